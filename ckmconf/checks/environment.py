@@ -1,0 +1,114 @@
+"""Semantic checks of the environment model: bounds, polygons, references, Zoom Map."""
+
+from __future__ import annotations
+
+import math
+
+from shapely.geometry import Point as ShapelyPoint
+from shapely.geometry import Polygon as ShapelyPolygon
+from shapely.validation import explain_validity
+
+from ..model import Environment, EnvObject, Polygon, Prism, System
+from ..model.environment import Region
+from .report import Reporter, missing
+
+
+def check_environment(system: System, report: Reporter) -> None:
+    env = system.environment
+    if env is None:
+        return
+    bounds = env.map
+    if bounds.xmin >= bounds.xmax or bounds.ymin >= bounds.ymax:
+        report.error(bounds, f"map bounds are empty: x [{bounds.xmin:g}, {bounds.xmax:g}], y [{bounds.ymin:g}, {bounds.ymax:g}]")
+        return
+    outline = ShapelyPolygon([(bounds.xmin, bounds.ymin), (bounds.xmax, bounds.ymin), (bounds.xmax, bounds.ymax), (bounds.xmin, bounds.ymax)])
+    report.unique([*env.areas, *env.avoided], "area", f"environment {env.name!r}")
+    report.unique(env.textures, "texture", f"environment {env.name!r}")
+    report.unique(env.semantics, "semantic tag", "the semantic dictionary", key="tag")
+    report.unique(env.objects, "object", f"environment {env.name!r}")
+    shapes = {region.name: _region_shape(region, report) for region in (*env.areas, *env.avoided)}
+    for region in (*env.areas, *env.avoided):
+        shape = shapes[region.name]
+        if shape is not None and not outline.buffer(1e-9).contains(shape):
+            report.error(region, f"{region.TAG} {region.name!r} reaches outside the map bounds")
+    missions = [m.name for m in system.missions]
+    for entry in env.semantics:
+        if entry.dynamic == "static" and entry.max_speed:
+            report.error(entry, "a static object has no speed (set dynamic=\"mobile\")", "maxSpeed")
+        for affordance in entry.affordances:
+            if affordance.mission is not None and affordance.mission not in missions:
+                report.error(affordance, missing("mission", affordance.mission, "the system", missions), "mission")
+    for obj in env.objects:
+        _check_object(obj, env, outline, shapes, report)
+    _check_zoom(env, report)
+
+
+def _region_shape(region: Region, report: Reporter) -> ShapelyPolygon | None:
+    points = region.points()
+    if len(set(points)) < 3:
+        report.error(region, f"{region.TAG} {region.name!r} needs at least 3 distinct vertices")
+        return None
+    shape = ShapelyPolygon(points)
+    if not shape.is_valid:
+        report.error(region, f"{region.TAG} {region.name!r} is not a simple polygon: {explain_validity(shape)}")
+        return None
+    return shape
+
+
+def _check_object(obj: EnvObject, env: Environment, outline: ShapelyPolygon, shapes: dict[str, ShapelyPolygon | None], report: Reporter) -> None:
+    tags = {s.tag: s for s in env.semantics}
+    semantic = tags.get(obj.tag)
+    if semantic is None:
+        report.error(obj, missing("semantic tag", obj.tag, "the semantic dictionary", tags), "tag")
+    if obj.texture is not None and obj.texture not in {t.name for t in env.textures}:
+        report.error(obj, missing("texture", obj.texture, f"environment {env.name!r}", [t.name for t in env.textures]), "texture")
+    where = ShapelyPoint(obj.pose.x, obj.pose.y)
+    if not outline.buffer(1e-9).contains(where):
+        report.error(obj.pose, f"object {obj.name!r} is outside the map bounds")
+    area_names = [a.name for a in env.areas]
+    if obj.area is not None:
+        if obj.area not in area_names:
+            report.error(obj, missing("area", obj.area, f"environment {env.name!r}", area_names), "area")
+        else:
+            shape = shapes.get(obj.area)
+            if shape is not None and not shape.buffer(1e-9).contains(where):
+                report.error(obj.pose, f"object {obj.name!r} is outside its area {obj.area!r}")
+    elif semantic is not None and semantic.landmark == "restricted-area":
+        report.error(obj, f"tag {obj.tag!r} is a restricted-area object: say which area it stays in (area=\"…\")")
+    for avoided in env.avoided:
+        shape = shapes.get(avoided.name)
+        if shape is not None and shape.contains(where):
+            report.error(obj.pose, f"object {obj.name!r} stands inside the avoided area {avoided.name!r}")
+    geometry = obj.geometry
+    prisms: tuple[Prism, ...] = ()
+    atoms = getattr(geometry, "atoms", ())
+    if hasattr(geometry, "prism"):
+        prisms = (geometry.prism,)
+    elif hasattr(geometry, "prisms"):
+        prisms = geometry.prisms
+    for prism in prisms:
+        if prism.zmin >= prism.zmax:
+            report.error(prism, f"zmin ({prism.zmin:g}) must be below zmax ({prism.zmax:g})", "zmin")
+        elif prism.zmax > env.map.height + 1e-9:
+            report.error(prism, f"zmax ({prism.zmax:g}) is above the map height ({env.map.height:g})", "zmax")
+    for atom in (*atoms, *(p.base for p in prisms)):
+        if isinstance(atom, Polygon):
+            points = [(v.x, v.y) for v in atom.vertices]
+            if len(set(points)) < 3 or not ShapelyPolygon(points).is_valid:
+                report.error(atom, f"the polygon of object {obj.name!r} is not a simple polygon with 3 or more vertices")
+
+
+def _check_zoom(env: Environment, report: Reporter) -> None:
+    zoom = env.zoom
+    if zoom is None:
+        return
+    width, depth = env.map.xmax - env.map.xmin, env.map.ymax - env.map.ymin
+    if zoom.width > width + 1e-9 or zoom.depth > depth + 1e-9:
+        report.error(zoom, f"the zoom area ({zoom.width:g}×{zoom.depth:g} m) is larger than the map ({width:g}×{depth:g} m)")
+    if zoom.height is not None:
+        if zoom.mode == "2D":
+            report.error(zoom, "height is only for a 2.5D zoom map", "height")
+        elif zoom.height > env.map.height + 1e-9:
+            report.error(zoom, f"height ({zoom.height:g}) is above the map height ({env.map.height:g})", "height")
+    if not math.isfinite(zoom.timeout):
+        report.error(zoom, "timeout must be finite", "timeout")

@@ -1,0 +1,204 @@
+"""Semantic checks of the kernel layer: network, message types, topics, nodes."""
+
+from __future__ import annotations
+
+from ..binding import Record
+from ..expressions import SWITCH, ExpressionError, parse
+from ..model import Adaptation, Alarm, Clamp, HWChannel, Lookup, Node, System
+from .report import Reporter, missing
+from .scope import Scope
+
+_TASK_MEASURES = ("deadline-misses", "jitter", "exec-time")
+
+
+def check_kernel(system: System, scope: Scope, report: Reporter) -> None:
+    _check_network(system, report)
+    _check_types(system, scope, report)
+    report.unique(system.nodes, "node", "the system")
+    external: dict[str, Record] = {}
+    for topic in system.topics:
+        if topic.scope == "internal":
+            report.error(topic, "a system-level topic must be external (internal topics belong to a node)", "scope")
+    for topic in [*system.topics, *(t for n in system.nodes for t in n.topics if t.scope == "external")]:
+        if topic.name in external:
+            report.error(topic, f"external topic {topic.name!r} is declared twice (first at {_at(external[topic.name])})", "name")
+        else:
+            external[topic.name] = topic
+        if not scope.type_exists(topic.type):
+            report.error(topic, missing("message type", topic.type, "the system", scope.type_names()), "type")
+    for node in system.nodes:
+        _check_node(node, scope, report)
+
+
+def _at(record: Record) -> str:
+    return f"{record.loc.file}:{record.loc.line}" if record.loc else "elsewhere"
+
+
+def _check_network(system: System, report: Reporter) -> None:
+    net = system.network
+    if net is None:
+        return
+    if net.reconnect_min > net.reconnect_max:
+        report.error(net, f"reconnectMin ({net.reconnect_min:g}) is larger than reconnectMax ({net.reconnect_max:g})", "reconnectMin")
+    last = net.base_port + net.port_tries - 1
+    if last > 65535:
+        report.error(net, f"basePort {net.base_port} + portTries {net.port_tries} runs past port 65535", "portTries")
+
+
+def _check_types(system: System, scope: Scope, report: Reporter) -> None:
+    report.unique(system.message_types, "message type", "the system")
+    for message_type in system.message_types:
+        if scope.type_exists(message_type.name) and message_type.name not in scope.types:
+            report.error(message_type, f"{message_type.name!r} is a built-in type and cannot be redefined", "name")
+        report.unique(message_type.fields, "field", f"message type {message_type.name!r}")
+        for f in message_type.fields:
+            if not scope.type_exists(f.type):
+                report.error(f, missing("message type", f.type, "the system", scope.type_names()), "type")
+    # A type that contains itself, directly or not, has no finite encoding.
+    graph = {t.name: {f.type for f in t.fields if f.count != 0} for t in system.message_types}
+    for message_type in system.message_types:
+        if _reaches(graph, message_type.name, message_type.name):
+            report.error(message_type, f"message type {message_type.name!r} contains itself (use count=\"0\" for a recursive list)", "name")
+
+
+def _reaches(graph: dict[str, set[str]], start: str, goal: str) -> bool:
+    todo, seen = list(graph.get(start, ())), set()
+    while todo:
+        current = todo.pop()
+        if current == goal:
+            return True
+        if current not in seen:
+            seen.add(current)
+            todo.extend(graph.get(current, ()))
+    return False
+
+
+def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
+    where = f"node {node.name!r}"
+    report.unique(node.partitions, "partition", where)
+    report.unique(node.channels, "HWChannel", where)
+    report.unique([t for t in node.topics if t.scope == "internal"], "topic", where)
+    report.unique([*node.sensors, *node.controllers, *node.actuators], "task name", where)
+    channels = {c.name: c for c in node.channels}
+    partitions = [p.name for p in node.partitions]
+    tasks = [t.name for t in (*node.sensors, *node.controllers, *node.actuators)]
+    for channel in node.channels:
+        if channel.min is not None and channel.max is not None and channel.min >= channel.max:
+            report.error(channel, f"min ({channel.min:g}) must be less than max ({channel.max:g})", "min")
+    for topic in node.topics:
+        if topic.scope == "internal" and not scope.type_exists(topic.type):
+            report.error(topic, missing("message type", topic.type, "the system", scope.type_names()), "type")
+
+    def topic_ref(record: Record, name: str, attr: str = "topic") -> None:
+        if scope.topic(node, name) is None:
+            report.error(record, missing("topic", name, where, scope.visible_topics(node)), attr)
+
+    def partition_ref(record: Record, name: str | None) -> None:
+        if name is not None and name not in partitions:
+            report.error(record, missing("partition", name, where, partitions), "partition")
+
+    publishers: dict[str, list[str]] = {}
+    for sensor in node.sensors:
+        _channel_ref(sensor, sensor.channel, "in", channels, where, report)
+        topic_ref(sensor, sensor.topic)
+        partition_ref(sensor, sensor.partition)
+        _check_adaptation(sensor.adaptation, report)
+        publishers.setdefault(sensor.topic, []).append(f"sensor {sensor.name}")
+    controllers = [c.name for c in node.controllers]
+    for controller in node.controllers:
+        partition_ref(controller, controller.partition)
+        for port in (*controller.inputs, *controller.outputs):
+            topic_ref(port, port.topic)
+        if controller.active:
+            for port in controller.outputs:
+                publishers.setdefault(port.topic, []).append(f"controller {controller.name}")
+        for switch in controller.switches:
+            if switch.to == controller.name:
+                report.error(switch, "a controller cannot switch to itself", "to")
+            elif switch.to not in controllers:
+                report.error(switch, missing("controller", switch.to, where, controllers), "to")
+            _check_switch_condition(switch, node, scope, report)
+    for actuator in node.actuators:
+        _channel_ref(actuator, actuator.channel, "out", channels, where, report)
+        topic_ref(actuator, actuator.topic)
+        partition_ref(actuator, actuator.partition)
+        _check_adaptation(actuator.adaptation, report)
+        if actuator.min >= actuator.max:
+            report.error(actuator, f"min ({actuator.min:g}) must be less than max ({actuator.max:g})", "min")
+        elif not actuator.min <= actuator.safe_value <= actuator.max:
+            report.error(actuator, f"safeValue {actuator.safe_value:g} is outside [{actuator.min:g}, {actuator.max:g}]", "safeValue")
+        if actuator.fallback is not None and actuator.min < actuator.max:
+            for action in actuator.fallback.actions:
+                if not actuator.min <= action.value <= actuator.max:
+                    report.error(action, f"fallback value {action.value:g} is outside [{actuator.min:g}, {actuator.max:g}]", "value")
+    for topic, writers in publishers.items():
+        if len(writers) > 1:
+            report.error(node, f"topic {topic!r} has several publishers: {', '.join(writers)} (make all but one controller active=\"false\")")
+    if node.monitor is not None:
+        for alarm in node.monitor.alarms:
+            _check_alarm(alarm, node, scope, tasks, controllers, partitions, report)
+        report.unique(node.monitor.alarms, "alarm", where)
+
+
+def _channel_ref(record: Record, name: str, direction: str, channels: dict[str, HWChannel], where: str, report: Reporter) -> None:
+    channel = channels.get(name)
+    if channel is None:
+        report.error(record, missing("HWChannel", name, where, channels), "channel")
+    elif channel.direction != direction:
+        kind = "sensor" if direction == "in" else "actuator"
+        report.error(record, f"HWChannel {name!r} is an {channel.direction!r} channel; a {kind} needs an {direction!r} one", "channel")
+
+
+def _check_adaptation(adaptation: Adaptation | None, report: Reporter) -> None:
+    if adaptation is None:
+        return
+    for step in adaptation.steps:
+        if isinstance(step, Clamp) and step.min >= step.max:
+            report.error(step, f"min ({step.min:g}) must be less than max ({step.max:g})", "min")
+        if isinstance(step, Lookup):
+            for earlier, point in zip(step.points, step.points[1:], strict=False):
+                if point.x <= earlier.x:
+                    report.error(point, f"lookup x values must increase: {point.x:g} follows {earlier.x:g}", "x")
+
+
+def _check_switch_condition(switch: Record, node: Node, scope: Scope, report: Reporter) -> None:
+    text = str(getattr(switch, "when"))
+    try:
+        condition = parse(text, SWITCH)
+    except ExpressionError as exc:
+        report.error(switch, str(exc), "when")
+        return
+    alarms = [a.name for a in node.monitor.alarms] if node.monitor else []
+    for name, args in condition.calls:
+        if name == "alarm" and args[0] not in alarms:
+            report.error(switch, missing("alarm", str(args[0]), f"node {node.name!r}", alarms), "when")
+        if name in ("stale", "value") and scope.topic(node, str(args[0])) is None:
+            report.error(switch, missing("topic", str(args[0]), f"node {node.name!r}", scope.visible_topics(node)), "when")
+
+
+def _check_alarm(alarm: Alarm, node: Node, scope: Scope, tasks: list[str], controllers: list[str], partitions: list[str], report: Reporter) -> None:
+    where = f"node {node.name!r}"
+    if alarm.above is None and alarm.below is None:
+        report.error(alarm, "an alarm needs a threshold: above, below or both")
+    elif alarm.above is not None and alarm.below is not None and alarm.below >= alarm.above:
+        report.error(alarm, f"below ({alarm.below:g}) must be less than above ({alarm.above:g}), or the alarm never clears", "below")
+    if alarm.measure in _TASK_MEASURES:
+        if alarm.task is None:
+            report.error(alarm, f"a {alarm.measure} alarm needs the task it watches (task=\"…\")")
+        elif alarm.task not in tasks:
+            report.error(alarm, missing("task", alarm.task, where, tasks), "task")
+    if alarm.measure == "staleness":
+        if alarm.topic is None:
+            report.error(alarm, "a staleness alarm needs the topic it watches (topic=\"…\")")
+        elif scope.topic(node, alarm.topic) is None:
+            report.error(alarm, missing("topic", alarm.topic, where, scope.visible_topics(node)), "topic")
+    if alarm.measure == "partition-crash" or alarm.action == "restart":
+        if alarm.partition is None:
+            report.error(alarm, "this alarm needs the partition it concerns (partition=\"…\")")
+        elif alarm.partition not in partitions:
+            report.error(alarm, missing("partition", alarm.partition, where, partitions), "partition")
+    if alarm.action in ("switch", "delegate"):
+        if alarm.target is None:
+            report.error(alarm, f"action {alarm.action!r} needs the target controller (target=\"…\")")
+        elif alarm.target not in controllers:
+            report.error(alarm, missing("controller", alarm.target, where, controllers), "target")

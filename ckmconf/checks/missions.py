@@ -1,0 +1,236 @@
+"""Semantic checks of behaviors, composition matrices, missions and plans."""
+
+from __future__ import annotations
+
+from ..expressions import TRANSITION, ExpressionError, parse
+from ..model import Behavior, CompositionMatrix, Mission, Plan, State, System, Transition
+from .report import Reporter, missing
+from .resources import check_bounds, check_value
+from .scope import Scope
+
+_TOLERANCE = 1e-6
+
+
+def check_missions(system: System, scope: Scope, report: Reporter) -> None:
+    report.unique(system.behaviors, "behavior", "the system")
+    report.unique(system.matrices, "composition matrix", "the system")
+    report.unique(system.missions, "mission", "the system")
+    report.unique(system.plans, "plan", "the system")
+    for behavior in system.behaviors:
+        _check_behavior(behavior, scope, report)
+    for matrix in system.matrices:
+        _check_matrix(matrix, scope, report)
+    for mission in system.missions:
+        _check_mission(mission, system, scope, report)
+    _check_nesting(system, report)
+    for plan in system.plans:
+        _check_plan(plan, system, scope, report)
+
+
+def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
+    where = f"behavior {behavior.name!r}"
+    if behavior.progress == "untraceable" and behavior.timeout is None:
+        report.error(behavior, "an untraceable behavior needs a timeout so the mission cannot hang (§5.1.2)", "progress")
+    report.unique(behavior.uses, "service alias", where, key="alias")
+    for uses in behavior.uses:
+        found = scope.services.get(uses.service)
+        if found is None:
+            report.error(uses, missing("service", uses.service, "any SmartResource", scope.services), "service")
+            continue
+        _, service = found
+        parameters = {p.name: p for p in service.parameters}
+        for configure in uses.configure:
+            parameter = parameters.get(configure.parameter)
+            if parameter is None:
+                report.error(configure, missing("parameter", configure.parameter, f"service {uses.service}", parameters), "parameter")
+                continue
+            problem = check_value(parameter, configure.value)
+            if problem:
+                report.error(configure, f"value {configure.value!r} for {configure.parameter} {problem}", "value")
+        measures = [m.name for m in service.measures]
+        for require in uses.requires:
+            if require.measure not in measures:
+                report.error(require, missing("quality measure", require.measure, f"service {uses.service}", measures), "measure")
+            check_bounds(require, require.lower, require.upper, report)
+    for port in (*behavior.inputs, *behavior.outputs):
+        if (port.topic is None) == (port.signal is None):
+            report.error(port, "give either a topic or a signal")
+        elif port.topic is not None and scope.topic(None, port.topic) is None:
+            report.error(port, missing("external topic", port.topic, "the system", scope.external), "topic")
+        elif port.signal is not None and port.signal not in scope.signals:
+            report.error(port, missing("signal", port.signal, "any plan", scope.signals), "signal")
+
+
+def _check_matrix(matrix: CompositionMatrix, scope: Scope, report: Reporter) -> None:
+    report.unique(matrix.services, "service", f"composition matrix {matrix.name!r}", key="ref")
+    for entry in matrix.services:
+        if entry.ref not in scope.services:
+            report.error(entry, missing("service", entry.ref, "any SmartResource", scope.services), "ref")
+    n = len(matrix.services)
+    if len(matrix.rows) != n:
+        report.error(matrix, f"matrix has {len(matrix.rows)} rows for {n} services; it must be {n}×{n}")
+        return
+    for index, row in enumerate(matrix.rows, start=1):
+        if len(row) != n:
+            report.error(matrix, f"row {index} has {len(row)} values; it must have {n}")
+            return
+    if matrix.rule == "strict":
+        for index, row in enumerate(matrix.rows, start=1):
+            if abs(sum(row) - 1) > _TOLERANCE:
+                report.error(matrix, f"row {index} sums to {sum(row):g}, not 1 (rule=\"strict\", eq. 5.1)", "rule")
+        for column in range(n):
+            total = sum(row[column] for row in matrix.rows)
+            if abs(total - 1) > _TOLERANCE:
+                report.error(matrix, f"column {column + 1} sums to {total:g}, not 1 (rule=\"strict\", eq. 5.1)", "rule")
+    else:
+        for index, row in enumerate(matrix.rows, start=1):
+            if sum(row) <= 0:
+                report.error(matrix, f"row {index} is all zeros; with rule=\"normalize\" every service must depend on something")
+
+
+def _check_mission(mission: Mission, system: System, scope: Scope, report: Reporter) -> None:
+    where = f"mission {mission.name!r}"
+    report.unique([*mission.states, *mission.finals], "state", where)
+    states = {s.name: s for s in mission.states}
+    finals = {f.name for f in mission.finals}
+    if mission.initial not in states:
+        if mission.initial in finals:
+            report.error(mission, f"the initial state {mission.initial!r} is a final state", "initial")
+        else:
+            report.error(mission, missing("state", mission.initial, where, states), "initial")
+    behaviors = [b.name for b in system.behaviors]
+    missions = [m.name for m in system.missions]
+    for state in mission.states:
+        if (state.behavior is None) == (state.mission is None):
+            report.error(state, "a state runs either a behavior or a mission (give exactly one)")
+        elif state.behavior is not None and state.behavior not in behaviors:
+            report.error(state, missing("behavior", state.behavior, "the system", behaviors), "behavior")
+        elif state.mission is not None and state.mission not in missions:
+            report.error(state, missing("mission", state.mission, "the system", missions), "mission")
+    for transition in mission.transitions:
+        if transition.from_ in finals:
+            report.error(transition, f"no transition may leave the final state {transition.from_!r}", "from")
+        elif transition.from_ not in states:
+            report.error(transition, missing("state", transition.from_, where, states), "from")
+        if transition.to not in states and transition.to not in finals:
+            report.error(transition, missing("state", transition.to, where, [*states, *finals]), "to")
+        source = states.get(transition.from_)
+        if source is not None:
+            _check_condition(transition, source, system, scope, report)
+    _check_composition(mission, system, report)
+
+
+def _check_condition(transition: Transition, state: State, system: System, scope: Scope, report: Reporter) -> None:
+    try:
+        condition = parse(transition.when, TRANSITION)
+    except ExpressionError as exc:
+        report.error(transition, str(exc), "when")
+        return
+    behavior = system.behavior(state.behavior) if state.behavior else None
+    nested = system.mission(state.mission) if state.mission else None
+    for name, args in condition.calls:
+        if name == "outcome":
+            if nested is None:
+                report.error(transition, f"outcome() is for states that run a mission; {state.name!r} runs a behavior", "when")
+            elif args[0] not in nested.outcomes():
+                report.error(transition, missing("outcome", str(args[0]), f"mission {nested.name!r}", nested.outcomes()), "when")
+        elif name == "signal" and args[0] not in scope.signals:
+            report.error(transition, missing("signal", str(args[0]), "any plan", scope.signals), "when")
+        elif name == "timeout" and state.timeout is None and (behavior is None or behavior.timeout is None):
+            report.error(transition, f"timeout() can never fire: neither state {state.name!r} nor its behavior has a timeout", "when")
+    for alias, field in condition.attributes:
+        uses = {u.alias: u for u in behavior.uses} if behavior is not None else {}
+        found = uses.get(alias)
+        if found is None:
+            report.error(transition, missing("service alias", alias, f"the behavior of state {state.name!r}", uses), "when")
+            continue
+        provided = scope.services.get(found.service)
+        if provided is None:
+            continue
+        _, service = provided
+        fields = [p.name for p in service.outputs] + [m.name for m in service.measures]
+        if field not in fields:
+            report.error(transition, missing("output or measure", field, f"service {found.service}", fields), "when")
+
+
+def _check_composition(mission: Mission, system: System, report: Reporter) -> None:
+    if mission.composition is None:
+        return
+    matrix = system.matrix(mission.composition)
+    if matrix is None:
+        report.error(mission, missing("composition matrix", mission.composition, "the system", [m.name for m in system.matrices]), "composition")
+        return
+    listed = set(matrix.refs())
+    for state in mission.states:
+        behavior = system.behavior(state.behavior) if state.behavior else None
+        for uses in behavior.uses if behavior else ():
+            if uses.service not in listed:
+                report.error(state, f"service {uses.service} (used by behavior {behavior.name!r}) is missing from composition matrix {matrix.name!r}", "behavior")  # type: ignore[union-attr]
+
+
+def _check_nesting(system: System, report: Reporter) -> None:
+    """A mission must not contain itself through nested states."""
+    graph = {m.name: [s for s in m.states if s.mission] for m in system.missions}
+    for mission in system.missions:
+        for state in graph.get(mission.name, []):
+            if state.mission is not None and _nests(graph, state.mission, mission.name):
+                report.error(state, f"mission {mission.name!r} would contain itself through state {state.name!r}", "mission")
+
+
+def _nests(graph: dict[str, list[State]], start: str, goal: str) -> bool:
+    todo, seen = [start], set()
+    while todo:
+        current = todo.pop()
+        if current == goal:
+            return True
+        if current in seen:
+            continue
+        seen.add(current)
+        todo.extend(s.mission for s in graph.get(current, []) if s.mission)
+    return False
+
+
+def resolve_state(system: System, mission_name: str, path: str) -> State | None:
+    """The state at a nested path such as Navigation/NAV inside a mission, or None."""
+    mission = system.mission(mission_name)
+    state: State | None = None
+    for step in path.split("/"):
+        if mission is None:
+            return None
+        state = mission.state(step)
+        if state is None:
+            return None
+        mission = system.mission(state.mission) if state.mission else None
+    return state
+
+
+def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> None:
+    where = f"plan {plan.name!r}"
+    report.unique(plan.agents, "agent", where)
+    report.unique(plan.signals, "signal", where)
+    agents = {a.name: a for a in plan.agents}
+    for agent in plan.agents:
+        if system.node(agent.node) is None:
+            report.error(agent, missing("node", agent.node, "the system", [n.name for n in system.nodes]), "node")
+        if system.mission(agent.mission) is None:
+            report.error(agent, missing("mission", agent.mission, "the system", [m.name for m in system.missions]), "mission")
+    signals = {s.name: s for s in plan.signals}
+    for signal in plan.signals:
+        agent = agents.get(signal.agent)
+        if agent is None:
+            report.error(signal, missing("agent", signal.agent, where, agents), "agent")
+        elif system.mission(agent.mission) and resolve_state(system, agent.mission, signal.state) is None:
+            report.error(signal, f"state {signal.state!r} does not exist in mission {agent.mission!r} of agent {agent.name!r}", "state")
+        if signal.type is not None and not scope.type_exists(signal.type):
+            report.error(signal, missing("message type", signal.type, "the system", scope.type_names()), "type")
+    for dependency in plan.dependencies:
+        agent = agents.get(dependency.agent)
+        if agent is None:
+            report.error(dependency, missing("agent", dependency.agent, where, agents), "agent")
+        elif system.mission(agent.mission) and resolve_state(system, agent.mission, dependency.state) is None:
+            report.error(dependency, f"state {dependency.state!r} does not exist in mission {agent.mission!r} of agent {agent.name!r}", "state")
+        signal = signals.get(dependency.signal)
+        if signal is None:
+            report.error(dependency, missing("signal", dependency.signal, where, signals), "signal")
+        elif signal.agent == dependency.agent:
+            report.error(dependency, f"signal {signal.name!r} comes from agent {signal.agent!r} itself; a dependency ties two agents", "signal")

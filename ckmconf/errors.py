@@ -1,0 +1,80 @@
+"""Configuration errors: every problem found in a file, located to the character."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Loc:
+    """Where a record came from: file, 1-based line and column, readable element path."""
+
+    file: str
+    line: int
+    column: int
+    xpath: str
+
+
+class ConfigError(Exception):
+    """One problem in a configuration file.
+
+    Its text is ``FILE:LINE:COL: XPATH: message``; ``ckm-validate`` prints exactly that,
+    and the tests compare it verbatim.
+    """
+
+    def __init__(self, file: str, line: int, column: int, xpath: str, message: str) -> None:
+        super().__init__(f"{file}:{line}:{column}: {xpath}: {message}")
+        self.file = file
+        self.line = line
+        self.column = column
+        self.xpath = xpath
+        self.message = message
+
+    @classmethod
+    def at(cls, loc: Loc, message: str) -> ConfigError:
+        return cls(loc.file, loc.line, loc.column, loc.xpath, message)
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "file": self.file,
+            "line": self.line,
+            "column": self.column,
+            "xpath": self.xpath,
+            "message": self.message,
+        }
+
+    def sort_key(self) -> tuple[str, int, int, str]:
+        return (self.file, self.line, self.column, self.message)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ConfigError) and self.as_dict() == other.as_dict()
+
+    def __hash__(self) -> int:
+        return hash(str(self))
+
+    def __reduce__(self) -> tuple[type[ConfigError], tuple[str, int, int, str, str]]:
+        return (ConfigError, (self.file, self.line, self.column, self.xpath, self.message))
+
+
+class ConfigErrors(Exception):
+    """Several problems at once (lax loading collects them; strict loading raises the first)."""
+
+    def __init__(self, errors: Iterable[ConfigError]) -> None:
+        self.errors = sorted(set(errors), key=ConfigError.sort_key)
+        super().__init__("\n".join(str(e) for e in self.errors))
+
+    def __iter__(self) -> Iterator[ConfigError]:
+        return iter(self.errors)
+
+    def __len__(self) -> int:
+        return len(self.errors)
+
+
+def errors_to_json(errors: Iterable[ConfigError]) -> str:
+    """The ``--json`` form of ``ckm-validate``: a list of objects."""
+    return json.dumps([e.as_dict() for e in errors], indent=2)
+
+
+__all__ = ["ConfigError", "ConfigErrors", "Loc", "errors_to_json"]

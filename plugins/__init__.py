@@ -1,0 +1,1 @@
+"""Processing plugins, controllers and hardware backends registered under ``ckm.plugins``."""
