@@ -12,7 +12,6 @@ import types
 import typing
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field
-from functools import cache
 from typing import Any, ClassVar, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from lxml import etree
@@ -112,9 +111,18 @@ def _record_classes(kind: Any) -> dict[str, type[Record]]:
     return found
 
 
-@cache
+_PLANS: dict[type[Record], tuple[FieldPlan, ...]] = {}
+
+
 def plan(cls: type[Record]) -> tuple[FieldPlan, ...]:
     """How each field of a record class maps to XML (computed once per class)."""
+    found = _PLANS.get(cls)
+    if found is None:
+        found = _PLANS[cls] = _make_plan(cls)
+    return found
+
+
+def _make_plan(cls: type[Record]) -> tuple[FieldPlan, ...]:
     hints = get_type_hints(cls)
     plans: list[FieldPlan] = []
     for f in dataclasses.fields(cls):
@@ -139,7 +147,7 @@ def plan(cls: type[Record]) -> tuple[FieldPlan, ...]:
 def bind(cls: type[R], element: etree._Element, source: SourceFile) -> R:
     """Build a record from a schema-valid element."""
     values: dict[str, Any] = {"loc": source.loc(element)}
-    kids = [(k.tag[len(NS):], k) for k in element if isinstance(k.tag, str) and k.tag.startswith(NS)]
+    kids = [(k.tag[len(NS) :], k) for k in element if isinstance(k.tag, str) and k.tag.startswith(NS)]
     for p in plan(cls):
         if p.kind == "attr":
             raw = element.get(p.xml)
@@ -162,7 +170,8 @@ def bind(cls: type[R], element: etree._Element, source: SourceFile) -> R:
 def unbind(record: Record, parent: etree._Element | None = None) -> etree._Element:
     """Write a record as an element (defaults and absent values are left out)."""
     tag = NS + record.TAG
-    element = etree.Element(tag, nsmap={None: NAMESPACE}) if parent is None else etree.SubElement(parent, tag)
+    nsmap: dict[Any, str] = {None: NAMESPACE}
+    element = etree.Element(tag, nsmap=nsmap) if parent is None else etree.SubElement(parent, tag)
     for p in plan(type(record)):
         value = getattr(record, p.name)
         if p.kind == "attr":

@@ -100,7 +100,9 @@ def _check(node: ast.AST, vocab: Vocabulary, out: Condition) -> None:
     elif isinstance(node, ast.Call):
         _check_call(node, vocab, out)
     else:
-        raise ExpressionError(f"{type(node).__name__.lower()} is not allowed in a condition", getattr(node, "col_offset", 0))
+        raise ExpressionError(
+            f"{type(node).__name__.lower()} is not allowed in a condition", getattr(node, "col_offset", 0)
+        )
 
 
 def _check_call(node: ast.Call, vocab: Vocabulary, out: Condition) -> None:

@@ -88,7 +88,9 @@ def _translate(source: SourceFile, error: Any) -> ConfigError:
     if match := _UNKNOWN_ATTRIBUTE.match(reason):
         attr = match.group("name")
         allowed = ", ".join(_allowed_attributes(error))
-        return ConfigError.at(source.attr_loc(element, attr), f"unknown attribute {attr!r} on {owner} (allowed: {allowed})")
+        return ConfigError.at(
+            source.attr_loc(element, attr), f"unknown attribute {attr!r} on {owner} (allowed: {allowed})"
+        )
     if match := _MISSING_ATTRIBUTE.match(reason):
         return ConfigError.at(source.loc(element), f"{owner} is missing the required attribute {match.group('name')!r}")
     if match := _UNEXPECTED_CHILD.match(reason):
@@ -132,6 +134,7 @@ def _unexpected_child(source: SourceFile, element: etree._Element, error: Any, p
 
 
 # ---------------------------------------------------------------- schema introspection
+
 
 def element_declaration(element: etree._Element) -> Any:
     """The xmlschema declaration of a CKM element, found by walking down from the root."""
@@ -211,7 +214,11 @@ def describe_type(xsd_type: Any) -> str | None:
     base = getattr(xsd_type, "primitive_type", None)
     base_name = local_name(getattr(base, "name", "") or "")
     low, high = getattr(xsd_type, "min_value", None), getattr(xsd_type, "max_value", None)
-    if base_name == "decimal" or base_name == "integer" or "int" in local_name(getattr(xsd_type.base_type, "name", "") or ""):
+    if (
+        base_name == "decimal"
+        or base_name == "integer"
+        or "int" in local_name(getattr(xsd_type.base_type, "name", "") or "")
+    ):
         if low is not None and high is not None:
             return f"a whole number from {low} to {high}"
         if low is not None:

@@ -62,7 +62,7 @@ class SourceFile:
             self._index()
         found = self._locs.get(element)
         if found is None:  # an element added after parsing: fall back to libxml2's line
-            return Loc(self.path, element.sourceline or 1, 1, element_path(element))
+            return Loc(self.path, _line(element), 1, element_path(element))
         return found
 
     def attr_loc(self, element: etree._Element, attribute: str) -> Loc:
@@ -99,11 +99,16 @@ class SourceFile:
             pattern = re.compile(rb"<" + re.escape(qname.encode()) + rb"[\s/>]")
             offset = _search_outside(pattern, self.data, cursor, skips)
             if offset < 0:
-                self._locs[element] = Loc(self.path, element.sourceline or 1, 1, paths[element])
+                self._locs[element] = Loc(self.path, _line(element), 1, paths[element])
                 continue
             cursor = offset + 1
             line, col = self.line_col(offset)
             self._locs[element] = Loc(self.path, line, col, paths[element])
+
+
+def _line(element: etree._Element) -> int:
+    line = element.sourceline
+    return line if isinstance(line, int) and line > 0 else 1
 
 
 def _all_paths(root: etree._Element) -> dict[etree._Element, str]:
@@ -210,14 +215,12 @@ def parse_bytes(path: str, data: bytes, limits: Limits) -> SourceFile:
     except ValueError as exc:  # e.g. an encoding declaration lxml cannot honour
         raise file_error(path, f"malformed XML: {exc}") from None
     tree = root.getroottree()
-    if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
+    if getattr(tree.docinfo, "doctype", "") or tree.docinfo.internalDTD is not None:
         offset = data.find(b"<!DOCTYPE")
         source = SourceFile(path, data, root)
         line, col = source.line_col(max(offset, 0))
         raise ConfigError(path, line, col, "/", "DOCTYPE declarations are not allowed (no DTDs, no entities)")
-    count = 0
-    for _ in root.iter():
-        count += 1
+    for count, _ in enumerate(root.iter(), start=1):
         if count > limits.max_elements:
             raise file_error(path, f"more than {limits.max_elements} elements")
     return SourceFile(path, data, root)

@@ -19,9 +19,13 @@ def check_environment(system: System, report: Reporter) -> None:
         return
     bounds = env.map
     if bounds.xmin >= bounds.xmax or bounds.ymin >= bounds.ymax:
-        report.error(bounds, f"map bounds are empty: x [{bounds.xmin:g}, {bounds.xmax:g}], y [{bounds.ymin:g}, {bounds.ymax:g}]")
+        report.error(
+            bounds, f"map bounds are empty: x [{bounds.xmin:g}, {bounds.xmax:g}], y [{bounds.ymin:g}, {bounds.ymax:g}]"
+        )
         return
-    outline = ShapelyPolygon([(bounds.xmin, bounds.ymin), (bounds.xmax, bounds.ymin), (bounds.xmax, bounds.ymax), (bounds.xmin, bounds.ymax)])
+    outline = ShapelyPolygon(
+        [(bounds.xmin, bounds.ymin), (bounds.xmax, bounds.ymin), (bounds.xmax, bounds.ymax), (bounds.xmin, bounds.ymax)]
+    )
     report.unique([*env.areas, *env.avoided], "area", f"environment {env.name!r}")
     report.unique(env.textures, "texture", f"environment {env.name!r}")
     report.unique(env.semantics, "semantic tag", "the semantic dictionary", key="tag")
@@ -34,7 +38,7 @@ def check_environment(system: System, report: Reporter) -> None:
     missions = [m.name for m in system.missions]
     for entry in env.semantics:
         if entry.dynamic == "static" and entry.max_speed:
-            report.error(entry, "a static object has no speed (set dynamic=\"mobile\")", "maxSpeed")
+            report.error(entry, 'a static object has no speed (set dynamic="mobile")', "maxSpeed")
         for affordance in entry.affordances:
             if affordance.mission is not None and affordance.mission not in missions:
                 report.error(affordance, missing("mission", affordance.mission, "the system", missions), "mission")
@@ -55,13 +59,21 @@ def _region_shape(region: Region, report: Reporter) -> ShapelyPolygon | None:
     return shape
 
 
-def _check_object(obj: EnvObject, env: Environment, outline: ShapelyPolygon, shapes: dict[str, ShapelyPolygon | None], report: Reporter) -> None:
+def _check_object(
+    obj: EnvObject,
+    env: Environment,
+    outline: ShapelyPolygon,
+    shapes: dict[str, ShapelyPolygon | None],
+    report: Reporter,
+) -> None:
     tags = {s.tag: s for s in env.semantics}
     semantic = tags.get(obj.tag)
     if semantic is None:
         report.error(obj, missing("semantic tag", obj.tag, "the semantic dictionary", tags), "tag")
     if obj.texture is not None and obj.texture not in {t.name for t in env.textures}:
-        report.error(obj, missing("texture", obj.texture, f"environment {env.name!r}", [t.name for t in env.textures]), "texture")
+        report.error(
+            obj, missing("texture", obj.texture, f"environment {env.name!r}", [t.name for t in env.textures]), "texture"
+        )
     where = ShapelyPoint(obj.pose.x, obj.pose.y)
     if not outline.buffer(1e-9).contains(where):
         report.error(obj.pose, f"object {obj.name!r} is outside the map bounds")
@@ -74,7 +86,7 @@ def _check_object(obj: EnvObject, env: Environment, outline: ShapelyPolygon, sha
             if shape is not None and not shape.buffer(1e-9).contains(where):
                 report.error(obj.pose, f"object {obj.name!r} is outside its area {obj.area!r}")
     elif semantic is not None and semantic.landmark == "restricted-area":
-        report.error(obj, f"tag {obj.tag!r} is a restricted-area object: say which area it stays in (area=\"…\")")
+        report.error(obj, f'tag {obj.tag!r} is a restricted-area object: say which area it stays in (area="…")')
     for avoided in env.avoided:
         shape = shapes.get(avoided.name)
         if shape is not None and shape.contains(where):
@@ -95,7 +107,9 @@ def _check_object(obj: EnvObject, env: Environment, outline: ShapelyPolygon, sha
         if isinstance(atom, Polygon):
             points = [(v.x, v.y) for v in atom.vertices]
             if len(set(points)) < 3 or not ShapelyPolygon(points).is_valid:
-                report.error(atom, f"the polygon of object {obj.name!r} is not a simple polygon with 3 or more vertices")
+                report.error(
+                    atom, f"the polygon of object {obj.name!r} is not a simple polygon with 3 or more vertices"
+                )
 
 
 def _check_zoom(env: Environment, report: Reporter) -> None:
@@ -104,7 +118,9 @@ def _check_zoom(env: Environment, report: Reporter) -> None:
         return
     width, depth = env.map.xmax - env.map.xmin, env.map.ymax - env.map.ymin
     if zoom.width > width + 1e-9 or zoom.depth > depth + 1e-9:
-        report.error(zoom, f"the zoom area ({zoom.width:g}×{zoom.depth:g} m) is larger than the map ({width:g}×{depth:g} m)")
+        report.error(
+            zoom, f"the zoom area ({zoom.width:g}×{zoom.depth:g} m) is larger than the map ({width:g}×{depth:g} m)"
+        )
     if zoom.height is not None:
         if zoom.mode == "2D":
             report.error(zoom, "height is only for a 2.5D zoom map", "height")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..binding import Record
 from ..expressions import SWITCH, ExpressionError, parse
-from ..model import Adaptation, Alarm, Clamp, HWChannel, Lookup, Node, System
+from ..model import Adaptation, Alarm, Clamp, HWChannel, Lookup, Node, Switch, System
 from .report import Reporter, missing
 from .scope import Scope
 
@@ -21,7 +21,9 @@ def check_kernel(system: System, scope: Scope, report: Reporter) -> None:
             report.error(topic, "a system-level topic must be external (internal topics belong to a node)", "scope")
     for topic in [*system.topics, *(t for n in system.nodes for t in n.topics if t.scope == "external")]:
         if topic.name in external:
-            report.error(topic, f"external topic {topic.name!r} is declared twice (first at {_at(external[topic.name])})", "name")
+            report.error(
+                topic, f"external topic {topic.name!r} is declared twice (first at {_at(external[topic.name])})", "name"
+            )
         else:
             external[topic.name] = topic
         if not scope.type_exists(topic.type):
@@ -39,7 +41,11 @@ def _check_network(system: System, report: Reporter) -> None:
     if net is None:
         return
     if net.reconnect_min > net.reconnect_max:
-        report.error(net, f"reconnectMin ({net.reconnect_min:g}) is larger than reconnectMax ({net.reconnect_max:g})", "reconnectMin")
+        report.error(
+            net,
+            f"reconnectMin ({net.reconnect_min:g}) is larger than reconnectMax ({net.reconnect_max:g})",
+            "reconnectMin",
+        )
     last = net.base_port + net.port_tries - 1
     if last > 65535:
         report.error(net, f"basePort {net.base_port} + portTries {net.port_tries} runs past port 65535", "portTries")
@@ -58,7 +64,11 @@ def _check_types(system: System, scope: Scope, report: Reporter) -> None:
     graph = {t.name: {f.type for f in t.fields if f.count != 0} for t in system.message_types}
     for message_type in system.message_types:
         if _reaches(graph, message_type.name, message_type.name):
-            report.error(message_type, f"message type {message_type.name!r} contains itself (use count=\"0\" for a recursive list)", "name")
+            report.error(
+                message_type,
+                f'message type {message_type.name!r} contains itself (use count="0" for a recursive list)',
+                "name",
+            )
 
 
 def _reaches(graph: dict[str, set[str]], start: str, goal: str) -> bool:
@@ -81,7 +91,7 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
     report.unique([*node.sensors, *node.controllers, *node.actuators], "task name", where)
     channels = {c.name: c for c in node.channels}
     partitions = [p.name for p in node.partitions]
-    tasks = [t.name for t in (*node.sensors, *node.controllers, *node.actuators)]
+    tasks = [s.name for s in node.sensors] + [c.name for c in node.controllers] + [a.name for a in node.actuators]
     for channel in node.channels:
         if channel.min is not None and channel.max is not None and channel.min >= channel.max:
             report.error(channel, f"min ({channel.min:g}) must be less than max ({channel.max:g})", "min")
@@ -126,27 +136,45 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
         if actuator.min >= actuator.max:
             report.error(actuator, f"min ({actuator.min:g}) must be less than max ({actuator.max:g})", "min")
         elif not actuator.min <= actuator.safe_value <= actuator.max:
-            report.error(actuator, f"safeValue {actuator.safe_value:g} is outside [{actuator.min:g}, {actuator.max:g}]", "safeValue")
+            report.error(
+                actuator,
+                f"safeValue {actuator.safe_value:g} is outside [{actuator.min:g}, {actuator.max:g}]",
+                "safeValue",
+            )
         if actuator.fallback is not None and actuator.min < actuator.max:
             for action in actuator.fallback.actions:
                 if not actuator.min <= action.value <= actuator.max:
-                    report.error(action, f"fallback value {action.value:g} is outside [{actuator.min:g}, {actuator.max:g}]", "value")
-    for topic, writers in publishers.items():
+                    report.error(
+                        action,
+                        f"fallback value {action.value:g} is outside [{actuator.min:g}, {actuator.max:g}]",
+                        "value",
+                    )
+    for topic_name, writers in publishers.items():
         if len(writers) > 1:
-            report.error(node, f"topic {topic!r} has several publishers: {', '.join(writers)} (make all but one controller active=\"false\")")
+            report.error(
+                node,
+                f"topic {topic_name!r} has several publishers: {', '.join(writers)}"
+                ' (make all but one controller active="false")',
+            )
     if node.monitor is not None:
         for alarm in node.monitor.alarms:
             _check_alarm(alarm, node, scope, tasks, controllers, partitions, report)
         report.unique(node.monitor.alarms, "alarm", where)
 
 
-def _channel_ref(record: Record, name: str, direction: str, channels: dict[str, HWChannel], where: str, report: Reporter) -> None:
+def _channel_ref(
+    record: Record, name: str, direction: str, channels: dict[str, HWChannel], where: str, report: Reporter
+) -> None:
     channel = channels.get(name)
     if channel is None:
         report.error(record, missing("HWChannel", name, where, channels), "channel")
     elif channel.direction != direction:
         kind = "sensor" if direction == "in" else "actuator"
-        report.error(record, f"HWChannel {name!r} is an {channel.direction!r} channel; a {kind} needs an {direction!r} one", "channel")
+        report.error(
+            record,
+            f"HWChannel {name!r} is an {channel.direction!r} channel; a {kind} needs an {direction!r} one",
+            "channel",
+        )
 
 
 def _check_adaptation(adaptation: Adaptation | None, report: Reporter) -> None:
@@ -161,8 +189,8 @@ def _check_adaptation(adaptation: Adaptation | None, report: Reporter) -> None:
                     report.error(point, f"lookup x values must increase: {point.x:g} follows {earlier.x:g}", "x")
 
 
-def _check_switch_condition(switch: Record, node: Node, scope: Scope, report: Reporter) -> None:
-    text = str(getattr(switch, "when"))
+def _check_switch_condition(switch: Switch, node: Node, scope: Scope, report: Reporter) -> None:
+    text = str(switch.when)
     try:
         condition = parse(text, SWITCH)
     except ExpressionError as exc:
@@ -173,32 +201,46 @@ def _check_switch_condition(switch: Record, node: Node, scope: Scope, report: Re
         if name == "alarm" and args[0] not in alarms:
             report.error(switch, missing("alarm", str(args[0]), f"node {node.name!r}", alarms), "when")
         if name in ("stale", "value") and scope.topic(node, str(args[0])) is None:
-            report.error(switch, missing("topic", str(args[0]), f"node {node.name!r}", scope.visible_topics(node)), "when")
+            report.error(
+                switch, missing("topic", str(args[0]), f"node {node.name!r}", scope.visible_topics(node)), "when"
+            )
 
 
-def _check_alarm(alarm: Alarm, node: Node, scope: Scope, tasks: list[str], controllers: list[str], partitions: list[str], report: Reporter) -> None:
+def _check_alarm(
+    alarm: Alarm,
+    node: Node,
+    scope: Scope,
+    tasks: list[str],
+    controllers: list[str],
+    partitions: list[str],
+    report: Reporter,
+) -> None:
     where = f"node {node.name!r}"
     if alarm.above is None and alarm.below is None:
         report.error(alarm, "an alarm needs a threshold: above, below or both")
     elif alarm.above is not None and alarm.below is not None and alarm.below >= alarm.above:
-        report.error(alarm, f"below ({alarm.below:g}) must be less than above ({alarm.above:g}), or the alarm never clears", "below")
+        report.error(
+            alarm,
+            f"below ({alarm.below:g}) must be less than above ({alarm.above:g}), or the alarm never clears",
+            "below",
+        )
     if alarm.measure in _TASK_MEASURES:
         if alarm.task is None:
-            report.error(alarm, f"a {alarm.measure} alarm needs the task it watches (task=\"…\")")
+            report.error(alarm, f'a {alarm.measure} alarm needs the task it watches (task="…")')
         elif alarm.task not in tasks:
             report.error(alarm, missing("task", alarm.task, where, tasks), "task")
     if alarm.measure == "staleness":
         if alarm.topic is None:
-            report.error(alarm, "a staleness alarm needs the topic it watches (topic=\"…\")")
+            report.error(alarm, 'a staleness alarm needs the topic it watches (topic="…")')
         elif scope.topic(node, alarm.topic) is None:
             report.error(alarm, missing("topic", alarm.topic, where, scope.visible_topics(node)), "topic")
     if alarm.measure == "partition-crash" or alarm.action == "restart":
         if alarm.partition is None:
-            report.error(alarm, "this alarm needs the partition it concerns (partition=\"…\")")
+            report.error(alarm, 'this alarm needs the partition it concerns (partition="…")')
         elif alarm.partition not in partitions:
             report.error(alarm, missing("partition", alarm.partition, where, partitions), "partition")
     if alarm.action in ("switch", "delegate"):
         if alarm.target is None:
-            report.error(alarm, f"action {alarm.action!r} needs the target controller (target=\"…\")")
+            report.error(alarm, f'action {alarm.action!r} needs the target controller (target="…")')
         elif alarm.target not in controllers:
             report.error(alarm, missing("controller", alarm.target, where, controllers), "target")

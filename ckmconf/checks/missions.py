@@ -30,7 +30,9 @@ def check_missions(system: System, scope: Scope, report: Reporter) -> None:
 def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
     where = f"behavior {behavior.name!r}"
     if behavior.progress == "untraceable" and behavior.timeout is None:
-        report.error(behavior, "an untraceable behavior needs a timeout so the mission cannot hang (§5.1.2)", "progress")
+        report.error(
+            behavior, "an untraceable behavior needs a timeout so the mission cannot hang (§5.1.2)", "progress"
+        )
     report.unique(behavior.uses, "service alias", where, key="alias")
     for uses in behavior.uses:
         found = scope.services.get(uses.service)
@@ -42,7 +44,11 @@ def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
         for configure in uses.configure:
             parameter = parameters.get(configure.parameter)
             if parameter is None:
-                report.error(configure, missing("parameter", configure.parameter, f"service {uses.service}", parameters), "parameter")
+                report.error(
+                    configure,
+                    missing("parameter", configure.parameter, f"service {uses.service}", parameters),
+                    "parameter",
+                )
                 continue
             problem = check_value(parameter, configure.value)
             if problem:
@@ -50,7 +56,9 @@ def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
         measures = [m.name for m in service.measures]
         for require in uses.requires:
             if require.measure not in measures:
-                report.error(require, missing("quality measure", require.measure, f"service {uses.service}", measures), "measure")
+                report.error(
+                    require, missing("quality measure", require.measure, f"service {uses.service}", measures), "measure"
+                )
             check_bounds(require, require.lower, require.upper, report)
     for port in (*behavior.inputs, *behavior.outputs):
         if (port.topic is None) == (port.signal is None):
@@ -77,15 +85,17 @@ def _check_matrix(matrix: CompositionMatrix, scope: Scope, report: Reporter) -> 
     if matrix.rule == "strict":
         for index, row in enumerate(matrix.rows, start=1):
             if abs(sum(row) - 1) > _TOLERANCE:
-                report.error(matrix, f"row {index} sums to {sum(row):g}, not 1 (rule=\"strict\", eq. 5.1)", "rule")
+                report.error(matrix, f'row {index} sums to {sum(row):g}, not 1 (rule="strict", eq. 5.1)', "rule")
         for column in range(n):
             total = sum(row[column] for row in matrix.rows)
             if abs(total - 1) > _TOLERANCE:
-                report.error(matrix, f"column {column + 1} sums to {total:g}, not 1 (rule=\"strict\", eq. 5.1)", "rule")
+                report.error(matrix, f'column {column + 1} sums to {total:g}, not 1 (rule="strict", eq. 5.1)', "rule")
     else:
         for index, row in enumerate(matrix.rows, start=1):
             if sum(row) <= 0:
-                report.error(matrix, f"row {index} is all zeros; with rule=\"normalize\" every service must depend on something")
+                report.error(
+                    matrix, f'row {index} is all zeros; with rule="normalize" every service must depend on something'
+                )
 
 
 def _check_mission(mission: Mission, system: System, scope: Scope, report: Reporter) -> None:
@@ -131,18 +141,28 @@ def _check_condition(transition: Transition, state: State, system: System, scope
     for name, args in condition.calls:
         if name == "outcome":
             if nested is None:
-                report.error(transition, f"outcome() is for states that run a mission; {state.name!r} runs a behavior", "when")
+                report.error(
+                    transition, f"outcome() is for states that run a mission; {state.name!r} runs a behavior", "when"
+                )
             elif args[0] not in nested.outcomes():
-                report.error(transition, missing("outcome", str(args[0]), f"mission {nested.name!r}", nested.outcomes()), "when")
+                report.error(
+                    transition, missing("outcome", str(args[0]), f"mission {nested.name!r}", nested.outcomes()), "when"
+                )
         elif name == "signal" and args[0] not in scope.signals:
             report.error(transition, missing("signal", str(args[0]), "any plan", scope.signals), "when")
         elif name == "timeout" and state.timeout is None and (behavior is None or behavior.timeout is None):
-            report.error(transition, f"timeout() can never fire: neither state {state.name!r} nor its behavior has a timeout", "when")
+            report.error(
+                transition,
+                f"timeout() can never fire: neither state {state.name!r} nor its behavior has a timeout",
+                "when",
+            )
     for alias, field in condition.attributes:
         uses = {u.alias: u for u in behavior.uses} if behavior is not None else {}
         found = uses.get(alias)
         if found is None:
-            report.error(transition, missing("service alias", alias, f"the behavior of state {state.name!r}", uses), "when")
+            report.error(
+                transition, missing("service alias", alias, f"the behavior of state {state.name!r}", uses), "when"
+            )
             continue
         provided = scope.services.get(found.service)
         if provided is None:
@@ -158,14 +178,21 @@ def _check_composition(mission: Mission, system: System, report: Reporter) -> No
         return
     matrix = system.matrix(mission.composition)
     if matrix is None:
-        report.error(mission, missing("composition matrix", mission.composition, "the system", [m.name for m in system.matrices]), "composition")
+        report.error(
+            mission,
+            missing("composition matrix", mission.composition, "the system", [m.name for m in system.matrices]),
+            "composition",
+        )
         return
     listed = set(matrix.refs())
     for state in mission.states:
         behavior = system.behavior(state.behavior) if state.behavior else None
-        for uses in behavior.uses if behavior else ():
+        if behavior is None:
+            continue
+        for uses in behavior.uses:
             if uses.service not in listed:
-                report.error(state, f"service {uses.service} (used by behavior {behavior.name!r}) is missing from composition matrix {matrix.name!r}", "behavior")  # type: ignore[union-attr]
+                message = f"service {uses.service} (used by behavior {behavior.name!r})"
+                report.error(state, f"{message} is missing from composition matrix {matrix.name!r}", "behavior")
 
 
 def _check_nesting(system: System, report: Reporter) -> None:
@@ -174,7 +201,9 @@ def _check_nesting(system: System, report: Reporter) -> None:
     for mission in system.missions:
         for state in graph.get(mission.name, []):
             if state.mission is not None and _nests(graph, state.mission, mission.name):
-                report.error(state, f"mission {mission.name!r} would contain itself through state {state.name!r}", "mission")
+                report.error(
+                    state, f"mission {mission.name!r} would contain itself through state {state.name!r}", "mission"
+                )
 
 
 def _nests(graph: dict[str, list[State]], start: str, goal: str) -> bool:
@@ -213,24 +242,38 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
         if system.node(agent.node) is None:
             report.error(agent, missing("node", agent.node, "the system", [n.name for n in system.nodes]), "node")
         if system.mission(agent.mission) is None:
-            report.error(agent, missing("mission", agent.mission, "the system", [m.name for m in system.missions]), "mission")
+            report.error(
+                agent, missing("mission", agent.mission, "the system", [m.name for m in system.missions]), "mission"
+            )
     signals = {s.name: s for s in plan.signals}
     for signal in plan.signals:
-        agent = agents.get(signal.agent)
-        if agent is None:
+        emitter = agents.get(signal.agent)
+        if emitter is None:
             report.error(signal, missing("agent", signal.agent, where, agents), "agent")
-        elif system.mission(agent.mission) and resolve_state(system, agent.mission, signal.state) is None:
-            report.error(signal, f"state {signal.state!r} does not exist in mission {agent.mission!r} of agent {agent.name!r}", "state")
+        elif system.mission(emitter.mission) and resolve_state(system, emitter.mission, signal.state) is None:
+            report.error(
+                signal,
+                f"state {signal.state!r} does not exist in mission {emitter.mission!r} of agent {emitter.name!r}",
+                "state",
+            )
         if signal.type is not None and not scope.type_exists(signal.type):
             report.error(signal, missing("message type", signal.type, "the system", scope.type_names()), "type")
     for dependency in plan.dependencies:
-        agent = agents.get(dependency.agent)
-        if agent is None:
+        waiter = agents.get(dependency.agent)
+        if waiter is None:
             report.error(dependency, missing("agent", dependency.agent, where, agents), "agent")
-        elif system.mission(agent.mission) and resolve_state(system, agent.mission, dependency.state) is None:
-            report.error(dependency, f"state {dependency.state!r} does not exist in mission {agent.mission!r} of agent {agent.name!r}", "state")
-        signal = signals.get(dependency.signal)
-        if signal is None:
+        elif system.mission(waiter.mission) and resolve_state(system, waiter.mission, dependency.state) is None:
+            report.error(
+                dependency,
+                f"state {dependency.state!r} does not exist in mission {waiter.mission!r} of agent {waiter.name!r}",
+                "state",
+            )
+        wanted = signals.get(dependency.signal)
+        if wanted is None:
             report.error(dependency, missing("signal", dependency.signal, where, signals), "signal")
-        elif signal.agent == dependency.agent:
-            report.error(dependency, f"signal {signal.name!r} comes from agent {signal.agent!r} itself; a dependency ties two agents", "signal")
+        elif wanted.agent == dependency.agent:
+            report.error(
+                dependency,
+                f"signal {wanted.name!r} comes from agent {wanted.agent!r} itself; a dependency ties two agents",
+                "signal",
+            )

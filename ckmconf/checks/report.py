@@ -23,7 +23,9 @@ class Reporter:
             loc = Loc("<memory>", 1, 1, f"/{record.TAG}")
         if attr is not None:
             source = self.sources.get(loc.file)
-            loc = source.attr_loc_at(loc, attr) if source else Loc(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}")
+            loc = (
+                source.attr_loc_at(loc, attr) if source else Loc(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}")
+            )
         self.errors.append(ConfigError.at(loc, message))
 
     def unique(self, records: Iterable[Record], kind: str, where: str, key: str = "name") -> None:
@@ -33,15 +35,18 @@ class Reporter:
             value = getattr(record, key)
             if value in first:
                 earlier = first[value].loc
-                at = f" (first at line {earlier.line})" if earlier and record.loc and earlier.file == record.loc.file else (
-                    f" (first at {earlier.file}:{earlier.line})" if earlier else "")
+                at = (
+                    f" (first at line {earlier.line})"
+                    if earlier and record.loc and earlier.file == record.loc.file
+                    else (f" (first at {earlier.file}:{earlier.line})" if earlier else "")
+                )
                 self.error(record, f"duplicate {kind} {value!r} in {where}{at}", key)
             else:
                 first[value] = record
 
 
 def missing(kind: str, name: str, where: str, candidates: Iterable[str]) -> str:
-    """"<kind> 'x' does not exist in <where>", with a suggestion or the list of what does."""
+    """ "<kind> 'x' does not exist in <where>", with a suggestion or the list of what does."""
     names = sorted(set(candidates))
     close = difflib.get_close_matches(name, names, n=1, cutoff=0.75)
     if close:

@@ -43,7 +43,7 @@ def _check_profile(profile: Profile, plugins: list[str], where: str, report: Rep
             report.error(profile, missing("plugin", profile.output, f"profile {profile.name!r}", used), "output")
     elif len(profile.root.leaves()) > 1:
         leaves = ", ".join(profile.root.leaves())
-        report.error(profile, f"profile {profile.name!r} has several leaves ({leaves}); name its output (output=\"…\")")
+        report.error(profile, f'profile {profile.name!r} has several leaves ({leaves}); name its output (output="…")')
 
 
 def _check_service(resource: SmartResource, service: Service, scope: Scope, report: Reporter) -> None:
@@ -51,7 +51,9 @@ def _check_service(resource: SmartResource, service: Service, scope: Scope, repo
     node = scope.system.node(resource.node)
     for port in (*service.inputs, *service.outputs):
         if scope.topic(node, port.topic) is None:
-            report.error(port, missing("topic", port.topic, f"node {resource.node!r}", scope.visible_topics(node)), "topic")
+            report.error(
+                port, missing("topic", port.topic, f"node {resource.node!r}", scope.visible_topics(node)), "topic"
+            )
     report.unique(service.inputs, "input", where)
     report.unique(service.outputs, "output", where)
     report.unique(service.parameters, "parameter", where)
@@ -65,7 +67,9 @@ def _check_service(resource: SmartResource, service: Service, scope: Scope, repo
     profiles = [p.name for p in resource.profiles]
     for scenario in service.scenarios:
         if scenario.profile not in profiles:
-            report.error(scenario, missing("profile", scenario.profile, f"SmartResource {resource.name!r}", profiles), "profile")
+            report.error(
+                scenario, missing("profile", scenario.profile, f"SmartResource {resource.name!r}", profiles), "profile"
+            )
         report.unique(scenario.policies, "policy for measure", f"scenario {scenario.name!r}", key="measure")
         for policy in scenario.policies:
             if policy.measure not in measures:
@@ -111,7 +115,7 @@ def check_value(parameter: Parameter, value: str) -> str | None:
 
 def _check_parameter(parameter: Parameter, report: Reporter) -> None:
     if parameter.type == "enum" and not parameter.values:
-        report.error(parameter, "an enum parameter needs its values (values=\"A B C\")", "type")
+        report.error(parameter, 'an enum parameter needs its values (values="A B C")', "type")
         return
     if parameter.values and parameter.type != "enum":
         report.error(parameter, "values are only for enum parameters", "values")

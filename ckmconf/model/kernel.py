@@ -99,7 +99,8 @@ class MessageType(Record):
 
 
 BUILTIN_TYPES = frozenset(
-    "bool int8 int16 int32 int64 uint8 uint16 uint32 uint64 float32 float64 string bytes time".split()
+    {"bool", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64"}
+    | {"float32", "float64", "string", "bytes", "time"}
 )
 
 
@@ -149,6 +150,7 @@ class HWChannel(Record):
 
 
 # ----------------------------------------------------------------- adaptation chain
+
 
 @dataclass(frozen=True, kw_only=True)
 class Linear(Record):
@@ -246,6 +248,7 @@ class Adaptation(Record):
 
 
 # ----------------------------------------------------------------- components
+
 
 @dataclass(frozen=True, kw_only=True)
 class Sensor(Record):
