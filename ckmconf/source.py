@@ -200,17 +200,30 @@ def _parser() -> etree.XMLParser:
     )
 
 
+_NO_DOCTYPE = "DOCTYPE declarations are not allowed (no DTDs, no entities)"
+
+
+def _find_doctype(data: bytes) -> int:
+    """Offset of a DOCTYPE outside comments, checked before libxml2 sees (and acts on) it."""
+    skips = [(m.start(), m.end()) for m in _SKIP_SPANS.finditer(data)]
+    return _search_outside(re.compile(rb"<!DOCTYPE", re.I), data, 0, skips)
+
+
 def parse_bytes(path: str, data: bytes, limits: Limits) -> SourceFile:
     """Parse already-read bytes (the editor and the network agent hand text in directly)."""
     if len(data) > limits.max_bytes:
         raise file_error(path, f"file is {len(data)} bytes, more than the limit of {limits.max_bytes} bytes")
     if not data.strip():
         raise file_error(path, "file is empty")
+    doctype = _find_doctype(data)
+    if doctype >= 0:
+        line, col = SourceFile(path, data, etree.Element("x")).line_col(doctype)
+        raise ConfigError(path, line, col, "/", _NO_DOCTYPE)
     try:
         root = etree.fromstring(data, _parser())
     except etree.XMLSyntaxError as exc:
         line, column = exc.position if exc.position else (1, 1)
-        message = (exc.msg or "malformed XML").split(", line ")[0]
+        message = re.sub(r"(,? line \d+(, column \d+)?)+$", "", (exc.msg or "malformed XML").strip())
         raise ConfigError(path, max(line, 1), max(column, 1), "/", f"malformed XML: {message}") from None
     except ValueError as exc:  # e.g. an encoding declaration lxml cannot honour
         raise file_error(path, f"malformed XML: {exc}") from None
@@ -219,7 +232,7 @@ def parse_bytes(path: str, data: bytes, limits: Limits) -> SourceFile:
         offset = data.find(b"<!DOCTYPE")
         source = SourceFile(path, data, root)
         line, col = source.line_col(max(offset, 0))
-        raise ConfigError(path, line, col, "/", "DOCTYPE declarations are not allowed (no DTDs, no entities)")
+        raise ConfigError(path, line, col, "/", _NO_DOCTYPE)
     for count, _ in enumerate(root.iter(), start=1):
         if count > limits.max_elements:
             raise file_error(path, f"more than {limits.max_elements} elements")

@@ -1,0 +1,127 @@
+"""Includes, strict and lax modes, loading from memory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import ckmconf
+from ckmconf import ConfigError
+
+HEAD = '<?xml version="1.0"?>\n'
+
+
+def write(folder: Path, name: str, body: str, root: str = "Part", attrs: str = 'version="1.0"') -> Path:
+    path = folder / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f'{HEAD}<{root} xmlns="urn:ckm:1" {attrs}>\n{body}\n</{root}>\n')
+    return path
+
+
+def system(folder: Path, body: str) -> Path:
+    return write(folder, "system.xml", body, "System", 'version="1.0" name="sys"')
+
+
+NODE = '<Node name="{name}"><Topic name="/{name}/out" type="float64"/></Node>'
+
+
+def test_diamond_includes_are_read_once(tmp_path: Path) -> None:
+    write(tmp_path, "base.xml", NODE.format(name="base"))
+    write(tmp_path, "left.xml", '<Include href="base.xml"/>\n' + NODE.format(name="left"))
+    write(tmp_path, "sub/right.xml", '<Include href="../base.xml"/>\n' + NODE.format(name="right"))
+    path = system(tmp_path, '<Include href="left.xml"/><Include href="sub/right.xml"/>' + NODE.format(name="top"))
+    result = ckmconf.load(path, strict=False)
+    assert result.errors == []
+    assert result.system is not None
+    # Included parts first, depth first, then the including file's own content.
+    assert [n.name for n in result.system.nodes] == ["left", "base", "right", "top"]
+    assert len(result.files) == 4
+
+
+def test_include_cycle(tmp_path: Path) -> None:
+    write(tmp_path, "a.xml", '<Include href="b.xml"/>')
+    write(tmp_path, "b.xml", '<Include href="a.xml"/>')
+    path = system(tmp_path, '<Include href="a.xml"/>')
+    result = ckmconf.load(path, strict=False)
+    assert [e.message for e in result.errors] == ["include cycle: a.xml is already being read"]
+    assert result.errors[0].file.endswith("b.xml")
+    assert result.system is None
+
+
+def test_missing_include_points_at_the_include(tmp_path: Path) -> None:
+    path = system(tmp_path, '<Include href="nowhere.xml"/>')
+    with pytest.raises(ConfigError) as caught:
+        ckmconf.load(path)
+    assert caught.value.message == "cannot include nowhere.xml: file not found"
+    assert (caught.value.line, caught.value.xpath) == (3, "/System[@name='sys']/Include")
+
+
+def test_only_parts_can_be_included(tmp_path: Path) -> None:
+    write(tmp_path, "other.xml", "", "System", 'version="1.0" name="other"')
+    result = ckmconf.load(system(tmp_path, '<Include href="other.xml"/>'), strict=False)
+    assert [e.message for e in result.errors] == ["other.xml holds a System; only a Part can be included"]
+
+
+def test_singletons_across_files(tmp_path: Path) -> None:
+    write(tmp_path, "net.xml", "<Network/>")
+    result = ckmconf.load(system(tmp_path, '<Include href="net.xml"/><Network heartbeat="1"/>'), strict=False)
+    assert len(result.errors) == 1
+    assert result.errors[0].message.startswith("Network is defined twice (first at ")
+    assert result.errors[0].file.endswith("system.xml")
+
+
+def test_errors_in_included_files_name_that_file(tmp_path: Path) -> None:
+    write(tmp_path, "bad.xml", '<Node name="n" kind="heavy"/>')
+    result = ckmconf.load(system(tmp_path, '<Include href="bad.xml"/>'), strict=False)
+    assert [str(e) for e in result.errors] == [
+        f"{tmp_path / 'bad.xml'}:3:16: /Part/Node[@name='n']/@kind: invalid kind 'heavy': must be one of light, service"
+    ]
+
+
+def test_strict_raises_the_first_and_lax_returns_all(tmp_path: Path) -> None:
+    body = '<Node name="a"/><Node name="a"/><Node name="b"/><Node name="b"/>'
+    path = system(tmp_path, body)
+    result = ckmconf.load(path, strict=False)
+    assert [e.message for e in result.errors] == [
+        "duplicate node 'a' in the system (first at line 3)",
+        "duplicate node 'b' in the system (first at line 3)",
+    ]
+    with pytest.raises(ConfigError) as caught:
+        ckmconf.load(path)
+    assert caught.value == result.errors[0]
+
+
+def test_a_part_loads_on_its_own(tmp_path: Path) -> None:
+    loaded = ckmconf.load(write(tmp_path, "nodes.xml", NODE.format(name="n")))
+    assert loaded.name == "nodes"
+    assert [n.name for n in loaded.nodes] == ["n"]
+
+
+def test_load_bytes_resolves_includes_next_to_the_given_path(tmp_path: Path) -> None:
+    write(tmp_path, "net.xml", "<Network/>")
+    text = b'<System xmlns="urn:ckm:1" version="1.0" name="m"><Include href="net.xml"/></System>'
+    loaded = ckmconf.load_bytes(text, str(tmp_path / "in-memory.xml"))
+    assert loaded.network is not None
+
+
+def test_unsupported_version(tmp_path: Path) -> None:
+    path = write(tmp_path, "future.xml", "<Whatever/>", "System", 'version="2.0" name="f"')
+    with pytest.raises(ConfigError) as caught:
+        ckmconf.load(path)
+    assert caught.value.message == "unsupported model version '2.0': this release reads 1.x"
+
+
+def test_read_document_keeps_includes(tmp_path: Path) -> None:
+    write(tmp_path, "net.xml", "<Network/>")
+    document = ckmconf.read_document(system(tmp_path, '<Include href="net.xml"/>'))
+    assert [i.href for i in document.includes] == ["net.xml"]
+    assert document.network is None
+
+
+def test_dump_is_atomic_and_reloadable(tmp_path: Path) -> None:
+    loaded = ckmconf.load(system(tmp_path, NODE.format(name="n")))
+    target = tmp_path / "out.xml"
+    ckmconf.dump(loaded, target)
+    assert ckmconf.load(target) == loaded
+    assert not list(tmp_path.glob(".*.tmp"))
