@@ -52,15 +52,21 @@ def test_evaluation(text: str, values: dict[str, Any], expected: bool) -> None:
     "text,message",
     [
         ("done(", "syntax error in condition 'done(': '(' was never closed"),
-        ("__import__('os')", "unknown function '__import__' (known: done(), failed(), outcome(), signal(), timeout(), "
-         "elapsed, performance, progress, service.field)"),
+        (
+            "__import__('os')",
+            "unknown function '__import__' (known: done(), failed(), outcome(), signal(), timeout(), "
+            "elapsed, performance, progress, service.field)",
+        ),
         ("().__class__", "attribute is not allowed in a condition"),
         ("progress[0]", "subscript is not allowed in a condition"),
         ("lambda: 1", "lambda is not allowed in a condition"),
         ("outcome()", "outcome() takes 1 argument"),
         ("signal(x)", "arguments of signal() must be literal values"),
-        ("speed > 1", "unknown name 'speed' (known: done(), failed(), outcome(), signal(), timeout(), elapsed, "
-         "performance, progress, service.field)"),
+        (
+            "speed > 1",
+            "unknown name 'speed' (known: done(), failed(), outcome(), signal(), timeout(), elapsed, "
+            "performance, progress, service.field)",
+        ),
         ("1 in progress", "only ==, !=, <, <=, >, >= comparisons are allowed"),
         ("(" * 300 + "1" + ")" * 300, "syntax error in condition"),
     ],

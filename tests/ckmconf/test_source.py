@@ -47,7 +47,10 @@ def test_positional_paths_for_unnamed_siblings() -> None:
         (b"   \n", "file is empty"),
         (b"<System", "malformed XML: Couldn't find end of Start Tag System"),
         (b'<!DOCTYPE x [<!ENTITY a "b">]><x>&a;</x>', "DOCTYPE declarations are not allowed (no DTDs, no entities)"),
-        (b'<!DOCTYPE x SYSTEM "http://127.0.0.1/x.dtd"><x/>', "DOCTYPE declarations are not allowed (no DTDs, no entities)"),
+        (
+            b'<!DOCTYPE x SYSTEM "http://127.0.0.1/x.dtd"><x/>',
+            "DOCTYPE declarations are not allowed (no DTDs, no entities)",
+        ),
     ],
 )
 def test_refused_input(data: bytes, message: str) -> None:
