@@ -132,7 +132,16 @@ def _translate(source: SourceFile, error: Any) -> ConfigError:
 
 def _unexpected_child(source: SourceFile, element: etree._Element, error: Any, position: int) -> ConfigError:
     children = [child for child in element if isinstance(child.tag, str)]
-    child = children[position - 1] if 0 < position <= len(children) else element
+    # xmlschema counts comments and processing instructions too; prefer the element it names.
+    named = getattr(error, "invalid_child", None)
+    if isinstance(named, etree._Element) and named.getparent() is element:
+        child = named
+    else:
+        every = list(element)
+        child = every[position - 1] if 0 < position <= len(every) else element
+    if not isinstance(child.tag, str):
+        child = element
+    position = children.index(child) + 1 if child in children else position
     tag = child.tag if isinstance(child.tag, str) else ""
     name = local_name(tag)
     owner = local_name(element.tag)

@@ -101,8 +101,9 @@ def _check_object(
     for prism in prisms:
         if prism.zmin >= prism.zmax:
             report.error(prism, f"zmin ({prism.zmin:g}) must be below zmax ({prism.zmax:g})", "zmin")
-        elif prism.zmax > env.map.height + 1e-9:
-            report.error(prism, f"zmax ({prism.zmax:g}) is above the map height ({env.map.height:g})", "zmax")
+        elif obj.pose.z + prism.zmax > env.map.height + 1e-9:
+            top = obj.pose.z + prism.zmax
+            report.error(prism, f"the object reaches {top:g} m, above the map height ({env.map.height:g} m)", "zmax")
     for atom in (*atoms, *(p.base for p in prisms)):
         if isinstance(atom, Polygon):
             points = [(v.x, v.y) for v in atom.vertices]

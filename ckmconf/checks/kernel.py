@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..binding import Record
 from ..expressions import SWITCH, ExpressionError, parse
-from ..model import Adaptation, Alarm, Clamp, HWChannel, Lookup, Node, Switch, System
+from ..model import Adaptation, Alarm, Clamp, Controller, HWChannel, Lookup, Node, Partition, Switch, System
 from .report import Reporter, missing
 from .scope import Scope
 
@@ -40,6 +40,8 @@ def _check_network(system: System, report: Reporter) -> None:
     net = system.network
     if net is None:
         return
+    if net.zenoh is not None and net.transport != "zenoh":
+        report.error(net.zenoh, 'Zenoh settings are only used with transport="zenoh"')
     if net.reconnect_min > net.reconnect_max:
         report.error(
             net,
@@ -162,6 +164,14 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
         report.unique(node.monitor.alarms, "alarm", where)
 
 
+def _partition(node: Node, name: str) -> Partition:
+    return next(p for p in node.partitions if p.name == name)
+
+
+def _controller(node: Node, name: str) -> Controller:
+    return next(c for c in node.controllers if c.name == name)
+
+
 def _channel_ref(
     record: Record, name: str, direction: str, channels: dict[str, HWChannel], where: str, report: Reporter
 ) -> None:
@@ -216,7 +226,10 @@ def _check_alarm(
     report: Reporter,
 ) -> None:
     where = f"node {node.name!r}"
-    if alarm.above is None and alarm.below is None:
+    if alarm.measure == "partition-crash":
+        if alarm.above is not None or alarm.below is not None:
+            report.error(alarm, "a partition-crash alarm fires on every crash and takes no threshold", "above")
+    elif alarm.above is None and alarm.below is None:
         report.error(alarm, "an alarm needs a threshold: above, below or both")
     elif alarm.above is not None and alarm.below is not None and alarm.below >= alarm.above:
         report.error(
@@ -224,6 +237,11 @@ def _check_alarm(
             f"below ({alarm.below:g}) must be less than above ({alarm.above:g}), or the alarm never clears",
             "below",
         )
+    for attr, needed_by in (("task", _TASK_MEASURES), ("topic", ("staleness",))):
+        if getattr(alarm, attr) is not None and alarm.measure not in needed_by:
+            report.error(alarm, f"{attr} does not apply to a {alarm.measure} alarm", attr)
+    if alarm.partition is not None and alarm.measure != "partition-crash" and alarm.action != "restart":
+        report.error(alarm, "partition only applies to partition-crash alarms and the restart action", "partition")
     if alarm.measure in _TASK_MEASURES:
         if alarm.task is None:
             report.error(alarm, f'a {alarm.measure} alarm needs the task it watches (task="…")')
@@ -239,8 +257,12 @@ def _check_alarm(
             report.error(alarm, 'this alarm needs the partition it concerns (partition="…")')
         elif alarm.partition not in partitions:
             report.error(alarm, missing("partition", alarm.partition, where, partitions), "partition")
+        elif alarm.action == "restart" and _partition(node, alarm.partition).restart == "never":
+            report.error(alarm, f'partition {alarm.partition!r} has restart="never"; it cannot be restarted', "action")
     if alarm.action in ("switch", "delegate"):
         if alarm.target is None:
             report.error(alarm, f'action {alarm.action!r} needs the target controller (target="…")')
         elif alarm.target not in controllers:
             report.error(alarm, missing("controller", alarm.target, where, controllers), "target")
+        elif alarm.action == "delegate" and not _controller(node, alarm.target).delegable:
+            report.error(alarm, f'controller {alarm.target!r} is not delegable (set delegable="true")', "target")

@@ -125,3 +125,63 @@ def test_dump_is_atomic_and_reloadable(tmp_path: Path) -> None:
     ckmconf.dump(loaded, target)
     assert ckmconf.load(target) == loaded
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_out_of_order_element_is_found_despite_comments(tmp_path: Path) -> None:
+    path = system(tmp_path, '<!-- one -->\n<!-- two -->\n<Node name="a"/>\n<Topic name="/t" type="float64"/>')
+    result = ckmconf.load(path, strict=False)
+    assert [(e.line, e.xpath) for e in result.errors] == [(6, "/System[@name='sys']/Topic[@name='/t']")]
+    assert result.errors[0].message.startswith("Topic is out of place: System holds its children in this order: ")
+
+
+NODE_WITH_ALARM = """<Node name="n">
+  <Partition name="p" restart="never"/>
+  <Topic name="/in" type="float64"/><Topic name="/out" type="float64"/>
+  <Controller name="c" kind="pid" period="0.1"><Input topic="/in"/><Output topic="/out"/></Controller>
+  <Monitor>{alarm}</Monitor>
+</Node>"""
+
+
+@pytest.mark.parametrize(
+    "alarm,message",
+    [
+        (
+            '<Alarm name="x" measure="cpu" above="0.9" action="delegate" target="c"/>',
+            "controller 'c' is not delegable (set delegable=\"true\")",
+        ),
+        (
+            '<Alarm name="x" measure="partition-crash" partition="p" action="restart"/>',
+            "partition 'p' has restart=\"never\"; it cannot be restarted",
+        ),
+        (
+            '<Alarm name="x" measure="partition-crash" partition="p" above="0"/>',
+            "a partition-crash alarm fires on every crash and takes no threshold",
+        ),
+        ('<Alarm name="x" measure="cpu" above="0.9" task="c"/>', "task does not apply to a cpu alarm"),
+        ('<Alarm name="x" measure="memory" above="0.9" topic="/in"/>', "topic does not apply to a memory alarm"),
+        (
+            '<Alarm name="x" measure="cpu" above="0.9" partition="p"/>',
+            "partition only applies to partition-crash alarms and the restart action",
+        ),
+    ],
+)
+def test_alarm_coherence(tmp_path: Path, alarm: str, message: str) -> None:
+    result = ckmconf.load(system(tmp_path, NODE_WITH_ALARM.format(alarm=alarm)), strict=False)
+    assert [e.message for e in result.errors] == [message]
+
+
+def test_zenoh_settings_need_the_zenoh_transport(tmp_path: Path) -> None:
+    result = ckmconf.load(
+        system(tmp_path, '<Network transport="multipeer"><Zenoh mode="client"/></Network>'), strict=False
+    )
+    assert [e.message for e in result.errors] == ['Zenoh settings are only used with transport="zenoh"']
+
+
+def test_prism_heights_are_relative_to_the_object_pose(tmp_path: Path) -> None:
+    env = """<Environment name="e"><Map xmin="0" ymin="0" xmax="5" ymax="5" height="3"/>
+      <Semantic tag="box"/>
+      <Object name="high" tag="box"><Pose x="1" y="1" z="2.5"/>
+        <Geometry25D><Prism zmax="1"><Rectangle width="0.2" depth="0.2"/></Prism></Geometry25D></Object>
+    </Environment>"""
+    result = ckmconf.load(system(tmp_path, env), strict=False)
+    assert [e.message for e in result.errors] == ["the object reaches 3.5 m, above the map height (3 m)"]
