@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 .venv/bin/ckm-validate --summary configs/usecase/lab.xml
-.venv/bin/ckm-validate configs/usecase/*.xml configs/examples/*.xml
+.venv/bin/ckm-validate configs/usecase/*.xml configs/examples/*.xml configs/examples/split/*.xml
 echo "all use-case and example files are valid"
 echo "--- a broken file, as ckm-validate reports it:"
 .venv/bin/ckm-validate configs/invalid/sensor_unknown_channel.xml || true
