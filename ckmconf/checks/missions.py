@@ -65,7 +65,7 @@ def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
             report.error(port, "give either a topic or a signal")
         elif port.topic is not None and scope.topic(None, port.topic) is None:
             report.error(port, missing("external topic", port.topic, "the system", scope.external), "topic")
-        elif port.signal is not None and port.signal not in scope.signals:
+        elif port.signal is not None and scope.system.plans and port.signal not in scope.signals:
             report.error(port, missing("signal", port.signal, "any plan", scope.signals), "signal")
 
 
@@ -148,7 +148,7 @@ def _check_condition(transition: Transition, state: State, system: System, scope
                 report.error(
                     transition, missing("outcome", str(args[0]), f"mission {nested.name!r}", nested.outcomes()), "when"
                 )
-        elif name == "signal" and args[0] not in scope.signals:
+        elif name == "signal" and system.plans and args[0] not in scope.signals:
             report.error(transition, missing("signal", str(args[0]), "any plan", scope.signals), "when")
         elif name == "timeout" and state.timeout is None and (behavior is None or behavior.timeout is None):
             report.error(
@@ -233,6 +233,30 @@ def resolve_state(system: System, mission_name: str, path: str) -> State | None:
     return state
 
 
+def _waits_for(system: System, mission_name: str, path: str, signal: str) -> bool:
+    """Whether the state at ``path`` uses ``signal`` in a transition or as a behavior input."""
+    state = resolve_state(system, mission_name, path)
+    if state is None:
+        return True  # reported elsewhere
+    parent_path, _, _ = path.rpartition("/")
+    parent = system.mission(mission_name)
+    if parent_path:
+        holder = resolve_state(system, mission_name, parent_path)
+        parent = system.mission(holder.mission) if holder and holder.mission else None
+    behavior = system.behavior(state.behavior) if state.behavior else None
+    if behavior is not None and any(port.signal == signal for port in behavior.inputs):
+        return True
+    for transition in parent.transitions if parent else ():
+        if transition.from_ == state.name:
+            try:
+                calls = parse(transition.when, TRANSITION).calls
+            except ExpressionError:
+                continue
+            if ("signal", (signal,)) in calls:
+                return True
+    return False
+
+
 def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> None:
     where = f"plan {plan.name!r}"
     report.unique(plan.agents, "agent", where)
@@ -258,6 +282,14 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
             )
         if signal.type is not None and not scope.type_exists(signal.type):
             report.error(signal, missing("message type", signal.type, "the system", scope.type_names()), "type")
+        elif signal.topic is not None:
+            topic = scope.external.get(signal.topic)
+            if topic is None:
+                report.error(signal, missing("external topic", signal.topic, "the system", scope.external), "topic")
+            elif signal.type is not None and topic.type != signal.type:
+                report.error(
+                    signal, f"signal type {signal.type!r} differs from its topic's type {topic.type!r}", "type"
+                )
     for dependency in plan.dependencies:
         waiter = agents.get(dependency.agent)
         if waiter is None:
@@ -271,6 +303,13 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
         wanted = signals.get(dependency.signal)
         if wanted is None:
             report.error(dependency, missing("signal", dependency.signal, where, signals), "signal")
+        elif waiter is not None and not _waits_for(system, waiter.mission, dependency.state, wanted.name):
+            report.error(
+                dependency,
+                f"state {dependency.state!r} never waits for {wanted.name!r}: use signal('{wanted.name}') in a"
+                f' transition out of it, or give its behavior an Input with signal="{wanted.name}"',
+                "state",
+            )
         elif wanted.agent == dependency.agent:
             report.error(
                 dependency,

@@ -49,6 +49,11 @@ def missing(kind: str, name: str, where: str, candidates: Iterable[str]) -> str:
     """ "<kind> 'x' does not exist in <where>", with a suggestion or the list of what does."""
     names = sorted(set(candidates))
     close = difflib.get_close_matches(name, names, n=1, cutoff=0.75)
+    if not close and "/" in "".join(names):
+        # Topics: "wheel_odom" should find "/kobuki/wheel_odom".
+        tails = {n.rsplit("/", 1)[-1]: n for n in names}
+        near = difflib.get_close_matches(name.rsplit("/", 1)[-1], list(tails), n=1, cutoff=0.75)
+        close = [tails[near[0]]] if near else []
     if close:
         return f"{kind} {name!r} does not exist in {where}; did you mean {close[0]!r}?"
     if not names:

@@ -185,3 +185,61 @@ def test_prism_heights_are_relative_to_the_object_pose(tmp_path: Path) -> None:
     </Environment>"""
     result = ckmconf.load(system(tmp_path, env), strict=False)
     assert [e.message for e in result.errors] == ["the object reaches 3.5 m, above the map height (3 m)"]
+
+
+PLAN = """<Node name="pc"/>
+<Behavior name="b" kind="k"/>
+<Mission name="m1" initial="s"><State name="s" behavior="b"/><Final name="f"/>
+  <Transition from="s" to="f" when="{when}"/></Mission>
+<Mission name="m2" initial="s"><State name="s" behavior="b"/><Final name="f"/><Transition from="s" to="f"/></Mission>
+<Plan name="p"><Agent name="a1" node="pc" mission="m1"/><Agent name="a2" node="pc" mission="m2"/>
+  <Signal name="go" agent="a2" state="s"{signal_attrs}/>
+  <Dependency agent="a1" state="s" signal="go"/></Plan>"""
+
+
+@pytest.mark.parametrize(
+    "when,signal_attrs,messages",
+    [
+        ("signal('go')", "", []),
+        (
+            "done()",
+            "",
+            [
+                "state 's' never waits for 'go': use signal('go') in a transition out of it, "
+                'or give its behavior an Input with signal="go"'
+            ],
+        ),
+        (
+            "signal('og')",
+            "",
+            [
+                "signal 'og' does not exist in any plan (there is: go)",
+                "state 's' never waits for 'go': use signal('go') in a transition out of it, "
+                'or give its behavior an Input with signal="go"',
+            ],
+        ),
+        (
+            "signal('go')",
+            ' topic="/nowhere"',
+            ["external topic '/nowhere' does not exist in the system (none is defined)"],
+        ),
+    ],
+)
+def test_plan_signals(tmp_path: Path, when: str, signal_attrs: str, messages: list[str]) -> None:
+    path = system(tmp_path, PLAN.format(when=when, signal_attrs=signal_attrs))
+    assert [e.message for e in ckmconf.load(path, strict=False).errors] == messages
+
+
+def test_signal_names_wait_for_a_plan(tmp_path: Path) -> None:
+    # A missions-only part cannot know the plan's signals yet: they are checked once a plan is loaded.
+    body = PLAN.format(when="signal('later')", signal_attrs="").split("<Plan")[0]
+    assert ckmconf.load(write(tmp_path, "missions.xml", body), strict=False).errors == []
+
+
+def test_topic_suggestions_match_the_last_segment(tmp_path: Path) -> None:
+    body = (
+        '<Node name="n"><HWChannel name="c" direction="in"/><Topic name="/kobuki/wheel_odom" type="float64"/>'
+        '<Sensor name="s" channel="c" topic="wheel_odom" period="0.1"/></Node>'
+    )
+    message = ckmconf.load(system(tmp_path, body), strict=False).errors[0].message
+    assert message == "topic 'wheel_odom' does not exist in node 'n'; did you mean '/kobuki/wheel_odom'?"
