@@ -1,7 +1,7 @@
 """Generic mapping between XML elements and frozen record dataclasses.
 
 Each record class declares its fields with ``attr()``, ``child()``, ``children()`` or
-``rows()``; the type hints say how values convert. One reader and one writer then serve
+``text()``; the type hints say how values convert. One reader and one writer then serve
 every element kind, so adding an element to the XSD means adding one small dataclass.
 """
 
@@ -39,9 +39,9 @@ def children() -> Any:
     return field(default=(), metadata={_KEY: ("children", None)})
 
 
-def rows(tag: str) -> Any:
-    """Repeated child elements whose text is a list of numbers (matrix rows)."""
-    return field(default=(), metadata={_KEY: ("rows", tag)})
+def text() -> Any:
+    """The element's own text content (a simple-content element such as a matrix Row)."""
+    return field(metadata={_KEY: ("text", None)})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -140,7 +140,8 @@ def _make_plan(cls: type[Record]) -> tuple[FieldPlan, ...]:
         elif kind == "children":
             plans.append(FieldPlan(f.name, kind, "", None, None, _record_classes(get_args(hint)[0]), default))
         else:
-            plans.append(FieldPlan(f.name, kind, str(xml), None, format_float, {}, default))
+            parse, write = _converters(hint)
+            plans.append(FieldPlan(f.name, kind, "", parse, write, {}, default))
     return tuple(plans)
 
 
@@ -160,10 +161,8 @@ def bind(cls: type[R], element: etree._Element, source: SourceFile) -> R:
                     break
         elif p.kind == "children":
             values[p.name] = tuple(bind(p.classes[tag], kid, source) for tag, kid in kids if tag in p.classes)
-        else:
-            values[p.name] = tuple(
-                tuple(float(x) for x in (kid.text or "").split()) for tag, kid in kids if tag == p.xml
-            )
+        elif p.parse is not None:
+            values[p.name] = p.parse(element.text or "")
     return cls(**values)
 
 
@@ -185,9 +184,8 @@ def unbind(record: Record, parent: etree._Element | None = None) -> etree._Eleme
         elif p.kind == "children":
             for item in value:
                 unbind(item, element)
-        else:
-            for row in value:
-                etree.SubElement(element, NS + p.xml).text = " ".join(format_float(x) for x in row)
+        elif p.write is not None:
+            element.text = p.write(value)
     return element
 
 

@@ -129,6 +129,12 @@ class _Loader:
         return document
 
     def _include(self, base: Path, include: Include, stack: list[str]) -> None:
+        if os.path.isabs(include.href) or include.href.startswith("~"):
+            self.errors.append(_error(include, f"include paths are relative to the including file: {include.href}"))
+            return
+        if not include.href.endswith(".xml"):
+            self.errors.append(_error(include, f"only .xml files can be included: {include.href}"))
+            return
         target = os.path.normpath(base / include.href)
         key = os.path.realpath(target)
         if key in stack:

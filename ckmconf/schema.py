@@ -17,9 +17,14 @@ import xmlschema
 from lxml import etree
 
 from .errors import ConfigError
-from .source import NAMESPACE, SourceFile, local_name
+from .source import NAMESPACE, SourceFile, in_namespace, local_name
 
 SUPPORTED_MAJOR = 1
+MAX_PROBLEMS = 100  # per file: a hostile file must not produce unbounded output
+# xmlschema needs ~30 µs per element, and time quadratic in the unknown children of one parent;
+# past these bounds libxml2's findings (one per content model, in C) are reported instead.
+XMLSCHEMA_MAX_ELEMENTS = 100_000
+XMLSCHEMA_MAX_FANOUT_COST = 1_000_000
 ROOTS = ("System", "Part")
 
 
@@ -63,16 +68,83 @@ def validate(source: SourceFile) -> list[ConfigError]:
     checker = fast_schema()
     if checker.validate(root.getroottree()):
         return []
+    if source.elements > XMLSCHEMA_MAX_ELEMENTS:
+        return _libxml2_errors(source, checker)
+    flood = _unknown_children_flood(source)
+    if flood:
+        return flood
     resource = xmlschema.XMLResource(root.getroottree(), allow="none", defuse="always")
-    errors = [_translate(source, error) for error in schema().iter_errors(resource)]
-    if not errors:  # the two validators disagree: never let a file through that libxml2 refused
-        errors = [_libxml2_error(source, entry) for entry in list(checker.error_log)]  # type: ignore[call-overload]
-    return errors
+    errors: list[ConfigError] = []
+    for error in schema().iter_errors(resource):
+        if len(errors) == MAX_PROBLEMS:
+            errors.append(
+                ConfigError(source.path, 1, 1, "/", f"more problems follow; the first {MAX_PROBLEMS} are shown")
+            )
+            break
+        errors.append(_translate(source, error))
+    return errors or _libxml2_errors(source, checker)  # never pass a file libxml2 refused
+
+
+def _libxml2_errors(source: SourceFile, checker: etree.XMLSchema) -> list[ConfigError]:
+    entries = list(checker.error_log)[:MAX_PROBLEMS]  # type: ignore[call-overload]
+    return [_libxml2_error(source, entry) for entry in entries]
+
+
+_NOT_EXPECTED = re.compile(r"Element '([^']+)': This element is not expected\.(?: Expected is one of \( (.*) \))?")
 
 
 def _libxml2_error(source: SourceFile, entry: Any) -> ConfigError:
+    found: Any = source.root.getroottree().xpath(str(entry.path)) if entry.path else []
+    element = found[0] if isinstance(found, list) and found and isinstance(found[0], etree._Element) else source.root
     message = re.sub(r"\{[^}]*\}", "", str(entry.message)).strip().rstrip(".")
-    return ConfigError(source.path, max(int(entry.line), 1), max(int(entry.column), 1), str(entry.path or "/"), message)
+    if match := _NOT_EXPECTED.match(message):
+        parent = element.getparent()
+        owner = local_name(parent.tag) if parent is not None else "the document"
+        allowed = ", ".join(local_name(t) for t in _allowed_children(parent)) if parent is not None else ""
+        message = f"unexpected element {match.group(1)!r} in {owner}" + (f" (allowed: {allowed})" if allowed else "")
+    return ConfigError.at(source.loc(element), shorten(message, 300))
+
+
+def _unknown_children_flood(source: SourceFile) -> list[ConfigError]:
+    """Unknown child elements by the thousand: report the first ones without xmlschema's quadratic pass."""
+    allowed_by_decl: dict[int, set[str]] = {}
+    flooded = False
+    unknown: list[etree._Element] = []
+    for parent in source.root.iter():
+        if not isinstance(parent.tag, str) or len(parent) < 100:
+            continue
+        decl = element_declaration(parent)
+        if decl is None:
+            continue
+        allowed = allowed_by_decl.setdefault(id(decl), set(child_declarations(decl)))
+        strays = [
+            c
+            for c in parent
+            if isinstance(c.tag, str) and (not in_namespace(c.tag) or local_name(c.tag) not in allowed)
+        ]
+        flooded = flooded or len(strays) * len(parent) > XMLSCHEMA_MAX_FANOUT_COST
+        unknown.extend(strays[: MAX_PROBLEMS + 1])
+    if not flooded:
+        return []
+    errors = [ConfigError.at(source.loc(child), _stray_message(child)) for child in unknown[: MAX_PROBLEMS + 1]]
+    if len(errors) > MAX_PROBLEMS:
+        errors[-1] = _more(errors[-1])
+    return errors
+
+
+def _more(next_problem: ConfigError) -> ConfigError:
+    """Where the first problem past the limit is, and that no more are listed."""
+    message = f"more problems from here on; only the first {MAX_PROBLEMS} are listed"
+    return ConfigError(next_problem.file, next_problem.line, next_problem.column, next_problem.xpath, message)
+
+
+def _stray_message(child: etree._Element) -> str:
+    parent = child.getparent()
+    owner = local_name(parent.tag) if parent is not None else "the document"
+    if not in_namespace(child.tag):
+        return f"element {local_name(child.tag)!r} is not in the CKM namespace {NAMESPACE}"
+    allowed = ", ".join(_allowed_children(parent)) if parent is not None else ""
+    return f"unexpected element {local_name(child.tag)!r} in {owner} (allowed: {allowed})"
 
 
 def _check_version(source: SourceFile) -> ConfigError | None:
@@ -102,7 +174,7 @@ def _translate(source: SourceFile, error: Any) -> ConfigError:
     if match := _ATTRIBUTE_VALUE.match(reason):
         attr = match.group("name")
         decl = _attribute_decl(error, attr)
-        raw = element.get(attr, "")
+        raw = shorten(element.get(attr, ""))
         return ConfigError.at(source.attr_loc(element, attr), f"invalid {attr} {raw!r}: {_expectation(decl, reason)}")
     if match := _UNKNOWN_ATTRIBUTE.match(reason):
         attr = match.group("name")
@@ -121,27 +193,30 @@ def _translate(source: SourceFile, error: Any) -> ConfigError:
         wanted = " or ".join(expected) if expected else "more elements"
         return ConfigError.at(source.loc(element), f"{owner} is incomplete: missing {wanted}")
     if "character data" in reason or "has no mixed content" in reason:
-        return ConfigError.at(source.loc(element), f"text is not allowed inside {owner}")
-    if error.elem is not None and not list(element) and element.text is not None:
+        return ConfigError.at(source.text_loc(element), f"text is not allowed inside {owner}")
+    if error.elem is not None and len(element) == 0 and element.text is not None:
         decl = getattr(_xsd_element(error), "type", None)
+        text = shorten(element.text.strip())
         return ConfigError.at(
-            source.loc(element), f"invalid {owner} content {element.text.strip()!r}: {_expectation(decl, reason)}"
+            source.text_loc(element), f"invalid {owner} content {text!r}: {_expectation(decl, reason)}"
         )
-    return ConfigError.at(source.loc(element), reason.rstrip("."))
+    return ConfigError.at(source.loc(element), shorten(reason.rstrip("."), 300))
+
+
+def shorten(text: str, limit: int = 60) -> str:
+    """Values echoed in messages are cut, so a hostile 5 MB value makes a short line."""
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 def _unexpected_child(source: SourceFile, element: etree._Element, error: Any, position: int) -> ConfigError:
-    children = [child for child in element if isinstance(child.tag, str)]
     # xmlschema counts comments and processing instructions too; prefer the element it names.
     named = getattr(error, "invalid_child", None)
     if isinstance(named, etree._Element) and named.getparent() is element:
         child = named
     else:
-        every = list(element)
-        child = every[position - 1] if 0 < position <= len(every) else element
+        child = element[position - 1] if 0 < position <= len(element) else element
     if not isinstance(child.tag, str):
         child = element
-    position = children.index(child) + 1 if child in children else position
     tag = child.tag if isinstance(child.tag, str) else ""
     name = local_name(tag)
     owner = local_name(element.tag)
@@ -149,8 +224,8 @@ def _unexpected_child(source: SourceFile, element: etree._Element, error: Any, p
     if not tag.startswith("{" + NAMESPACE + "}"):
         message = f"element {name!r} is not in the CKM namespace {NAMESPACE}"
     elif name in allowed:
-        before = [c for c in children[: position - 1] if c.tag == child.tag]
-        if before and _max_occurs(element, name) == 1:
+        before = next(child.itersiblings(child.tag, preceding=True), None)
+        if before is not None and _max_occurs(element, name) == 1:
             message = f"{owner} may hold only one {name}"
         else:
             message = f"{name} is out of place: {owner} holds its children in this order: {', '.join(allowed)}"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 from shapely.geometry import Point as ShapelyPoint
 from shapely.geometry import Polygon as ShapelyPolygon
@@ -54,9 +55,18 @@ def _region_shape(region: Region, report: Reporter) -> ShapelyPolygon | None:
         return None
     shape = ShapelyPolygon(points)
     if not shape.is_valid:
-        report.error(region, f"{region.TAG} {region.name!r} is not a simple polygon: {explain_validity(shape)}")
+        report.error(region, f"{region.TAG} {region.name!r} is not a simple polygon: {_why(shape)}")
         return None
     return shape
+
+
+def _why(shape: ShapelyPolygon) -> str:
+    reason = str(explain_validity(shape))
+    if match := re.match(r"Self-intersection\[([-\d.e]+) ([-\d.e]+)\]", reason):
+        return f"its edges cross at ({float(match.group(1)):g}, {float(match.group(2)):g})"
+    if match := re.match(r"Ring Self-intersection\[([-\d.e]+) ([-\d.e]+)\]", reason):
+        return f"its outline touches itself at ({float(match.group(1)):g}, {float(match.group(2)):g})"
+    return reason
 
 
 def _check_object(

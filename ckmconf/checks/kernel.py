@@ -109,13 +109,13 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
         if name is not None and name not in partitions:
             report.error(record, missing("partition", name, where, partitions), "partition")
 
-    publishers: dict[str, list[str]] = {}
+    publishers: dict[str, list[tuple[str, Record]]] = {}
     for sensor in node.sensors:
         _channel_ref(sensor, sensor.channel, "in", channels, where, report)
         topic_ref(sensor, sensor.topic)
         partition_ref(sensor, sensor.partition)
         _check_adaptation(sensor.adaptation, report)
-        publishers.setdefault(sensor.topic, []).append(f"sensor {sensor.name}")
+        publishers.setdefault(sensor.topic, []).append((f"sensor {sensor.name}", sensor))
     controllers = [c.name for c in node.controllers]
     for controller in node.controllers:
         partition_ref(controller, controller.partition)
@@ -123,7 +123,7 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
             topic_ref(port, port.topic)
         if controller.active:
             for port in controller.outputs:
-                publishers.setdefault(port.topic, []).append(f"controller {controller.name}")
+                publishers.setdefault(port.topic, []).append((f"controller {controller.name}", port))
         for switch in controller.switches:
             if switch.to == controller.name:
                 report.error(switch, "a controller cannot switch to itself", "to")
@@ -152,11 +152,12 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
                         "value",
                     )
     for topic_name, writers in publishers.items():
-        if len(writers) > 1:
+        for label, record in writers[1:]:  # reported at each extra publisher
             report.error(
-                node,
-                f"topic {topic_name!r} has several publishers: {', '.join(writers)}"
-                ' (make all but one controller active="false")',
+                record,
+                f"{label} also publishes {topic_name!r}, already published by {writers[0][0]}"
+                ' (a topic has one publisher; make switched-in controllers active="false")',
+                "topic",
             )
     if node.monitor is not None:
         for alarm in node.monitor.alarms:
@@ -179,10 +180,10 @@ def _channel_ref(
     if channel is None:
         report.error(record, missing("HWChannel", name, where, channels), "channel")
     elif channel.direction != direction:
-        kind = "sensor" if direction == "in" else "actuator"
+        kind = "a sensor" if direction == "in" else "an actuator"
         report.error(
             record,
-            f"HWChannel {name!r} is an {channel.direction!r} channel; a {kind} needs an {direction!r} one",
+            f"HWChannel {name!r} is an {channel.direction!r} channel; {kind} needs an {direction!r} one",
             "channel",
         )
 
@@ -204,7 +205,7 @@ def _check_switch_condition(switch: Switch, node: Node, scope: Scope, report: Re
     try:
         condition = parse(text, SWITCH)
     except ExpressionError as exc:
-        report.error(switch, str(exc), "when")
+        report.error(switch, str(exc), "when", exc.column)
         return
     alarms = [a.name for a in node.monitor.alarms] if node.monitor else []
     for name, args in condition.calls:

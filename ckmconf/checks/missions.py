@@ -78,23 +78,24 @@ def _check_matrix(matrix: CompositionMatrix, scope: Scope, report: Reporter) -> 
     if len(matrix.rows) != n:
         report.error(matrix, f"matrix has {len(matrix.rows)} rows for {n} services; it must be {n}×{n}")
         return
-    for index, row in enumerate(matrix.rows, start=1):
-        if len(row) != n:
-            report.error(matrix, f"row {index} has {len(row)} values; it must have {n}")
-            return
+    bad = [(i, row) for i, row in enumerate(matrix.rows, start=1) if len(row.values) != n]
+    for index, row in bad:
+        report.error(row, f"row {index} has {len(row.values)} values; it must have {n}")
+    if bad:
+        return
     if matrix.rule == "strict":
         for index, row in enumerate(matrix.rows, start=1):
-            if abs(sum(row) - 1) > _TOLERANCE:
-                report.error(matrix, f'row {index} sums to {sum(row):g}, not 1 (rule="strict", eq. 5.1)', "rule")
+            if abs(sum(row.values) - 1) > _TOLERANCE:
+                report.error(row, f'row {index} sums to {sum(row.values):g}, not 1 (rule="strict", eq. 5.1)')
         for column in range(n):
-            total = sum(row[column] for row in matrix.rows)
+            total = sum(row.values[column] for row in matrix.rows)
             if abs(total - 1) > _TOLERANCE:
                 report.error(matrix, f'column {column + 1} sums to {total:g}, not 1 (rule="strict", eq. 5.1)', "rule")
     else:
         for index, row in enumerate(matrix.rows, start=1):
-            if sum(row) <= 0:
+            if sum(row.values) <= 0:
                 report.error(
-                    matrix, f'row {index} is all zeros; with rule="normalize" every service must depend on something'
+                    row, f'row {index} is all zeros; with rule="normalize" every service must depend on something'
                 )
 
 
@@ -134,7 +135,7 @@ def _check_condition(transition: Transition, state: State, system: System, scope
     try:
         condition = parse(transition.when, TRANSITION)
     except ExpressionError as exc:
-        report.error(transition, str(exc), "when")
+        report.error(transition, str(exc), "when", exc.column)
         return
     behavior = system.behavior(state.behavior) if state.behavior else None
     nested = system.mission(state.mission) if state.mission else None

@@ -17,15 +17,19 @@ class Reporter:
         self.sources = sources or {}
         self.errors: list[ConfigError] = []
 
-    def error(self, record: Record, message: str, attr: str | None = None) -> None:
+    def error(self, record: Record, message: str, attr: str | None = None, offset: int | None = None) -> None:
+        """Report at the record, or at one of its attributes (``offset``: a character of its value)."""
         loc = record.loc
         if loc is None:
             loc = Loc("<memory>", 1, 1, f"/{record.TAG}")
         if attr is not None:
             source = self.sources.get(loc.file)
-            loc = (
-                source.attr_loc_at(loc, attr) if source else Loc(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}")
-            )
+            if source is None:
+                loc = Loc(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}")
+            elif offset is None:
+                loc = source.attr_loc_at(loc, attr)
+            else:
+                loc = source.value_loc_at(loc, attr, offset)
         self.errors.append(ConfigError.at(loc, message))
 
     def unique(self, records: Iterable[Record], kind: str, where: str, key: str = "name") -> None:
@@ -48,15 +52,15 @@ class Reporter:
 def missing(kind: str, name: str, where: str, candidates: Iterable[str]) -> str:
     """ "<kind> 'x' does not exist in <where>", with a suggestion or the list of what does."""
     names = sorted(set(candidates))
-    close = difflib.get_close_matches(name, names, n=1, cutoff=0.75)
+    close = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
     if not close and "/" in "".join(names):
         # Topics: "wheel_odom" should find "/kobuki/wheel_odom".
         tails = {n.rsplit("/", 1)[-1]: n for n in names}
-        near = difflib.get_close_matches(name.rsplit("/", 1)[-1], list(tails), n=1, cutoff=0.75)
+        near = difflib.get_close_matches(name.rsplit("/", 1)[-1], list(tails), n=1, cutoff=0.6)
         close = [tails[near[0]]] if near else []
     if close:
         return f"{kind} {name!r} does not exist in {where}; did you mean {close[0]!r}?"
     if not names:
         return f"{kind} {name!r} does not exist in {where} (none is defined)"
     shown = ", ".join(names[:12]) + (", …" if len(names) > 12 else "")
-    return f"{kind} {name!r} does not exist in {where} (there is: {shown})"
+    return f"{kind} {name!r} does not exist in {where} (defined: {shown})"

@@ -49,7 +49,7 @@ def _check_profile(profile: Profile, plugins: list[str], where: str, report: Rep
 def _check_service(resource: SmartResource, service: Service, scope: Scope, report: Reporter) -> None:
     where = f"service {resource.name}.{service.name}"
     node = scope.system.node(resource.node)
-    for port in (*service.inputs, *service.outputs):
+    for port in (*service.inputs, *service.outputs) if node is not None else ():  # no node: reported once
         if scope.topic(node, port.topic) is None:
             report.error(
                 port, missing("topic", port.topic, f"node {resource.node!r}", scope.visible_topics(node)), "topic"

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from ..binding import Record, attr, children, rows
+from ..binding import Record, attr, children, text
 from .kernel import Param
 
 
@@ -101,6 +101,14 @@ class MatrixService(Record):
 
 
 @dataclass(frozen=True, kw_only=True)
+class Row(Record):
+    """<Row>: one row of a composition matrix, values from 0 to 1."""
+
+    TAG = "Row"
+    values: tuple[float, ...] = text()
+
+
+@dataclass(frozen=True, kw_only=True)
 class CompositionMatrix(Record):
     """<CompositionMatrix>: the Service Composition matrix SC of eq. 5.1."""
 
@@ -108,7 +116,7 @@ class CompositionMatrix(Record):
     name: str = attr()
     rule: Literal["strict", "normalize"] = attr(default="normalize")
     services: tuple[MatrixService, ...] = children()
-    rows: tuple[tuple[float, ...], ...] = rows("Row")
+    rows: tuple[Row, ...] = children()
 
     def refs(self) -> list[str]:
         return [s.ref for s in self.services]

@@ -213,7 +213,7 @@ PLAN = """<Node name="pc"/>
             "signal('og')",
             "",
             [
-                "signal 'og' does not exist in any plan (there is: go)",
+                "signal 'og' does not exist in any plan (defined: go)",
                 "state 's' never waits for 'go': use signal('go') in a transition out of it, "
                 'or give its behavior an Input with signal="go"',
             ],
@@ -243,3 +243,21 @@ def test_topic_suggestions_match_the_last_segment(tmp_path: Path) -> None:
     )
     message = ckmconf.load(system(tmp_path, body), strict=False).errors[0].message
     assert message == "topic 'wheel_odom' does not exist in node 'n'; did you mean '/kobuki/wheel_odom'?"
+
+
+def test_problem_count_is_bounded(tmp_path: Path) -> None:
+    path = system(tmp_path, "<Junk/>\n" * 5000)
+    errors = ckmconf.load(path, strict=False).errors
+    assert len(errors) == 101
+    assert errors[0].message.startswith("unexpected element 'Junk' in System (allowed: Include, Network, ")
+    assert (errors[-1].line, errors[-1].message) == (103, "more problems from here on; only the first 100 are listed")
+
+
+def test_very_large_invalid_files_are_reported_by_libxml2(tmp_path: Path) -> None:
+    # Past 100,000 elements xmlschema would take seconds; libxml2's finding is located the same way.
+    nodes = '<Node name="n{i}"><Topic name="t" type="float64" scope="internal"/></Node>\n'
+    body = "".join(nodes.format(i=i) for i in range(60_000)) + '<Node name="bad" kind="heavy"/>'
+    errors = ckmconf.load(system(tmp_path, body), strict=False).errors
+    assert len(errors) == 1
+    assert (errors[0].line, errors[0].xpath) == (60_003, "/System[@name='sys']/Node[@name='bad']")
+    assert "heavy" in errors[0].message and "kind" in errors[0].message

@@ -90,7 +90,7 @@ def test_use_case_is_complete() -> None:
     behaviors = {b.name for b in lab.behaviors}
     assert {"INIT", "NAV", "WAIT", "SPOT", "APPR", "PICK", "PLACE", "BACK", "END", "OBJ_TRACK", "OBJ_FIX"} <= behaviors
     table_7_6 = next(m for m in lab.matrices if len(m.services) == 7)
-    assert table_7_6.rows[6] == (0, 0, 0.5, 0.5, 0, 0, 1)
+    assert table_7_6.rows[6].values == (0, 0, 0.5, 0.5, 0, 0, 1)
     assert table_7_6.rule == "normalize"
     assert any(len(plan.agents) == 2 and plan.dependencies for plan in lab.plans)
     assert lab.environment is not None and len(lab.environment.objects) >= 4
