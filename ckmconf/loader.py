@@ -138,7 +138,8 @@ class _Loader:
         target = os.path.normpath(base / include.href)
         key = os.path.realpath(target)
         if key in stack:
-            self.errors.append(_error(include, f"include cycle: {include.href} is already being read"))
+            chain = " → ".join(Path(p).name for p in [*stack[stack.index(key) :], key])
+            self.errors.append(_error(include, f"include cycle: {chain}"))
             return
         if any(os.path.realpath(p) == key for p in self.sources):
             return  # read once, like a header guard

@@ -44,7 +44,7 @@ def test_include_cycle(tmp_path: Path) -> None:
     write(tmp_path, "b.xml", '<Include href="a.xml"/>')
     path = system(tmp_path, '<Include href="a.xml"/>')
     result = ckmconf.load(path, strict=False)
-    assert [e.message for e in result.errors] == ["include cycle: a.xml is already being read"]
+    assert [e.message for e in result.errors] == ["include cycle: a.xml → b.xml → a.xml"]
     assert result.errors[0].file.endswith("b.xml")
     assert result.system is None
 
