@@ -95,7 +95,7 @@ class _Loader:
         self.errors: list[ConfigError] = []
 
     def run(self, path: str, data: bytes | None) -> LoadResult:
-        root = self._read(path, data, stack=[], include=None)
+        root = self._read(path, data, stack=[], via=[])
         files = list(self.sources)
         if root is None or self.errors:
             return LoadResult(None, sorted(self.errors, key=ConfigError.sort_key), files)
@@ -106,8 +106,10 @@ class _Loader:
         errors = sorted(set(self.errors), key=ConfigError.sort_key)
         return LoadResult(None if errors else system, errors, files)
 
-    def _read(self, path: str, data: bytes | None, stack: list[str], include: Include | None) -> System | Part | None:
+    def _read(self, path: str, data: bytes | None, stack: list[str], via: list[Include]) -> System | Part | None:
+        """Read one file; ``stack`` holds the files being read and ``via`` the Include followed in each."""
         key = os.path.realpath(path)
+        include = via[-1] if via else None
         try:
             source = parse_bytes(path, data, self.limits) if data is not None else read_source(path, self.limits)
         except ConfigError as error:
@@ -125,10 +127,11 @@ class _Loader:
         self.documents.append(document)
         base = Path(path).parent
         for inc in document.includes:
-            self._include(base, inc, [*stack, key])
+            self._include(base, [*stack, key], [*via, inc])
         return document
 
-    def _include(self, base: Path, include: Include, stack: list[str]) -> None:
+    def _include(self, base: Path, stack: list[str], via: list[Include]) -> None:
+        include = via[-1]
         if os.path.isabs(include.href) or include.href.startswith("~"):
             self.errors.append(_error(include, f"include paths are relative to the including file: {include.href}"))
             return
@@ -138,15 +141,16 @@ class _Loader:
         target = os.path.normpath(base / include.href)
         key = os.path.realpath(target)
         if key in stack:
-            chain = " → ".join(Path(p).name for p in [*stack[stack.index(key) :], key])
-            self.errors.append(_error(include, f"include cycle: {chain}"))
+            start = stack.index(key)  # reported where the cycle begins: in the file that was asked for
+            chain = " → ".join(Path(p).name for p in [*stack[start:], key])
+            self.errors.append(_error(via[start], f"include cycle: {chain}"))
             return
         if any(os.path.realpath(p) == key for p in self.sources):
             return  # read once, like a header guard
         if len(self.sources) >= self.limits.max_files:
             self.errors.append(_error(include, f"more than {self.limits.max_files} files included"))
             return
-        self._read(target, None, stack, include)
+        self._read(target, None, stack, via)
 
     def _at_include(self, include: Include, error: ConfigError) -> ConfigError:
         if error.message in ("file not found", "not a regular file") or error.message.startswith("cannot read"):
