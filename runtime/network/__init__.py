@@ -1,0 +1,1 @@
+"""Networking: CKMultiPeer (§3.1.4) and a Zenoh transport behind one publish/subscribe interface."""

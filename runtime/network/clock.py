@@ -1,0 +1,55 @@
+"""SYNCTIME (§3.1.4.3): NTP-style clock offsets between peers, from four timestamps.
+
+The requester stamps t1 when it sends, the responder t2 when it receives and t3 when it
+answers, the requester t4 when the answer arrives:
+
+    offset = ((t2 - t1) + (t3 - t4)) / 2      the remote clock minus ours
+    delay  = (t4 - t1) - (t3 - t2)            the round trip spent on the network
+
+Among recent exchanges the one with the smallest delay gives the best offset (least queueing).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Offset:
+    offset: float
+    delay: float
+
+
+class ClockSync:
+    """Offsets to remote peers, updated from SYNCTIME exchanges."""
+
+    def __init__(self, window: int = 8) -> None:
+        self._window = window
+        self._samples: dict[int, deque[Offset]] = {}
+        self._lock = threading.Lock()
+
+    def add(self, guid: int, t1: float, t2: float, t3: float, t4: float) -> Offset:
+        sample = Offset(((t2 - t1) + (t3 - t4)) / 2, (t4 - t1) - (t3 - t2))
+        with self._lock:
+            self._samples.setdefault(guid, deque(maxlen=self._window)).append(sample)
+        return sample
+
+    def best(self, guid: int) -> Offset | None:
+        with self._lock:
+            samples = self._samples.get(guid)
+            return min(samples, key=lambda s: s.delay) if samples else None
+
+    def offset(self, guid: int) -> float:
+        """Remote clock minus local clock (0 until the first exchange)."""
+        best = self.best(guid)
+        return best.offset if best is not None else 0.0
+
+    def to_local(self, guid: int, remote_time: float) -> float:
+        """A remote timestamp expressed on the local clock."""
+        return remote_time - self.offset(guid)
+
+    def forget(self, guid: int) -> None:
+        with self._lock:
+            self._samples.pop(guid, None)

@@ -1,0 +1,334 @@
+"""CKMultiPeer (§3.1.4): discovery, the full mesh of TCP links, listeners and clock sync.
+
+Lifecycle: ``MultiPeer(network, name=…)`` does no I/O; ``setup()`` binds the listening port
+(trying the next ones when busy) and the discovery socket; ``start()`` starts the threads;
+``stop()`` says goodbye and closes everything.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from ckmconf.model import Network
+
+from .clock import ClockSync
+from .discovery import Discovery
+from .frames import Frame, FrameType, encode
+from .guid import guid_address, guid_text, make_guid
+from .link import Link
+
+LOG = logging.getLogger("ckm.multipeer")
+
+Listener = Callable[[int, Frame], None]
+
+
+@dataclass(frozen=True)
+class PeerEvent:
+    """found / lost (discovery), linked / unlinked (TCP link up or down)."""
+
+    kind: str
+    guid: int
+    name: str
+    reason: str = ""
+
+
+class NetworkError(RuntimeError):
+    """A peer cannot start: no free port, no multicast, unreadable key…"""
+
+
+class MultiPeer:
+    """One member of a CKMultiPeer group."""
+
+    def __init__(self, network: Network, *, name: str = "peer", key: bytes | None = None) -> None:
+        self.network = network
+        self.name = name
+        self.key = key
+        self.guid = 0
+        self.links: dict[int, Link] = {}
+        self.names: dict[int, str] = {}
+        self.rejected_links = 0
+        self.clock = ClockSync()
+        self._listeners: dict[FrameType, list[Listener]] = {}
+        self._event_callbacks: list[Callable[[PeerEvent], None]] = []
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._server: socket.socket | None = None
+        self._discovery: Discovery | None = None
+        self._threads: list[threading.Thread] = []
+        self._retry_at: dict[int, float] = {}
+        self._backoff: dict[int, float] = {}
+        self._connecting: set[int] = set()
+        self._all_links: list[Link] = []
+        self.add_listener(FrameType.SYNCTIME, self._on_synctime)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def setup(self) -> None:
+        net = self.network
+        self._server = self._bind(net.interface, net.base_port, net.port_tries)
+        self.guid = make_guid(net.interface, self._server.getsockname()[1])
+        self._discovery = Discovery(
+            guid=self.guid,
+            name=self.name,
+            group=net.group,
+            port=net.discovery_port,
+            interface=net.interface,
+            heartbeat=net.heartbeat,
+            lost_after=net.lost_after,
+            key=self.key,
+            on_found=self._found,
+            on_lost=self._lost,
+        )
+        try:
+            self._discovery.setup()
+        except OSError as exc:
+            self._server.close()
+            raise NetworkError(f"cannot join multicast group {net.group}:{net.discovery_port}: {exc}") from exc
+
+    def start(self) -> None:
+        assert self._server is not None and self._discovery is not None, "call setup() first"
+        for target, label in ((self._accept_loop, "accept"), (self._timer_loop, "timer")):
+            thread = threading.Thread(target=target, name=f"ckm-{label}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        self._discovery.start()
+
+    def stop(self) -> None:
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        if self._discovery is not None:
+            self._discovery.stop()
+        if self._server is not None:
+            self._server.close()
+        with self._lock:
+            links = list(self._all_links)
+        for link in links:
+            link.close("peer stopping")
+        for link in links:
+            link.join()
+        for thread in self._threads:
+            thread.join(timeout=2)
+
+    def __enter__(self) -> MultiPeer:
+        self.setup()
+        self.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.stop()
+
+    @staticmethod
+    def _bind(interface: str, base: int, tries: int) -> socket.socket:
+        last: OSError | None = None
+        for port in range(base, min(base + tries, 65536)):
+            server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            try:
+                server.bind((interface, port))
+            except OSError as exc:
+                server.close()
+                if exc.errno not in (errno.EADDRINUSE, errno.EACCES):
+                    raise NetworkError(f"cannot listen on {interface}:{port}: {exc}") from exc
+                last = exc
+                continue
+            server.listen(64)
+            server.settimeout(0.1)
+            return server
+        raise NetworkError(f"no free port on {interface} in {base}…{base + tries - 1}: {last}")
+
+    # ------------------------------------------------------------------ API
+
+    def add_listener(self, kind: FrameType, callback: Listener) -> None:
+        """Call ``callback(sender_guid, frame)`` for every frame of ``kind`` (§3.1.4.4).
+
+        The frame is only valid during the call: copy what you keep.
+        """
+        self._listeners.setdefault(kind, []).append(callback)
+
+    def on_event(self, callback: Callable[[PeerEvent], None]) -> None:
+        self._event_callbacks.append(callback)
+
+    def linked(self) -> list[int]:
+        with self._lock:
+            return sorted(self.links)
+
+    def send(self, guid: int, kind: FrameType, body: list[Any]) -> bool:
+        link = self.links.get(guid)
+        return link is not None and link.send(kind, body)
+
+    def broadcast(self, kind: FrameType, body: list[Any], guids: list[int] | None = None) -> int:
+        """Send to every linked peer (or those listed); encodes once when there is no group key."""
+        with self._lock:
+            targets = [self.links[g] for g in (guids if guids is not None else self.links) if g in self.links]
+        if not targets:
+            return 0
+        if self.key is None:
+            data = encode(kind, body)
+            return sum(link.send_encoded(data) for link in targets)
+        return sum(link.send(kind, body) for link in targets)
+
+    def wait_linked(self, count: int, timeout: float) -> bool:
+        """Wait until at least ``count`` links are open (tests and benchmarks)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if len(self.links) >= count:
+                return True
+            time.sleep(0.005)
+        return len(self.links) >= count
+
+    # ------------------------------------------------------------------ discovery callbacks
+
+    def _found(self, guid: int, name: str) -> None:
+        self.names[guid] = name
+        self._emit(PeerEvent("found", guid, name))
+        if guid > self.guid:  # the mandala: the lower GUID connects to the higher one
+            with self._lock:
+                self._retry_at[guid] = 0.0
+                self._backoff[guid] = self.network.reconnect_min
+
+    def _lost(self, guid: int, name: str) -> None:
+        with self._lock:
+            self._retry_at.pop(guid, None)
+            link = self.links.get(guid)
+        self._emit(PeerEvent("lost", guid, name, "heartbeat stopped"))
+        if link is not None:
+            link.close("peer lost (no heartbeat)")
+
+    # ------------------------------------------------------------------ links
+
+    def _accept_loop(self) -> None:
+        assert self._server is not None
+        while not self._stop.is_set():
+            try:
+                sock, _ = self._server.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            self._start_link(sock, outgoing=False, expected=None)
+
+    def _start_link(self, sock: socket.socket, *, outgoing: bool, expected: int | None) -> None:
+        link = Link(
+            sock,
+            local_guid=self.guid,
+            local_name=self.name,
+            max_frame=self.network.max_frame,
+            key=self.key,
+            outgoing=outgoing,
+            expected=expected,
+            on_open=self._opened,
+            on_frame=self._frame,
+            on_close=self._closed,
+        )
+        with self._lock:
+            if self._stop.is_set():
+                sock.close()
+                return
+            self._all_links.append(link)
+        try:
+            link.start()
+        except OSError as exc:
+            link.close(f"cannot start: {exc}")
+
+    def _connect(self, guid: int) -> None:
+        address, port = guid_address(guid)
+        try:
+            sock = socket.create_connection((address, port), timeout=1.0)
+        except OSError as exc:
+            LOG.debug("connect to %s failed: %s", guid_text(guid), exc)
+            self._schedule_retry(guid)
+            return
+        finally:
+            with self._lock:
+                self._connecting.discard(guid)
+        self._start_link(sock, outgoing=True, expected=guid)
+
+    def _opened(self, link: Link) -> bool:
+        guid = link.remote_guid
+        assert guid is not None
+        with self._lock:
+            if self._stop.is_set():
+                return False
+            if not link.outgoing and guid > self.guid:
+                self.rejected_links += 1
+                return False  # a higher GUID must wait for us to connect
+            old = self.links.get(guid)
+            self.links[guid] = link
+            self._retry_at.pop(guid, None)
+            self._backoff[guid] = self.network.reconnect_min
+        if old is not None and old is not link:
+            old.close("replaced by a new connection")
+        self.names.setdefault(guid, link.remote_name)
+        self._emit(PeerEvent("linked", guid, link.remote_name))
+        self._sync_clock(guid)
+        return True
+
+    def _closed(self, link: Link, reason: str) -> None:
+        guid = link.remote_guid
+        with self._lock:
+            if link in self._all_links:
+                self._all_links.remove(link)
+            current = self.links.get(guid) if guid is not None else None
+            if current is link:
+                del self.links[guid]  # type: ignore[arg-type]
+        if current is link and guid is not None:
+            self._emit(PeerEvent("unlinked", guid, link.remote_name, reason))
+            self._schedule_retry(guid)
+
+    def _schedule_retry(self, guid: int) -> None:
+        if self._stop.is_set() or guid < self.guid or self._discovery is None or guid not in self._discovery.known:
+            return
+        with self._lock:
+            delay = self._backoff.get(guid, self.network.reconnect_min)
+            self._retry_at[guid] = time.monotonic() + delay
+            self._backoff[guid] = min(delay * 2, self.network.reconnect_max)
+
+    def _frame(self, link: Link, frame: Frame) -> None:
+        guid = link.remote_guid
+        assert guid is not None
+        for callback in self._listeners.get(frame.type, ()):
+            callback(guid, frame)
+
+    def _emit(self, event: PeerEvent) -> None:
+        for callback in list(self._event_callbacks):
+            try:
+                callback(event)
+            except Exception:
+                LOG.exception("event callback failed on %s", event)
+
+    # ------------------------------------------------------------------ timer: reconnects, clock sync
+
+    def _timer_loop(self) -> None:
+        next_sync = time.monotonic() + self.network.clock_sync
+        while not self._stop.wait(0.005):
+            now = time.monotonic()
+            with self._lock:
+                due = [g for g, at in self._retry_at.items() if at <= now and g not in self.links]
+                due = [g for g in due if g not in self._connecting]
+                for guid in due:
+                    self._retry_at.pop(guid, None)
+                    self._connecting.add(guid)
+            for guid in due:
+                threading.Thread(target=self._connect, args=(guid,), name="ckm-connect", daemon=True).start()
+            if now >= next_sync:
+                next_sync = now + self.network.clock_sync
+                for guid in self.linked():
+                    self._sync_clock(guid)
+
+    def _sync_clock(self, guid: int) -> None:
+        self.send(guid, FrameType.SYNCTIME, ["req", time.time()])
+
+    def _on_synctime(self, guid: int, frame: Frame) -> None:
+        received = time.time()
+        body = frame.body
+        if len(body) == 2 and body[0] == "req" and isinstance(body[1], float):
+            self.send(guid, FrameType.SYNCTIME, ["rep", body[1], received, time.time()])
+        elif len(body) == 4 and body[0] == "rep" and all(isinstance(v, float) for v in body[1:]):
+            self.clock.add(guid, body[1], body[2], body[3], received)
