@@ -93,9 +93,7 @@ class Authenticator:
         return hmac.new(self._key, message, hashlib.sha256).digest()
 
 
-def encode(
-    kind: FrameType, body: list[Any], *, auth: Authenticator | None = None, direction: bytes = b">"
-) -> bytes:
+def encode(kind: FrameType, body: list[Any], *, auth: Authenticator | None = None, direction: bytes = b">") -> bytes:
     """One frame as bytes."""
     payload: bytes = msgpack.packb(body, use_bin_type=True)
     flags = FLAG_AUTH if auth is not None else 0

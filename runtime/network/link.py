@@ -101,6 +101,10 @@ class Link:
             data = encode(kind, body, auth=self._auth, direction=self._role())
             return self._write_locked(data)
 
+    def busy(self) -> bool:
+        """Whether another thread is writing right now (best-effort samples are then dropped)."""
+        return self._send_lock.locked()
+
     def send_encoded(self, data: bytes) -> bool:
         """Send a frame encoded once for many links (only possible without a group key)."""
         if self.state != "open" or self._auth is not None:

@@ -1,0 +1,185 @@
+"""The publish/subscribe interface every transport offers (CKMultiPeer, Zenoh).
+
+Topics carry msgpack-able values. Every sample is timestamped by its publisher (§3.1.2.10);
+QoS comes from the configuration's Topic: reliability, history depth, deadline (a missed
+deadline is an event) and lifespan (stale samples are dropped). Events — peers found, lost,
+linked, unlinked, deadlines missed, stale samples dropped — go to ``on_event`` callbacks and
+to the local topic ``EVENTS_TOPIC``.
+"""
+
+from __future__ import annotations
+
+import abc
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from ckmconf.model import Network, Topic
+
+EVENTS_TOPIC = "/ckm/events"
+
+
+@dataclass(frozen=True)
+class TopicQoS:
+    """A topic's name and quality of service, usually from a configuration's <Topic>."""
+
+    name: str
+    type: str = "bytes"
+    reliability: Literal["reliable", "best-effort"] = "reliable"
+    history: int = 1
+    deadline: float | None = None
+    lifespan: float | None = None
+
+    @classmethod
+    def of(cls, topic: Topic) -> TopicQoS:
+        return cls(topic.name, topic.type, topic.reliability, topic.history, topic.deadline, topic.lifespan)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One received value. ``stamp`` is on the publisher's clock; ``received`` on ours."""
+
+    topic: str
+    value: Any
+    stamp: float
+    source: int
+    seq: int
+    received: float
+    offset: float = 0.0  # publisher clock minus ours, from SYNCTIME
+
+    @property
+    def age(self) -> float:
+        """Seconds from publication to reception, on one clock."""
+        return self.received - (self.stamp - self.offset)
+
+
+@dataclass(frozen=True)
+class NetworkEvent:
+    """found, lost, linked, unlinked (peers); deadline-missed, stale-dropped (topics)."""
+
+    kind: str
+    peer: int | None = None
+    topic: str | None = None
+    detail: str = ""
+
+
+class Subscription:
+    """A subscriber's end of a topic: an optional callback and the last ``history`` samples."""
+
+    def __init__(
+        self, qos: TopicQoS, callback: Callable[[Sample], None] | None, on_close: Callable[[Subscription], None]
+    ):
+        self.qos = qos
+        self.callback = callback
+        self.received = 0
+        self.last_arrival = time.monotonic()  # or the last missed-deadline report
+        self._samples: deque[Sample] = deque(maxlen=qos.history)
+        self._lock = threading.Lock()
+        self._on_close = on_close
+        self._arrived = threading.Condition(self._lock)
+
+    def deliver(self, sample: Sample) -> None:
+        with self._lock:
+            self._samples.append(sample)
+            self.received += 1
+            self.last_arrival = time.monotonic()
+            self._arrived.notify_all()
+        if self.callback is not None:
+            self.callback(sample)
+
+    def latest(self) -> Sample | None:
+        """The newest sample still within its lifespan, if any."""
+        with self._lock:
+            sample = self._samples[-1] if self._samples else None
+        if (
+            sample is not None
+            and self.qos.lifespan is not None
+            and time.time() - (sample.stamp - sample.offset) > self.qos.lifespan
+        ):
+            return None
+        return sample
+
+    def history(self) -> list[Sample]:
+        with self._lock:
+            return list(self._samples)
+
+    def wait(self, count: int, timeout: float) -> bool:
+        """Wait until ``count`` samples have arrived in total (tests, benchmarks)."""
+        with self._arrived:
+            return self._arrived.wait_for(lambda: self.received >= count, timeout)
+
+    def close(self) -> None:
+        self._on_close(self)
+
+
+class Publisher:
+    """A publisher's end of a topic."""
+
+    def __init__(self, qos: TopicQoS, send: Callable[[TopicQoS, Any, float], int]) -> None:
+        self.qos = qos
+        self._send = send
+
+    def publish(self, value: Any, *, stamp: float | None = None) -> int:
+        """Publish ``value`` (stamped now unless given); returns the number of remote peers sent to."""
+        return self._send(self.qos, value, time.time() if stamp is None else stamp)
+
+
+class Transport(abc.ABC):
+    """What the runtime uses to talk: the same for CKMultiPeer and Zenoh."""
+
+    guid: int = 0
+
+    @abc.abstractmethod
+    def setup(self) -> None: ...
+
+    @abc.abstractmethod
+    def start(self) -> None: ...
+
+    @abc.abstractmethod
+    def stop(self) -> None: ...
+
+    @abc.abstractmethod
+    def publisher(self, qos: TopicQoS) -> Publisher: ...
+
+    @abc.abstractmethod
+    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription: ...
+
+    @abc.abstractmethod
+    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None: ...
+
+    @abc.abstractmethod
+    def peers(self) -> list[int]: ...
+
+    @abc.abstractmethod
+    def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        """Wait until ``count`` remote peers subscribe to ``topic`` (tests, benchmarks)."""
+
+    def __enter__(self) -> Transport:
+        self.setup()
+        self.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.stop()
+
+
+class GroupKeyError(ValueError):
+    """The group key file named by the configuration cannot be used."""
+
+
+def read_group_key(network: Network, base: Path) -> bytes | None:
+    """The group key bytes (file relative to ``base``), or None when the network has none."""
+    if network.group_key_file is None:
+        return None
+    path = (base / network.group_key_file).resolve()
+    try:
+        key = path.read_bytes().strip()
+    except OSError as exc:
+        raise GroupKeyError(f"cannot read the group key file {path}: {exc.strerror}") from None
+    if len(key) < 16:
+        raise GroupKeyError(f"the group key in {path} is too short ({len(key)} bytes; use at least 16)")
+    return key

@@ -1,0 +1,210 @@
+"""Publish/subscribe over CKMultiPeer: TOPICLINKS tell who subscribes what; TOPICDATA goes only there.
+
+Local subscribers get the very object published, with no serialization. Remote peers get one
+TOPICDATA frame per sample — ``[topic, seq, stamp, value]`` — encoded once for all links when
+there is no group key. Best-effort topics drop a sample rather than wait for a busy link.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from ckmconf.model import Network
+
+from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
+from .frames import Frame, FrameType, encode
+from .multipeer import MultiPeer, PeerEvent
+
+LOG = logging.getLogger("ckm.pubsub")
+
+
+class MultiPeerTransport(Transport):
+    """The CKMultiPeer transport (``<Network transport="multipeer">``)."""
+
+    def __init__(self, network: Network, *, name: str = "peer", key: bytes | None = None) -> None:
+        self.peer = MultiPeer(network, name=name, key=key)
+        self._subs: dict[str, list[Subscription]] = {}
+        self._remote_subs: dict[str, set[int]] = {}
+        self._seq: dict[str, int] = {}
+        self._callbacks: list[Callable[[NetworkEvent], None]] = []
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._watchdog = threading.Thread(target=self._watch_deadlines, name="ckm-deadlines", daemon=True)
+        self.dropped_stale = 0
+        self.dropped_busy = 0
+        self.peer.add_listener(FrameType.TOPICDATA, self._on_data)
+        self.peer.add_listener(FrameType.TOPICLINKS, self._on_links)
+        self.peer.on_event(self._on_peer_event)
+
+    @property
+    def guid(self) -> int:  # type: ignore[override]
+        return self.peer.guid
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def setup(self) -> None:
+        self.peer.setup()
+
+    def start(self) -> None:
+        self.peer.start()
+        self._watchdog.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.peer.stop()
+        if self._watchdog.is_alive():
+            self._watchdog.join(timeout=2)
+
+    # ------------------------------------------------------------------ API
+
+    def publisher(self, qos: TopicQoS) -> Publisher:
+        return Publisher(qos, self._publish)
+
+    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        subscription = Subscription(qos, callback, self._unsubscribe)
+        with self._lock:
+            first = not self._subs.get(qos.name)
+            self._subs.setdefault(qos.name, []).append(subscription)
+        if first and qos.name != EVENTS_TOPIC:
+            self._announce_links()
+        return subscription
+
+    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        self._callbacks.append(callback)
+
+    def peers(self) -> list[int]:
+        return self.peer.linked()
+
+    def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if len(self._remote_subs.get(topic, ())) >= count:
+                return True
+            time.sleep(0.002)
+        return len(self._remote_subs.get(topic, ())) >= count
+
+    # ------------------------------------------------------------------ publishing
+
+    def _publish(self, qos: TopicQoS, value: Any, stamp: float) -> int:
+        with self._lock:
+            seq = self._seq[qos.name] = self._seq.get(qos.name, 0) + 1
+            local = list(self._subs.get(qos.name, ()))
+            remote = list(self._remote_subs.get(qos.name, ()))
+        if local:
+            sample = Sample(qos.name, value, stamp, self.guid, seq, time.time())
+            for subscription in local:
+                subscription.deliver(sample)
+        if not remote:
+            return 0
+        body = [qos.name, seq, stamp, value]
+        links = [self.peer.links.get(g) for g in remote]
+        if self.peer.key is None:
+            data = encode(FrameType.TOPICDATA, body)
+            sent = 0
+            for link in links:
+                if link is None:
+                    continue
+                if qos.reliability == "best-effort" and link.busy():
+                    self.dropped_busy += 1
+                    continue
+                sent += link.send_encoded(data)
+            return sent
+        return sum(link.send(FrameType.TOPICDATA, body) for link in links if link is not None)
+
+    # ------------------------------------------------------------------ receiving
+
+    def _on_data(self, guid: int, frame: Frame) -> None:
+        body = frame.body
+        if (
+            len(body) != 4
+            or not isinstance(body[0], str)
+            or not isinstance(body[1], int)
+            or not isinstance(body[2], float)
+        ):
+            LOG.warning("ignoring a malformed TOPICDATA frame from %s", guid)
+            return
+        topic, seq, stamp, value = body
+        with self._lock:
+            local = list(self._subs.get(topic, ()))
+        if not local:
+            return
+        offset = self.peer.clock.offset(guid)
+        sample = Sample(topic, value, stamp, guid, seq, time.time(), offset)
+        lifespan = local[0].qos.lifespan
+        if lifespan is not None and sample.age > lifespan:
+            self.dropped_stale += 1
+            self._emit(NetworkEvent("stale-dropped", guid, topic, f"sample {seq} is {sample.age:.3f} s old"))
+            return
+        for subscription in local:
+            subscription.deliver(sample)
+
+    def _on_links(self, guid: int, frame: Frame) -> None:
+        body = frame.body
+        if len(body) != 2 or body[0] != "subs" or not isinstance(body[1], list):
+            LOG.warning("ignoring a malformed TOPICLINKS frame from %s", guid)
+            return
+        topics = {t for t in body[1] if isinstance(t, str)}
+        with self._lock:
+            for name, guids in self._remote_subs.items():
+                if name not in topics:
+                    guids.discard(guid)
+            for name in topics:
+                self._remote_subs.setdefault(name, set()).add(guid)
+
+    def _announce_links(self, guids: list[int] | None = None) -> None:
+        with self._lock:
+            topics = sorted(name for name, subs in self._subs.items() if subs and name != EVENTS_TOPIC)
+        self.peer.broadcast(FrameType.TOPICLINKS, ["subs", topics], guids)
+
+    def _unsubscribe(self, subscription: Subscription) -> None:
+        with self._lock:
+            subs = self._subs.get(subscription.qos.name, [])
+            if subscription in subs:
+                subs.remove(subscription)
+            last = not subs
+        if last:
+            self._announce_links()
+
+    # ------------------------------------------------------------------ events and deadlines
+
+    def _on_peer_event(self, event: PeerEvent) -> None:
+        if event.kind == "linked":
+            self._announce_links([event.guid])
+        elif event.kind in ("unlinked", "lost"):
+            with self._lock:
+                for guids in self._remote_subs.values():
+                    guids.discard(event.guid)
+            if event.kind == "lost":
+                self.peer.clock.forget(event.guid)
+        self._emit(NetworkEvent(event.kind, event.guid, None, event.reason or event.name))
+
+    def _emit(self, event: NetworkEvent) -> None:
+        for callback in list(self._callbacks):
+            try:
+                callback(event)
+            except Exception:
+                LOG.exception("event callback failed")
+        with self._lock:
+            local = list(self._subs.get(EVENTS_TOPIC, ()))
+        if local:
+            sample = Sample(EVENTS_TOPIC, event, time.time(), self.guid, 0, time.time())
+            for subscription in local:
+                subscription.deliver(sample)
+
+    def _watch_deadlines(self) -> None:
+        while not self._stop.wait(0.002):
+            now = time.monotonic()
+            with self._lock:
+                watched = [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]
+            for subscription in watched:
+                deadline = subscription.qos.deadline
+                assert deadline is not None
+                if now - subscription.last_arrival > deadline:
+                    subscription.last_arrival = now  # re-armed: one event per missed period
+                    self._emit(
+                        NetworkEvent("deadline-missed", None, subscription.qos.name, f"no sample for {deadline:g} s")
+                    )
