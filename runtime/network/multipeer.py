@@ -23,6 +23,7 @@ from .discovery import Discovery
 from .frames import Frame, FrameType, encode
 from .guid import guid_address, guid_text, make_guid
 from .link import Link
+from .proxy import Router
 
 LOG = logging.getLogger("ckm.multipeer")
 
@@ -66,7 +67,17 @@ class MultiPeer:
         self._backoff: dict[int, float] = {}
         self._connecting: set[int] = set()
         self._all_links: list[Link] = []
+        self._sync_burst: dict[int, int] = {}  # guid → exchanges left in the opening burst
+        self.router = Router(
+            local=lambda: self.guid,
+            linked=self.linked,
+            send_direct=self._send_direct,
+            deliver=self._dispatch,
+            on_route=self._route_changed,
+            proxy_after=max(1.0, 2 * network.reconnect_max),
+        )
         self.add_listener(FrameType.SYNCTIME, self._on_synctime)
+        self.add_listener(FrameType.PROXYWRAPPER, self.router.handle)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -159,20 +170,30 @@ class MultiPeer:
         with self._lock:
             return sorted(self.links)
 
+    def reachable(self) -> list[int]:
+        """Peers linked directly or through a neighbour (PROXYWRAPPER)."""
+        with self._lock:
+            return sorted(set(self.links) | set(self.router.routes))
+
     def send(self, guid: int, kind: FrameType, body: list[Any]) -> bool:
+        """Send one frame to a peer, directly or through the neighbour that reaches it."""
+        return self._send_direct(guid, kind, body) or (guid not in self.links and self.router.send(guid, kind, body))
+
+    def _send_direct(self, guid: int, kind: FrameType, body: list[Any]) -> bool:
         link = self.links.get(guid)
         return link is not None and link.send(kind, body)
 
     def broadcast(self, kind: FrameType, body: list[Any], guids: list[int] | None = None) -> int:
-        """Send to every linked peer (or those listed); encodes once when there is no group key."""
+        """Send to every reachable peer (or those listed); encodes once for direct links without a key."""
+        wanted = guids if guids is not None else self.reachable()
         with self._lock:
-            targets = [self.links[g] for g in (guids if guids is not None else self.links) if g in self.links]
-        if not targets:
-            return 0
-        if self.key is None:
+            targets = [self.links[g] for g in wanted if g in self.links]
+            routed = [g for g in wanted if g not in self.links and g in self.router.routes]
+        sent = sum(self.router.send(g, kind, body) for g in routed)
+        if self.key is None and targets:
             data = encode(kind, body)
-            return sum(link.send_encoded(data) for link in targets)
-        return sum(link.send(kind, body) for link in targets)
+            return sent + sum(link.send_encoded(data) for link in targets)
+        return sent + sum(link.send(kind, body) for link in targets)
 
     def wait_linked(self, count: int, timeout: float) -> bool:
         """Wait until at least ``count`` links are open (tests and benchmarks)."""
@@ -240,7 +261,8 @@ class MultiPeer:
     def _connect(self, guid: int) -> None:
         address, port = guid_address(guid)
         try:
-            sock = socket.create_connection((address, port), timeout=1.0)
+            # From the interface address: the GUID we claim must match where the link comes from.
+            sock = socket.create_connection((address, port), timeout=1.0, source_address=(self.network.interface, 0))
         except OSError as exc:
             LOG.debug("connect to %s failed: %s", guid_text(guid), exc)
             self._schedule_retry(guid)
@@ -266,8 +288,10 @@ class MultiPeer:
         if old is not None and old is not link:
             old.close("replaced by a new connection")
         self.names.setdefault(guid, link.remote_name)
+        self.router.link_up(guid)
         self._emit(PeerEvent("linked", guid, link.remote_name))
-        self._sync_clock(guid)
+        self._sync_burst[guid] = 8  # the least-delay exchange of a burst gives a good first offset
+        threading.Thread(target=self.router.announce, args=(self.names,), daemon=True).start()
         return True
 
     def _closed(self, link: Link, reason: str) -> None:
@@ -280,6 +304,9 @@ class MultiPeer:
                 del self.links[guid]  # type: ignore[arg-type]
         if current is link and guid is not None:
             self._emit(PeerEvent("unlinked", guid, link.remote_name, reason))
+            self.router.link_down(guid)
+            if not self._stop.is_set():
+                self.router.announce(self.names)
             self._schedule_retry(guid)
 
     def _schedule_retry(self, guid: int) -> None:
@@ -291,10 +318,19 @@ class MultiPeer:
             self._backoff[guid] = min(delay * 2, self.network.reconnect_max)
 
     def _frame(self, link: Link, frame: Frame) -> None:
-        guid = link.remote_guid
-        assert guid is not None
+        assert link.remote_guid is not None
+        self._dispatch(link.remote_guid, frame)
+
+    def _dispatch(self, guid: int, frame: Frame) -> None:
         for callback in self._listeners.get(frame.type, ()):
             callback(guid, frame)
+
+    def _route_changed(self, guid: int, name: str, via: int | None) -> None:
+        if via is not None:
+            self.names.setdefault(guid, name)
+            self._emit(PeerEvent("linked", guid, self.names.get(guid, name), f"via {guid_text(via)}"))
+        else:
+            self._emit(PeerEvent("unlinked", guid, self.names.get(guid, ""), "route lost"))
 
     def _emit(self, event: PeerEvent) -> None:
         for callback in list(self._event_callbacks):
@@ -317,6 +353,13 @@ class MultiPeer:
                     self._connecting.add(guid)
             for guid in due:
                 threading.Thread(target=self._connect, args=(guid,), name="ckm-connect", daemon=True).start()
+            self.router.tick()
+            for guid, left in list(self._sync_burst.items()):
+                self._sync_clock(guid)
+                if left <= 1:
+                    self._sync_burst.pop(guid, None)
+                else:
+                    self._sync_burst[guid] = left - 1
             if now >= next_sync:
                 next_sync = now + self.network.clock_sync
                 for guid in self.linked():

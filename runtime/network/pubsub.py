@@ -18,6 +18,7 @@ from ckmconf.model import Network
 from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import Frame, FrameType, encode
 from .multipeer import MultiPeer, PeerEvent
+from .qos import DeadlineWatchdog, emit_event, fresh_subscribers, stale_event
 
 LOG = logging.getLogger("ckm.pubsub")
 
@@ -32,8 +33,7 @@ class MultiPeerTransport(Transport):
         self._seq: dict[str, int] = {}
         self._callbacks: list[Callable[[NetworkEvent], None]] = []
         self._lock = threading.RLock()
-        self._stop = threading.Event()
-        self._watchdog = threading.Thread(target=self._watch_deadlines, name="ckm-deadlines", daemon=True)
+        self._deadlines = DeadlineWatchdog(self._watched, self._emit, "ckm-deadlines")
         self.dropped_stale = 0
         self.dropped_busy = 0
         self.peer.add_listener(FrameType.TOPICDATA, self._on_data)
@@ -51,13 +51,11 @@ class MultiPeerTransport(Transport):
 
     def start(self) -> None:
         self.peer.start()
-        self._watchdog.start()
+        self._deadlines.start()
 
     def stop(self) -> None:
-        self._stop.set()
+        self._deadlines.stop()
         self.peer.stop()
-        if self._watchdog.is_alive():
-            self._watchdog.join(timeout=2)
 
     # ------------------------------------------------------------------ API
 
@@ -77,7 +75,7 @@ class MultiPeerTransport(Transport):
         self._callbacks.append(callback)
 
     def peers(self) -> list[int]:
-        return self.peer.linked()
+        return self.peer.reachable()
 
     def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -102,18 +100,22 @@ class MultiPeerTransport(Transport):
             return 0
         body = [qos.name, seq, stamp, value]
         links = [self.peer.links.get(g) for g in remote]
+        routed = sum(
+            self.peer.send(g, FrameType.TOPICDATA, body) for g, link in zip(remote, links, strict=True) if link is None
+        )
+        return routed + self._send_links([link for link in links if link is not None], qos, body)
+
+    def _send_links(self, links: list[Any], qos: TopicQoS, body: list[Any]) -> int:
         if self.peer.key is None:
             data = encode(FrameType.TOPICDATA, body)
             sent = 0
             for link in links:
-                if link is None:
-                    continue
                 if qos.reliability == "best-effort" and link.busy():
                     self.dropped_busy += 1
                     continue
                 sent += link.send_encoded(data)
             return sent
-        return sum(link.send(FrameType.TOPICDATA, body) for link in links if link is not None)
+        return sum(link.send(FrameType.TOPICDATA, body) for link in links)
 
     # ------------------------------------------------------------------ receiving
 
@@ -134,12 +136,11 @@ class MultiPeerTransport(Transport):
             return
         offset = self.peer.clock.offset(guid)
         sample = Sample(topic, value, stamp, guid, seq, time.time(), offset)
-        lifespan = local[0].qos.lifespan
-        if lifespan is not None and sample.age > lifespan:
+        fresh = fresh_subscribers(local, sample)
+        if len(fresh) < len(local):
             self.dropped_stale += 1
-            self._emit(NetworkEvent("stale-dropped", guid, topic, f"sample {seq} is {sample.age:.3f} s old"))
-            return
-        for subscription in local:
+            self._emit(stale_event(sample))
+        for subscription in fresh:
             subscription.deliver(sample)
 
     def _on_links(self, guid: int, frame: Frame) -> None:
@@ -183,28 +184,10 @@ class MultiPeerTransport(Transport):
         self._emit(NetworkEvent(event.kind, event.guid, None, event.reason or event.name))
 
     def _emit(self, event: NetworkEvent) -> None:
-        for callback in list(self._callbacks):
-            try:
-                callback(event)
-            except Exception:
-                LOG.exception("event callback failed")
         with self._lock:
             local = list(self._subs.get(EVENTS_TOPIC, ()))
-        if local:
-            sample = Sample(EVENTS_TOPIC, event, time.time(), self.guid, 0, time.time())
-            for subscription in local:
-                subscription.deliver(sample)
+        emit_event(event, self._callbacks, local, self.guid)
 
-    def _watch_deadlines(self) -> None:
-        while not self._stop.wait(0.002):
-            now = time.monotonic()
-            with self._lock:
-                watched = [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]
-            for subscription in watched:
-                deadline = subscription.qos.deadline
-                assert deadline is not None
-                if now - subscription.last_arrival > deadline:
-                    subscription.last_arrival = now  # re-armed: one event per missed period
-                    self._emit(
-                        NetworkEvent("deadline-missed", None, subscription.qos.name, f"no sample for {deadline:g} s")
-                    )
+    def _watched(self) -> list[Subscription]:
+        with self._lock:
+            return [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]
