@@ -11,10 +11,12 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from . import config
+from . import config, netbench
 
 BENCHMARKS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any]], list[tuple[str, str]]]]] = {
     "config": (config.run, config.describe),
+    "pubsub": (netbench.run_pubsub, netbench.describe_pubsub),
+    "discovery": (netbench.run_discovery, netbench.describe_discovery),
 }
 
 
