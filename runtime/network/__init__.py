@@ -9,6 +9,10 @@ from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, To
 
 def open_transport(network: Network, *, name: str = "peer", key: bytes | None = None) -> Transport:
     """The transport the configuration asks for (no I/O until ``setup()``)."""
+    if network.transport == "zenoh":
+        from .zenoh_transport import ZenohTransport
+
+        return ZenohTransport(network, name=name, key=key)
     from .pubsub import MultiPeerTransport
 
     return MultiPeerTransport(network, name=name, key=key)

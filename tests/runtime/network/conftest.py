@@ -10,7 +10,7 @@ import pytest
 from ckmconf.model import Network
 from runtime.network import Transport, open_transport
 
-TRANSPORTS = ["multipeer"]
+TRANSPORTS = ["multipeer", "zenoh"]
 
 
 def private_network(transport: str = "multipeer", **overrides: object) -> Network:

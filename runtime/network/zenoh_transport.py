@@ -1,0 +1,407 @@
+"""Publish/subscribe over Zenoh (``<Network transport="zenoh">``), with CKMultiPeer's semantics.
+
+Naming — every CKM name lives under the ``ckm`` prefix:
+
+    topic "/a/b" (or "a/b")      → key expression "ckm/a/b" (leading slash removed)
+    ckm/@peer/<guid>             liveliness token of every transport: discovery, found / lost
+    ckm/@sub/<guid>/a/b          liveliness token per subscribed topic: wait_for_subscribers
+
+Because the leading slash is dropped, "/a/b" and "a/b" are one topic here (two in CKMultiPeer).
+``@`` chunks are verbatim in Zenoh, so the token spaces never match a data key expression.
+
+Wire format: the payload is msgpack ``[seq, stamp, value]`` as in CKMultiPeer's TOPICDATA
+(the topic is the key expression); the attachment is the publisher's GUID (8 bytes,
+big-endian). The GUID is the low 48 bits of the session's random 128-bit ZenohId, so it has
+the width of a CKMultiPeer GUID. There is no SYNCTIME: ``Sample.offset`` is 0, clocks are
+assumed synchronised (NTP) for lifespan checks.
+
+A CKM group key is refused: Zenoh has no shared-key authentication, and an HMAC over the
+payload alone would leave discovery and subscriber tokens open to anyone on the LAN. Secure a
+Zenoh system with Zenoh's own TLS (mutual) or user-password authentication instead.
+"""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import json
+import logging
+import re
+import struct
+import threading
+import time
+import weakref
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+import zenoh
+
+from ckmconf.model import Network
+
+from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
+from .frames import FrameError, unpack_body
+from .multipeer import NetworkError
+from .qos import DeadlineWatchdog, emit_event, fresh_subscribers, stale_event
+
+LOG = logging.getLogger("ckm.zenoh")
+
+PREFIX = "ckm"
+PEER_TOKENS = f"{PREFIX}/@peer"
+SUB_TOKENS = f"{PREFIX}/@sub"
+GUID_MASK = (1 << 48) - 1
+SOURCE = struct.Struct("!Q")
+MIN_LEASE_MS = 1000  # a shorter lease lets a busy machine close healthy links (and lose data)
+FORBIDDEN = set("*$?#")
+
+# Sessions still open at interpreter exit make the process hang (DESIGN.md, "Pitfalls"):
+# whatever the caller forgot to stop is stopped at exit (see _stop_forgotten).
+_OPEN: weakref.WeakSet[ZenohTransport] = weakref.WeakSet()
+
+KEYED_CONFIG_ERROR = (
+    "the Zenoh transport cannot use a CKM group key (group_key_file): Zenoh has no shared-key "
+    "authentication; configure TLS or user-password authentication in Zenoh instead"
+)
+
+
+@functools.lru_cache(maxsize=4096)
+def topic_path(topic: str) -> str:
+    """The key expression of ``topic`` without the prefix: "/a/b" → "a/b"; rejects wildcards."""
+    path = topic.removeprefix("/")
+    chunks = path.split("/")
+    if not path or any(not c or c.startswith("@") or FORBIDDEN & set(c) for c in chunks):
+        raise ValueError(f"topic {topic!r} cannot be a Zenoh key expression (empty, wildcard or '@' part)")
+    return path
+
+
+@functools.lru_cache(maxsize=4096)
+def key_expr(topic: str) -> str:
+    """The Zenoh key expression of a CKM topic: "/a/b" → "ckm/a/b"."""
+    key = f"{PREFIX}/{topic_path(topic)}"
+    try:
+        zenoh.KeyExpr(key)
+    except zenoh.ZError as exc:
+        raise ValueError(f"topic {topic!r} cannot be a Zenoh key expression: {exc}") from None
+    return key
+
+
+def guid_of(zid: zenoh.ZenohId) -> int:
+    """A transport's GUID: the low 48 bits of its session's ZenohId (random unless configured)."""
+    return int(str(zid), 16) & GUID_MASK or 1
+
+
+def zenoh_config(network: Network) -> zenoh.Config:
+    """The session configuration for ``network``: peer mode with multicast scouting by default.
+
+    Scouting uses the network's own multicast group, port and interface (so separate CKM
+    systems, and tests, never hear each other); the link lease is heartbeat × lost_after.
+    """
+    settings = network.zenoh
+    mode = settings.mode if settings is not None else "peer"
+    scouting = settings.multicast_scouting if settings is not None else True
+    listen = [e.endpoint for e in settings.listen] if settings is not None else []
+    connect = [e.endpoint for e in settings.connect] if settings is not None else []
+    wildcard = network.interface == "0.0.0.0"  # an IPv4 address (schema), or every interface
+    if not listen and mode != "client":
+        listen = [f"tcp/{network.interface}:{7447 if mode == 'router' else 0}"]  # a router needs a known port
+    values: dict[str, Any] = {
+        "mode": mode,
+        "scouting/multicast/enabled": scouting,
+        "scouting/multicast/address": f"{network.group}:{network.discovery_port}",
+        "scouting/multicast/interface": "auto" if wildcard else network.interface,
+        "listen/endpoints": listen,
+        "connect/endpoints": connect,
+        "transport/link/tx/lease": max(MIN_LEASE_MS, round(network.heartbeat * network.lost_after * 1000)),
+        "transport/link/tx/keep_alive": max(1, network.lost_after),
+    }
+    config = zenoh.Config()
+    for key, value in values.items():
+        try:
+            config.insert_json5(key, json.dumps(value))
+        except zenoh.ZError as exc:  # e.g. a malformed <Connect>/<Listen> endpoint
+            raise NetworkError(f"invalid Zenoh setting {key} = {value!r}: {_reason(exc)}") from None
+    return config
+
+
+class ZenohTransport(Transport):
+    """The Zenoh transport: same lifecycle, QoS and events as ``MultiPeerTransport``."""
+
+    def __init__(self, network: Network, *, name: str = "peer", key: bytes | None = None) -> None:
+        if key is not None:
+            raise ValueError(KEYED_CONFIG_ERROR)
+        self.network = network
+        self.name = name
+        self.guid = 0
+        self.dropped_stale = 0
+        self.dropped_malformed = 0
+        self._session: zenoh.Session | None = None
+        self._stopped = False
+        self._lock = threading.RLock()  # our tables; never held while calling into Zenoh
+        self._changed = threading.Condition(self._lock)
+        self._declaring = threading.Lock()  # serialises declarations; Zenoh callbacks never take it
+        self._subs: dict[str, list[Subscription]] = {}
+        self._seq: dict[str, int] = {}
+        self._peers: set[int] = set()
+        self._remote_subs: dict[str, set[int]] = {}  # key expression → remote GUIDs
+        self._callbacks: list[Callable[[NetworkEvent], None]] = []
+        self._zsubs: dict[str, tuple[zenoh.Subscriber[None], zenoh.LivelinessToken]] = {}
+        self._zpubs: dict[tuple[str, str], zenoh.Publisher] = {}
+        self._own: list[zenoh.LivelinessToken | zenoh.Subscriber[None]] = []
+        self._attachment = b""
+        self._deadlines = DeadlineWatchdog(self._watched, self._emit, "ckm-zenoh-deadlines")
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def setup(self) -> None:
+        try:
+            session = zenoh.open(zenoh_config(self.network))
+        except zenoh.ZError as exc:  # no router to connect to, port taken…
+            raise NetworkError(f"cannot open the Zenoh session: {_reason(exc)}") from None
+        _OPEN.add(self)
+        self.guid = guid_of(session.zid())
+        self._attachment = SOURCE.pack(self.guid)
+        with self._lock:
+            self._session = session
+            topics = list(self._subs)
+        for topic in topics:  # subscriptions made before setup()
+            self._sync_topic(topic)
+
+    def start(self) -> None:
+        session = self._session
+        assert session is not None, "call setup() first"
+        liveliness = session.liveliness()
+        with self._declaring:
+            # Watch before announcing; history=True also reports the tokens already there.
+            self._own.append(liveliness.declare_subscriber(f"{PEER_TOKENS}/*", self._on_peer_token, history=True))
+            self._own.append(liveliness.declare_subscriber(f"{SUB_TOKENS}/**", self._on_sub_token, history=True))
+            self._own.append(liveliness.declare_token(f"{PEER_TOKENS}/{self.guid}"))
+        self._deadlines.start()
+
+    def stop(self) -> None:
+        with self._lock:
+            if self._stopped:
+                return
+            self._stopped = True
+        self._deadlines.stop()
+        with self._declaring:
+            session, self._session = self._session, None
+            entities: list[Any] = [token for _, token in self._zsubs.values()]
+            entities += [zsub for zsub, _ in self._zsubs.values()]
+            entities += [*self._zpubs.values(), *reversed(self._own)]  # our peer token goes first
+            self._zsubs.clear()
+            self._zpubs.clear()
+            self._own.clear()
+        for entity in entities:
+            _release(entity.undeclare)
+        if session is not None:
+            _release(session.close)
+        _OPEN.discard(self)
+        with self._changed:
+            self._peers.clear()
+            self._remote_subs.clear()
+            self._changed.notify_all()
+
+    # ------------------------------------------------------------------ API
+
+    def publisher(self, qos: TopicQoS) -> Publisher:
+        if qos.name != EVENTS_TOPIC:
+            key_expr(qos.name)  # refuse a bad name now, not at the first publish
+        return Publisher(qos, self._publish)
+
+    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        if qos.name != EVENTS_TOPIC:
+            key_expr(qos.name)
+        subscription = Subscription(qos, callback, self._unsubscribe)
+        with self._lock:
+            self._subs.setdefault(qos.name, []).append(subscription)
+        self._sync_topic(qos.name)
+        return subscription
+
+    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        self._callbacks.append(callback)
+
+    def peers(self) -> list[int]:
+        with self._lock:
+            return sorted(self._peers)
+
+    def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        key = key_expr(topic)
+        with self._changed:
+            return self._changed.wait_for(lambda: len(self._remote_subs.get(key, ())) >= count, timeout)
+
+    # ------------------------------------------------------------------ declarations
+
+    def _sync_topic(self, topic: str) -> None:
+        """Declare or undeclare the Zenoh subscriber and token of ``topic`` to match our subscriptions."""
+        if topic == EVENTS_TOPIC:
+            return  # local only, like CKMultiPeer
+        with self._declaring:
+            session = self._session
+            with self._lock:
+                wanted = bool(self._subs.get(topic)) and not self._stopped
+            declared = self._zsubs.get(topic)
+            if session is None or wanted == (declared is not None):
+                return
+            if declared is not None:
+                zsub, token = self._zsubs.pop(topic)
+                _release(token.undeclare)  # first, so publishers stop counting us
+                _release(zsub.undeclare)
+                return
+            callback = functools.partial(self._on_sample, topic)
+            zsub = session.declare_subscriber(key_expr(topic), callback, allowed_origin=zenoh.Locality.REMOTE)
+            # Declared after the subscriber, and declarations travel in order: whoever sees the
+            # token already routes data to us.
+            token = session.liveliness().declare_token(f"{SUB_TOKENS}/{self.guid}/{topic_path(topic)}")
+            self._zsubs[topic] = (zsub, token)
+
+    def _unsubscribe(self, subscription: Subscription) -> None:
+        with self._lock:
+            subs = self._subs.get(subscription.qos.name, [])
+            if subscription in subs:
+                subs.remove(subscription)
+        self._sync_topic(subscription.qos.name)
+
+    def _zenoh_publisher(self, session: zenoh.Session, qos: TopicQoS) -> zenoh.Publisher:
+        publisher = self._zpubs.get((qos.name, qos.reliability))
+        if publisher is not None:
+            return publisher
+        with self._declaring:
+            publisher = self._zpubs.get((qos.name, qos.reliability))
+            if publisher is None:
+                reliable = qos.reliability == "reliable"
+                publisher = session.declare_publisher(
+                    key_expr(qos.name),
+                    congestion_control=zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP,
+                    reliability=zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT,
+                    allowed_destination=zenoh.Locality.REMOTE,  # local subscribers get the object itself
+                )
+                self._zpubs[(qos.name, qos.reliability)] = publisher
+            return publisher
+
+    # ------------------------------------------------------------------ publishing and receiving
+
+    def _publish(self, qos: TopicQoS, value: Any, stamp: float) -> int:
+        with self._lock:
+            seq = self._seq[qos.name] = self._seq.get(qos.name, 0) + 1
+            local = list(self._subs.get(qos.name, ()))
+            session = self._session
+        if local:
+            sample = Sample(qos.name, value, stamp, self.guid, seq, time.time())
+            for subscription in local:
+                subscription.deliver(sample)
+        if session is None or qos.name == EVENTS_TOPIC:
+            return 0
+        payload = msgpack.packb([seq, float(stamp), value], use_bin_type=True)
+        try:
+            self._zenoh_publisher(session, qos).put(payload, attachment=self._attachment)
+        except zenoh.ZError:
+            if self._stopped:
+                return 0  # stop() raced with this publish
+            raise
+        with self._lock:
+            return len(self._remote_subs.get(key_expr(qos.name), ()))
+
+    def _on_sample(self, topic: str, zsample: zenoh.Sample) -> None:
+        if self._stopped:
+            return
+        attachment = zsample.attachment
+        try:
+            (source,) = SOURCE.unpack(attachment.to_bytes() if attachment is not None else b"")
+            body = unpack_body(zsample.payload.to_bytes(), self.network.max_frame)
+        except (struct.error, FrameError):
+            body = []
+        if len(body) != 3 or type(body[0]) is not int or type(body[1]) not in (int, float):
+            self.dropped_malformed += 1
+            LOG.warning("ignoring a malformed sample on %s", zsample.key_expr)
+            return
+        if source == self.guid:
+            return  # our own sample: local subscribers already had it
+        seq, stamp, value = body
+        with self._lock:
+            local = list(self._subs.get(topic, ()))
+        if not local:
+            return
+        sample = Sample(topic, value, float(stamp), source, seq, time.time())
+        fresh = fresh_subscribers(local, sample)
+        if len(fresh) < len(local):
+            self.dropped_stale += 1
+            self._emit(stale_event(sample))
+        for subscription in fresh:
+            subscription.deliver(sample)
+
+    # ------------------------------------------------------------------ discovery and events
+
+    def _on_peer_token(self, zsample: zenoh.Sample) -> None:
+        guid = _guid_after(str(zsample.key_expr), PEER_TOKENS)
+        if guid is None or guid == self.guid or self._stopped:
+            return
+        alive = zsample.kind == zenoh.SampleKind.PUT
+        with self._changed:
+            if (guid in self._peers) == alive:
+                return  # a repeated report (history and live declaration can overlap)
+            if alive:
+                self._peers.add(guid)
+            else:
+                self._peers.discard(guid)
+                for guids in self._remote_subs.values():
+                    guids.discard(guid)
+            self._changed.notify_all()
+        if alive:
+            self._emit(NetworkEvent("found", guid, None, "liveliness token declared"))
+        else:
+            self._emit(NetworkEvent("lost", guid, None, "liveliness token gone (stopped or lease expired)"))
+
+    def _on_sub_token(self, zsample: zenoh.Sample) -> None:
+        key = str(zsample.key_expr)
+        guid = _guid_after(key, SUB_TOKENS)
+        if guid is None or guid == self.guid or self._stopped:
+            return
+        topic_key = f"{PREFIX}/{key.removeprefix(SUB_TOKENS + '/').partition('/')[2]}"
+        with self._changed:
+            guids = self._remote_subs.setdefault(topic_key, set())
+            if zsample.kind == zenoh.SampleKind.PUT:
+                guids.add(guid)
+            else:
+                guids.discard(guid)
+            self._changed.notify_all()
+
+    def _emit(self, event: NetworkEvent) -> None:
+        with self._lock:
+            local = list(self._subs.get(EVENTS_TOPIC, ()))
+        emit_event(event, self._callbacks, local, self.guid)
+
+    def _watched(self) -> list[Subscription]:
+        with self._lock:
+            return [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]
+
+
+def _guid_after(key: str, prefix: str) -> int | None:
+    """The GUID chunk right after ``prefix`` in a token's key expression, if well formed."""
+    chunk = key.removeprefix(prefix + "/").partition("/")[0] if key.startswith(prefix + "/") else ""
+    return int(chunk) if chunk.isdigit() else None
+
+
+def _release(undeclare: Callable[[], Any]) -> None:
+    """Undeclare a Zenoh entity or close a session; a failure only matters to the logs."""
+    try:
+        undeclare()
+    except zenoh.ZError as exc:
+        LOG.debug("releasing a Zenoh entity failed: %s", exc)
+
+
+def _reason(exc: Exception) -> str:
+    """Zenoh's message, without the Rust wrapper and source location around it."""
+    text = str(exc)
+    wrapped = re.search(r'msg: "(.*?)"', text)
+    return (wrapped.group(1) if wrapped else text).split(" at /", 1)[0].strip()
+
+
+def _stop_forgotten() -> None:
+    for transport in list(_OPEN):
+        transport.stop()
+
+
+# zenoh-python runs Python callbacks on non-daemon threads that live until their subscriber is
+# undeclared, and the interpreter joins those threads *before* running atexit handlers; so the
+# safety net must run earlier, where concurrent.futures hooks its own shutdown.
+getattr(threading, "_register_atexit", atexit.register)(_stop_forgotten)
