@@ -125,7 +125,7 @@ class Publisher:
 
     def publish(self, value: Any, *, stamp: float | None = None) -> int:
         """Publish ``value`` (stamped now unless given); returns the number of remote peers sent to."""
-        return self._send(self.qos, value, time.time() if stamp is None else stamp)
+        return self._send(self.qos, value, time.time() if stamp is None else float(stamp))
 
 
 class Transport(abc.ABC):

@@ -101,16 +101,20 @@ class Link:
             data = encode(kind, body, auth=self._auth, direction=self._role())
             return self._write_locked(data)
 
-    def busy(self) -> bool:
-        """Whether another thread is writing right now (best-effort samples are then dropped)."""
-        return self._send_lock.locked()
+    def send_encoded(self, data: bytes, *, wait: float | None = None) -> bool:
+        """Send a frame encoded once for many links (only possible without a group key).
 
-    def send_encoded(self, data: bytes) -> bool:
-        """Send a frame encoded once for many links (only possible without a group key)."""
+        ``wait``: the longest time to wait for another writer to finish; past it the frame is
+        dropped (best-effort topics: a congested link loses samples rather than stalling).
+        """
         if self.state != "open" or self._auth is not None:
             return False
-        with self._send_lock:
+        if not self._send_lock.acquire(timeout=-1 if wait is None else wait):
+            return False
+        try:
             return self.state == "open" and self._write_locked(data)
+        finally:
+            self._send_lock.release()
 
     def _write(self, data: bytes) -> None:
         with self._send_lock:

@@ -18,9 +18,10 @@ from ckmconf.model import Network
 from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import Frame, FrameType, encode
 from .multipeer import MultiPeer, PeerEvent
-from .qos import DeadlineWatchdog, emit_event, fresh_subscribers, stale_event
+from .qos import DeadlineWatchdog, deliver, emit_event
 
 LOG = logging.getLogger("ckm.pubsub")
+BEST_EFFORT_WAIT = 0.002  # a best-effort sample waits this long for a busy link, then is dropped
 
 
 class MultiPeerTransport(Transport):
@@ -93,9 +94,7 @@ class MultiPeerTransport(Transport):
             local = list(self._subs.get(qos.name, ()))
             remote = list(self._remote_subs.get(qos.name, ()))
         if local:
-            sample = Sample(qos.name, value, stamp, self.guid, seq, time.time())
-            for subscription in local:
-                subscription.deliver(sample)
+            deliver(local, Sample(qos.name, value, stamp, self.guid, seq, time.time()), self._emit)
         if not remote:
             return 0
         body = [qos.name, seq, stamp, value]
@@ -109,11 +108,12 @@ class MultiPeerTransport(Transport):
         if self.peer.key is None:
             data = encode(FrameType.TOPICDATA, body)
             sent = 0
+            wait = BEST_EFFORT_WAIT if qos.reliability == "best-effort" else None
             for link in links:
-                if qos.reliability == "best-effort" and link.busy():
+                if link.send_encoded(data, wait=wait):
+                    sent += 1
+                elif wait is not None:
                     self.dropped_busy += 1
-                    continue
-                sent += link.send_encoded(data)
             return sent
         return sum(link.send(FrameType.TOPICDATA, body) for link in links)
 
@@ -125,7 +125,7 @@ class MultiPeerTransport(Transport):
             len(body) != 4
             or not isinstance(body[0], str)
             or not isinstance(body[1], int)
-            or not isinstance(body[2], float)
+            or not isinstance(body[2], (float, int))
         ):
             LOG.warning("ignoring a malformed TOPICDATA frame from %s", guid)
             return
@@ -135,13 +135,9 @@ class MultiPeerTransport(Transport):
         if not local:
             return
         offset = self.peer.clock.offset(guid)
-        sample = Sample(topic, value, stamp, guid, seq, time.time(), offset)
-        fresh = fresh_subscribers(local, sample)
-        if len(fresh) < len(local):
+        sample = Sample(topic, value, float(stamp), guid, seq, time.time(), offset)
+        if deliver(local, sample, self._emit):
             self.dropped_stale += 1
-            self._emit(stale_event(sample))
-        for subscription in fresh:
-            subscription.deliver(sample)
 
     def _on_links(self, guid: int, frame: Frame) -> None:
         body = frame.body

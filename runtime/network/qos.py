@@ -50,6 +50,17 @@ def fresh_subscribers(subscribers: list[Subscription], sample: Sample) -> list[S
     return [s for s in subscribers if s.qos.lifespan is None or sample.age <= s.qos.lifespan]
 
 
+def deliver(subscribers: list[Subscription], sample: Sample, emit: Callable[[NetworkEvent], None]) -> bool:
+    """Hand a sample to the subscribers it is still fresh for; True (and one event) if it was stale for some."""
+    fresh = fresh_subscribers(subscribers, sample)
+    for subscription in fresh:
+        subscription.deliver(sample)
+    if len(fresh) < len(subscribers):
+        emit(stale_event(sample))
+        return True
+    return False
+
+
 def stale_event(sample: Sample) -> NetworkEvent:
     return NetworkEvent("stale-dropped", sample.source, sample.topic, f"sample {sample.seq} is {sample.age:.3f} s old")
 

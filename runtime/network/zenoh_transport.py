@@ -42,7 +42,7 @@ from ckmconf.model import Network
 from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import FrameError, unpack_body
 from .multipeer import NetworkError
-from .qos import DeadlineWatchdog, emit_event, fresh_subscribers, stale_event
+from .qos import DeadlineWatchdog, deliver, emit_event
 
 LOG = logging.getLogger("ckm.zenoh")
 
@@ -286,9 +286,7 @@ class ZenohTransport(Transport):
             local = list(self._subs.get(qos.name, ()))
             session = self._session
         if local:
-            sample = Sample(qos.name, value, stamp, self.guid, seq, time.time())
-            for subscription in local:
-                subscription.deliver(sample)
+            deliver(local, Sample(qos.name, value, stamp, self.guid, seq, time.time()), self._emit)
         if session is None or qos.name == EVENTS_TOPIC:
             return 0
         payload = msgpack.packb([seq, float(stamp), value], use_bin_type=True)
@@ -322,12 +320,8 @@ class ZenohTransport(Transport):
         if not local:
             return
         sample = Sample(topic, value, float(stamp), source, seq, time.time())
-        fresh = fresh_subscribers(local, sample)
-        if len(fresh) < len(local):
+        if deliver(local, sample, self._emit):
             self.dropped_stale += 1
-            self._emit(stale_event(sample))
-        for subscription in fresh:
-            subscription.deliver(sample)
 
     # ------------------------------------------------------------------ discovery and events
 
