@@ -58,7 +58,8 @@ class Discovery:
         lost_after: int,
         key: bytes | None,
         on_found: Callable[[int, str], None],
-        on_lost: Callable[[int, str], None],
+        on_lost: Callable[[int, str, str], None],
+        alive: Callable[[int], bool] = lambda guid: False,
     ) -> None:
         self.guid = guid
         self.name = name
@@ -70,6 +71,9 @@ class Discovery:
         self.key = key
         self.on_found = on_found
         self.on_lost = on_lost
+        self.alive = alive
+        self._retired: dict[int, tuple[bytes, int]] = {}  # guid → last (boot, counter) of a peer gone
+        self._answer_due = False
         self.known: dict[int, Known] = {}
         self.rejected = 0
         self._boot = os.urandom(8)
@@ -86,13 +90,16 @@ class Discovery:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         if hasattr(socket, "SO_REUSEPORT"):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
-        sock.bind(("", self.port))
+        # Bound to the group address and with IP_MULTICAST_ALL off, the socket hears only its
+        # own group even when another group on this host uses the same port.
+        sock.bind((self.group, self.port))
+        sock.setsockopt(socket.IPPROTO_IP, getattr(socket, "IP_MULTICAST_ALL", 49), 0)
         membership = socket.inet_aton(self.group) + socket.inet_aton(self.interface)
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(self.interface))
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
-        sock.settimeout(0.05)
+        sock.settimeout(0.005)
         self._sock = sock
 
     def start(self) -> None:
@@ -126,6 +133,7 @@ class Discovery:
     def _receive_loop(self) -> None:
         assert self._sock is not None
         while not self._stop.is_set():
+            self._flush_answer()
             try:
                 packet, _ = self._sock.recvfrom(MAX_DATAGRAM)
             except TimeoutError:
@@ -156,11 +164,11 @@ class Discovery:
             and fields[0] == MAGIC
             and fields[1] == 1
             and fields[2] in (HELLO, HEARTBEAT, BYE)
-            and isinstance(fields[3], int)
+            and type(fields[3]) is int
             and 0 < fields[3] < 1 << 48
             and isinstance(fields[4], str)
             and isinstance(fields[5], bytes)
-            and isinstance(fields[6], int)
+            and type(fields[6]) is int
         )
         if not valid:
             self.rejected += 1
@@ -175,27 +183,42 @@ class Discovery:
 
     def _update(self, kind: str, guid: int, name: str, boot: bytes, counter: int) -> None:
         known = self.known.get(guid)
-        if known is not None and known.boot == boot and counter <= known.counter:
-            self.rejected += 1  # a replayed or duplicated datagram
+        retired = self._retired.get(guid)
+        last = (known.boot, known.counter) if known is not None else retired
+        if last is not None and last[0] == boot and counter <= last[1]:
+            self.rejected += 1  # a replayed or duplicated datagram, even of a peer that has left
             return
         if kind == BYE:
             if known is not None:
-                del self.known[guid]
-                self.on_lost(guid, known.name)
+                self._retire(guid, boot, counter)
+                self.on_lost(guid, known.name, "said goodbye")
             return
         fresh = known is None or known.boot != boot
         if known is not None and fresh:
-            self.on_lost(guid, known.name)  # restarted: the old incarnation is gone
+            self.on_lost(guid, known.name, "restarted")  # the old incarnation is gone
         self.known[guid] = Known(guid, name, boot, counter)
         if fresh:
             self.on_found(guid, name)
             self._answer()
 
+    def _retire(self, guid: int, boot: bytes, counter: int) -> None:
+        del self.known[guid]
+        self._retired[guid] = (boot, counter)
+
     def _answer(self) -> None:
-        # A newcomer must learn us: re-announce, at most every few milliseconds in a burst of joins.
+        # A newcomer must learn us: re-announce. In a burst of joins, answers within 5 ms are
+        # merged into one sent when the burst's first window ends (never dropped).
         now = time.monotonic()
         if now - self._last_answer > 0.005:
             self._last_answer = now
+            self.announce(HELLO)
+        else:
+            self._answer_due = True
+
+    def _flush_answer(self) -> None:
+        if self._answer_due and time.monotonic() - self._last_answer > 0.005:
+            self._answer_due = False
+            self._last_answer = time.monotonic()
             self.announce(HELLO)
 
     def _beat_loop(self) -> None:
@@ -204,6 +227,10 @@ class Discovery:
             deadline = time.monotonic() - self.heartbeat * self.lost_after
             with self._table:
                 for guid, known in list(self.known.items()):
-                    if known.last_heard < deadline:
-                        del self.known[guid]
-                        self.on_lost(guid, known.name)
+                    if known.last_heard >= deadline:
+                        continue
+                    if self.alive(guid):
+                        known.last_heard = time.monotonic()  # busy but talking on its link: not lost
+                        continue
+                    self._retire(guid, known.boot, known.counter)
+                    self.on_lost(guid, known.name, "heartbeat stopped")

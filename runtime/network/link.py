@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import select
 import socket
 import threading
 import time
@@ -18,6 +19,7 @@ LOG = logging.getLogger("ckm.link")
 PROTOCOL = 1
 HANDSHAKE_TIMEOUT = 3.0
 SEND_TIMEOUT = 5.0
+HANDSHAKE_MAX_FRAME = 4096  # until the peer is identified, a frame cannot be large
 _HELLO_SESSION = b"ckm-hello"
 
 
@@ -55,10 +57,14 @@ class Link:
         self.closed_reason = ""
         self.frames_in = 0
         self.frames_out = 0
+        self.last_received = time.monotonic()
         self._key = key
         self._nonce = os.urandom(16)
         self._auth = Authenticator(key, _HELLO_SESSION) if key is not None else None
-        self._decoder = Decoder(max_frame, auth=self._auth, direction=b"A" if outgoing else b"O")
+        self._max_frame = max_frame
+        self._decoder = Decoder(
+            min(max_frame, HANDSHAKE_MAX_FRAME), auth=self._auth, direction=b"A" if outgoing else b"O"
+        )
         self._send_lock = threading.Lock()
         self._on_open = on_open
         self._on_frame = on_frame
@@ -69,7 +75,7 @@ class Link:
 
     def start(self) -> None:
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.sock.settimeout(SEND_TIMEOUT)
+        self.sock.settimeout(SEND_TIMEOUT)  # bounds sendall; reads wait in select
         hello = [self.local_guid, self.local_name, self._nonce, PROTOCOL]
         self._write(encode(FrameType.HELLO, hello, auth=self._auth, direction=b"O" if self.outgoing else b"A"))
         self._reader.start()
@@ -137,29 +143,35 @@ class Link:
 
     def _read_loop(self) -> None:
         deadline = time.monotonic() + HANDSHAKE_TIMEOUT
-        self.sock.settimeout(0.2)
         reason = "closed by peer"
         try:
             while self.state != "closed":
-                if self.state == "handshake" and time.monotonic() > deadline:
+                if self.state != "open" and time.monotonic() > deadline:
                     reason = "handshake timed out"
                     break
-                try:
-                    data = self.sock.recv(262144)
-                except TimeoutError:
+                # select, not a socket timeout: the socket's timeout bounds sends (SEND_TIMEOUT).
+                readable, _, _ = select.select([self.sock], [], [], 0.2)
+                if not readable:
                     continue
+                data = self.sock.recv(262144)
                 if not data:
+                    if self._decoder.pending():
+                        reason = f"truncated frame from {self._who()}: the stream ended inside a frame"
+                        LOG.warning("link closed: %s", reason)
                     break
+                self.last_received = time.monotonic()
                 for frame in self._decoder.feed(data):
                     self.frames_in += 1
                     if self.state == "handshake":
                         self._handshake(frame)
+                    elif self.state == "confirm":
+                        self._confirm(frame)
                     elif self.state == "open":
                         self._dispatch(frame)
         except FrameError as exc:
             reason = f"bad frame from {self._who()}: {exc}"
             LOG.warning("link closed: %s", reason)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:
             reason = f"socket error: {exc}"
         self.close(reason)
 
@@ -196,10 +208,25 @@ class Link:
             raise FrameError("connected to itself")
         self.remote_guid = guid
         self.remote_name = name
-        if self._auth is not None:
-            low, high = (self._nonce, nonce) if self.local_guid < guid else (nonce, self._nonce)
-            self._auth.rekey(low + high)
-            self._decoder.direction = b"H" if self.local_guid < guid else b"L"
+        if self._auth is None:
+            self._open()
+            return
+        # Key confirmation: a HELLO can be replayed, but only a key holder can answer in the new
+        # session, which both nonces (one of them fresh from us) define.
+        low, high = (self._nonce, nonce) if self.local_guid < guid else (nonce, self._nonce)
+        self._auth.rekey(low + high)
+        self._decoder.direction = b"H" if self.local_guid < guid else b"L"
+        with self._send_lock:
+            self.state = "confirm"
+            self._write_locked(encode(FrameType.HELLO, ["confirm"], auth=self._auth, direction=self._role()))
+
+    def _confirm(self, frame: Frame) -> None:
+        if frame.type != FrameType.HELLO or frame.body != ["confirm"]:
+            raise FrameError("expected the key confirmation")
+        self._open()
+
+    def _open(self) -> None:
+        self._decoder.max_frame = self._max_frame
         with self._send_lock:
             self.state = "open"
         if not self._on_open(self):

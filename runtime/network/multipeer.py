@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import errno
 import logging
+import math
 import socket
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -28,6 +30,7 @@ from .proxy import Router
 LOG = logging.getLogger("ckm.multipeer")
 
 Listener = Callable[[int, Frame], None]
+MAX_PENDING_LINKS = 64
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,7 @@ class MultiPeer:
         self._connecting: set[int] = set()
         self._all_links: list[Link] = []
         self._sync_burst: dict[int, int] = {}  # guid → exchanges left in the opening burst
+        self._asked: dict[int, deque[float]] = {}  # SYNCTIME requests awaiting their reply
         self.router = Router(
             local=lambda: self.guid,
             linked=self.linked,
@@ -96,6 +100,7 @@ class MultiPeer:
             key=self.key,
             on_found=self._found,
             on_lost=self._lost,
+            alive=self.alive,
         )
         try:
             self._discovery.setup()
@@ -141,6 +146,9 @@ class MultiPeer:
         last: OSError | None = None
         for port in range(base, min(base + tries, 65536)):
             server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            # A port held only by TIME_WAIT connections of an earlier run is free: a restarted
+            # peer keeps its GUID. (Two live listeners still cannot share it.)
+            server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             try:
                 server.bind((interface, port))
             except OSError as exc:
@@ -214,11 +222,11 @@ class MultiPeer:
                 self._retry_at[guid] = 0.0
                 self._backoff[guid] = self.network.reconnect_min
 
-    def _lost(self, guid: int, name: str) -> None:
+    def _lost(self, guid: int, name: str, reason: str) -> None:
         with self._lock:
             self._retry_at.pop(guid, None)
             link = self.links.get(guid)
-        self._emit(PeerEvent("lost", guid, name, "heartbeat stopped"))
+        self._emit(PeerEvent("lost", guid, name, reason))
         if link is not None:
             link.close("peer lost (no heartbeat)")
 
@@ -249,8 +257,9 @@ class MultiPeer:
             on_close=self._closed,
         )
         with self._lock:
-            if self._stop.is_set():
-                sock.close()
+            pending = sum(1 for existing in self._all_links if existing.state != "open")
+            if self._stop.is_set() or pending >= MAX_PENDING_LINKS:
+                sock.close()  # too many connections still in their handshake: refuse, do not queue
                 return
             self._all_links.append(link)
         try:
@@ -282,6 +291,9 @@ class MultiPeer:
                 self.rejected_links += 1
                 return False  # a higher GUID must wait for us to connect
             old = self.links.get(guid)
+            if old is not None and old is not link and time.monotonic() - old.last_received < self._healthy_window():
+                self.rejected_links += 1
+                return False  # the current link is alive: a second HELLO for it is an intruder or a ghost
             self.links[guid] = link
             self._retry_at.pop(guid, None)
             self._backoff[guid] = self.network.reconnect_min
@@ -295,7 +307,7 @@ class MultiPeer:
         return True
 
     def _closed(self, link: Link, reason: str) -> None:
-        guid = link.remote_guid
+        guid = link.remote_guid if link.remote_guid is not None else link.expected
         with self._lock:
             if link in self._all_links:
                 self._all_links.remove(link)
@@ -308,6 +320,20 @@ class MultiPeer:
             if not self._stop.is_set():
                 self.router.announce(self.names)
             self._schedule_retry(guid)
+        elif link.outgoing and guid is not None and guid not in self.links:
+            self._schedule_retry(guid)  # the handshake failed: try again later
+
+    def _healthy_window(self) -> float:
+        """A link that carried something this recently is alive (SYNCTIME runs on every link)."""
+        return max(3 * self.network.clock_sync, self.network.heartbeat * self.network.lost_after)
+
+    def alive(self, guid: int) -> bool:
+        """Whether the link to ``guid`` carried traffic recently: discovery spares busy peers."""
+        link = self.links.get(guid)
+        return (
+            link is not None
+            and time.monotonic() - link.last_received < self.network.heartbeat * self.network.lost_after
+        )
 
     def _schedule_retry(self, guid: int) -> None:
         if self._stop.is_set() or guid < self.guid or self._discovery is None or guid not in self._discovery.known:
@@ -366,12 +392,23 @@ class MultiPeer:
                     self._sync_clock(guid)
 
     def _sync_clock(self, guid: int) -> None:
-        self.send(guid, FrameType.SYNCTIME, ["req", time.time()])
+        sent = time.time()
+        with self._lock:
+            asked = self._asked.setdefault(guid, deque(maxlen=16))
+            asked.append(sent)
+        self.send(guid, FrameType.SYNCTIME, ["req", sent])
 
     def _on_synctime(self, guid: int, frame: Frame) -> None:
         received = time.time()
         body = frame.body
         if len(body) == 2 and body[0] == "req" and isinstance(body[1], float):
             self.send(guid, FrameType.SYNCTIME, ["rep", body[1], received, time.time()])
-        elif len(body) == 4 and body[0] == "rep" and all(isinstance(v, float) for v in body[1:]):
-            self.clock.add(guid, body[1], body[2], body[3], received)
+        elif len(body) == 4 and body[0] == "rep" and all(type(v) is float and math.isfinite(v) for v in body[1:]):
+            t1, t2, t3 = body[1], body[2], body[3]
+            with self._lock:
+                asked = self._asked.get(guid)
+                if asked is None or t1 not in asked:
+                    return  # an answer to nothing we asked: ignored
+                asked.remove(t1)
+            if t3 >= t2 and received >= t1:
+                self.clock.add(guid, t1, t2, t3, received)

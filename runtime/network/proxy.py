@@ -104,6 +104,8 @@ class Router:
         except ValueError:
             return
         if dst == self._local():
+            if src not in self.neighbours.get(sender, {}):
+                return  # the relay does not say it is linked to that origin: not believed
             if src not in self._linked() and self.routes.get(src) != sender:
                 with self._lock:
                     self.routes[src] = sender

@@ -163,11 +163,6 @@ def test_a_killed_peer_is_lost_within_the_heartbeat_bound_and_relinked_after_res
         assert reply["ok"] and reply["values"] == ["welcome back"] and reply["sources"] == [observers[1].guid]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="discovery.py Discovery.setup binds ('', port) and leaves IP_MULTICAST_ALL on, so a peer hears "
-    "every group joined on the host at that port: two groups sharing a port find and link each other",
-)
 def test_groups_sharing_a_discovery_port_do_not_meet() -> None:
     first = private_network(group="239.255.201.1")
     second = private_network(group="239.255.201.2", discovery_port=first.discovery_port)

@@ -219,11 +219,6 @@ def test_stalled_and_trickling_handshakes_are_cut_at_the_handshake_timeout(
     assert_healthy(low, high)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="multipeer.py MultiPeer._opened: an unauthenticated HELLO claiming a linked peer's GUID (same "
-    "address) replaces that peer's healthy link instead of being refused",
-)
 def test_a_hello_claiming_a_linked_peers_guid_does_not_displace_the_real_link(
     pair: tuple[MultiPeerTransport, MultiPeerTransport],
 ) -> None:
@@ -238,11 +233,6 @@ def test_a_hello_claiming_a_linked_peers_guid_does_not_displace_the_real_link(
     assert high.peer.links.get(low.guid) is real and real.state == "open"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="link.py Link._read_loop: EOF in the middle of a frame closes the link as 'closed by peer' "
-    "and logs nothing; a truncated frame should be reported",
-)
 def test_a_truncated_frame_closes_the_link_with_a_logged_reason(
     pair: tuple[MultiPeerTransport, MultiPeerTransport], caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -378,11 +368,6 @@ def test_all_ports_busy_is_a_clear_network_error() -> None:
         assert peers.add(network).guid == make_guid(LOOPBACK, base)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="multipeer.py MultiPeer._bind does not set SO_REUSEADDR, so a port held only by TIME_WAIT "
-    "connections (e.g. a peer restarted after a crash) looks busy and the peer changes GUID",
-)
 def test_a_port_left_in_time_wait_is_reused() -> None:
     network = private_network()
     base = network.base_port
@@ -521,11 +506,6 @@ def test_refused_connections_are_retried_with_exponential_backoff(caplog: pytest
             assert real.peer.links[scripted.guid].outgoing
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="multipeer.py MultiPeer._closed: an outgoing connection whose handshake fails (hang-up, timeout, "
-    "refusal) never schedules a retry, so the pair stays unlinked while the peer is alive",
-)
 def test_a_failed_handshake_is_retried() -> None:
     network = private_network(reconnect_min=0.02, reconnect_max=0.2, lost_after=200)
     with LocalPeers() as peers:
@@ -563,11 +543,6 @@ def test_clock_offsets_between_processes_are_near_zero_and_sample_ages_small() -
         assert statistics.median(ages) < 0.5, statistics.median(ages)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="multipeer.py MultiPeer._on_synctime accepts a SYNCTIME 'rep' it never requested (t1 is not "
-    "checked against its own requests, negative delays are kept), so any linked peer can set its offset",
-)
 def test_an_unsolicited_synctime_reply_does_not_move_the_offset(
     pair: tuple[MultiPeerTransport, MultiPeerTransport],
 ) -> None:
@@ -603,12 +578,6 @@ def test_100k_reliable_messages_from_another_process_arrive_all_in_order_once() 
         assert {s.source for s in received} == {publisher.guid}
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="link.py Link._read_loop sets sock.settimeout(0.2) on the socket that _write_locked also "
-    "sendall()s on: a reliable publisher whose subscriber stalls for more than 0.2 s (not SEND_TIMEOUT, "
-    "5 s) drops the link and every sample in flight",
-)
 def test_a_subscriber_stalling_for_one_second_loses_no_reliable_samples() -> None:
     count, size = 1000, 65536  # 64 MiB: far more than the socket buffers hold during the stall
     with linked_pair(private_network(heartbeat=0.5, lost_after=3)) as (low, high):

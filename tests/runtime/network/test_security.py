@@ -194,11 +194,6 @@ def test_replayed_discovery_datagrams_are_ignored_and_counted(capture_network: t
         assert link_table(low) == {high.guid: True}
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="discovery.py Discovery._update forgets a peer's (boot, counter) when it is lost or says goodbye, "
-    "so its captured datagrams replayed later resurrect it ('found', connection attempts) without the key",
-)
 def test_replayed_datagrams_do_not_resurrect_a_peer_that_left(capture_network: tuple[Network, Capture]) -> None:
     network, capture = capture_network
     with LocalPeers() as peers:
@@ -303,12 +298,6 @@ def test_captured_link_frames_replayed_on_a_new_connection_are_rejected(
     assert exchange(low, high, "/after-replay")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="link.py Link._handshake: a HELLO is sealed in the fixed 'ckm-hello' session with sequence 1 and "
-    "no challenge from the other side, so a captured HELLO replayed by anyone at the peer's address opens a "
-    "link for that GUID without the key, displacing the real one (multipeer.py MultiPeer._opened)",
-)
 def test_a_captured_hello_replayed_does_not_open_a_link(
     sniffed_pair: tuple[MultiPeerTransport, MultiPeerTransport, list[bytes]],
 ) -> None:
