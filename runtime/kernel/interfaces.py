@@ -1,0 +1,112 @@
+"""Base classes plugins implement: hardware backends, adaptation functions, controllers.
+
+Each is built from its configuration record with no I/O in ``__init__``; hardware opens in
+``setup()`` and closes in ``stop()``. Values are floats (or tuples of floats for channels whose
+``size`` is more than one).
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from ckmconf.model import HWChannel, Param, params_dict
+from ckmconf.model.kernel import Controller as ControllerRecord
+
+Value = float | tuple[float, ...]
+
+
+class ParamError(ValueError):
+    """A Param a plugin cannot use: unknown, missing or of the wrong type (reported with its line)."""
+
+
+def read_params(params: Sequence[Param], spec: Mapping[str, Any], *, owner: str) -> dict[str, Any]:
+    """Typed parameter values: ``spec`` maps each accepted name to its default (whose type converts).
+
+    Unknown names and unconvertible values raise ParamError naming the owner.
+    """
+    given = params_dict(tuple(params))
+    unknown = sorted(set(given) - set(spec))
+    if unknown:
+        raise ParamError(f"{owner} takes no parameter {unknown[0]!r} (accepted: {', '.join(sorted(spec))})")
+    values: dict[str, Any] = {}
+    for name, default in spec.items():
+        if name not in given:
+            values[name] = default
+            continue
+        text = given[name]
+        try:
+            if isinstance(default, bool):
+                if text not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                values[name] = text in ("true", "1")
+            elif isinstance(default, (int, float)) and not isinstance(default, bool):
+                values[name] = type(default)(float(text)) if isinstance(default, float) else int(text)
+            else:
+                values[name] = text
+        except ValueError:
+            raise ParamError(f"{owner}: parameter {name!r} = {text!r} is not a {type(default).__name__}") from None
+    return values
+
+
+class Backend(abc.ABC):
+    """The hardware behind one HWChannel (loopback plant, pybullet joint or camera, a real bus…)."""
+
+    def __init__(self, channel: HWChannel) -> None:
+        self.channel = channel
+
+    def setup(self) -> None:
+        """Open the device (no I/O before this)."""
+        return None  # optional hook
+
+    @abc.abstractmethod
+    def read(self) -> Value:
+        """The current raw value of an input channel."""
+
+    @abc.abstractmethod
+    def write(self, value: Value) -> None:
+        """Drive an output channel to a raw value (already within the channel's range)."""
+
+    def stop(self) -> None:
+        """Close the device; output channels have already been driven to their safe value."""
+        return None  # optional hook
+
+
+class AdaptationFunction(abc.ABC):
+    """One step of an adaptation chain: raw → engineering units (sensors) or back (actuators)."""
+
+    @abc.abstractmethod
+    def __call__(self, value: float, now: float) -> float:
+        """Transform one value; ``now`` (seconds, monotonic) lets filters account for time."""
+
+    def reset(self) -> None:
+        """Forget any history (filters)."""
+        return None  # optional hook
+
+
+class Controller(abc.ABC):
+    """A control law (§3.1.2.2). ``step`` gives the action; ``future`` the stored next actions."""
+
+    def __init__(self, record: ControllerRecord) -> None:
+        self.record = record
+
+    @abc.abstractmethod
+    def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """The action for this period from inputs by role (measure, setpoint, …)."""
+
+    def future(self) -> list[float]:
+        """Actions for the next ``horizon`` periods, as predicted now (played if inputs are lost)."""
+        return []
+
+    def bumpless(self, output: float) -> None:
+        """Take over from another controller whose last output was ``output``."""
+        return None  # optional hook
+
+    def state(self) -> dict[str, Any]:
+        """The controller's internal state, msgpack-able (for delegation to another node)."""
+        return {}
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a state produced by ``state()`` on another node."""
+        return None  # optional hook

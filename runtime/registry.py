@@ -1,0 +1,74 @@
+"""The plugin registry: kind names in configurations → classes (BehaviorTree.CPP's factory).
+
+Plugins register through the entry-point group ``ckm.plugins`` with names ``CATEGORY.KIND``
+(``hardware.loopback``, ``controller.pid``, ``function.scale``…), or by ``register()`` in code.
+Registering a name twice is an error; an unknown name is a ConfigError at the element that
+asked for it, listing what is registered. Classes are imported only when first needed.
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+from typing import Any
+
+from ckmconf.binding import Record
+from ckmconf.checks.report import missing
+from ckmconf.errors import ConfigError, Loc
+
+GROUP = "ckm.plugins"
+CATEGORIES = ("hardware", "controller", "function", "plugin", "behavior")
+
+
+class RegistryError(RuntimeError):
+    """A programming error in plugin registration (not a configuration problem)."""
+
+
+class Registry:
+    """Maps (category, kind) to a class, loaded lazily from entry points."""
+
+    def __init__(self, *, load_entry_points: bool = True) -> None:
+        self._targets: dict[tuple[str, str], str | type[Any]] = {}
+        if load_entry_points:
+            for point in entry_points(group=GROUP):
+                category, _, kind = point.name.partition(".")
+                self._add(category, kind, point.value)
+
+    def register(self, category: str, kind: str, cls: type[Any]) -> None:
+        self._add(category, kind, cls)
+
+    def _add(self, category: str, kind: str, target: str | type[Any]) -> None:
+        if category not in CATEGORIES or not kind:
+            raise RegistryError(f"plugin name {category}.{kind!r} must be CATEGORY.KIND with CATEGORY in {CATEGORIES}")
+        key = (category, kind)
+        if key in self._targets and self._targets[key] != target:
+            raise RegistryError(f"{category} {kind!r} is registered twice ({self._targets[key]!r} and {target!r})")
+        self._targets[key] = target
+
+    def kinds(self, category: str) -> list[str]:
+        return sorted(kind for cat, kind in self._targets if cat == category)
+
+    def resolve(self, category: str, kind: str, record: Record | None = None, attr: str = "kind") -> type[Any]:
+        """The class registered for ``kind``, or a ConfigError located at ``record``."""
+        target = self._targets.get((category, kind))
+        if target is None:
+            loc = record.loc if record is not None and record.loc else Loc("<memory>", 1, 1, "/")
+            message = missing(f"{category} plugin", kind, "the registry", self.kinds(category))
+            raise ConfigError(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}", message)
+        if isinstance(target, str):
+            module, _, name = target.partition(":")
+            target = getattr(importlib.import_module(module), name)
+            assert isinstance(target, type)
+            self._targets[(category, kind)] = target
+        return target
+
+
+_DEFAULT: Registry | None = None
+
+
+def default_registry() -> Registry:
+    """The process-wide registry built from the installed entry points."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        _DEFAULT = Registry()
+    return _DEFAULT
