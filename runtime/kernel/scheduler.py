@@ -1,0 +1,222 @@
+"""Periodic tasks on absolute deadlines (§3.1.2.8).
+
+One scheduler thread runs its tasks in release order (ties: higher priority first). It sleeps
+until shortly before the next release and spins the rest of the way, which gives
+sub-millisecond release accuracy without holding a core. Releases are absolute
+(``start + k · period``), so lateness never accumulates as drift. A task may change its period
+at run time (flexible tasks) and may have an optional part that runs only while the scheduler's
+measured idle share is at least the part's ``min_idle`` (advanced control when resources allow).
+
+Tasks are cooperative: a part that overruns delays the others; that shows in their statistics
+as jitter and misses rather than being hidden.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+import statistics
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+LOG = logging.getLogger("ckm.scheduler")
+SPIN = 0.0003  # seconds spun before a release instead of sleeping
+IDLE_WINDOW = 1.0  # seconds over which the idle share is measured
+
+
+@dataclass
+class TaskStats:
+    """What a task did: releases, runs, misses, and recent jitter and execution times (seconds)."""
+
+    releases: int = 0
+    misses: int = 0
+    optional_runs: int = 0
+    optional_skipped: int = 0
+    failures: int = 0
+    jitter: deque[float] = field(default_factory=lambda: deque(maxlen=20000))
+    exec_time: deque[float] = field(default_factory=lambda: deque(maxlen=20000))
+    max_jitter: float = 0.0
+
+    def summary(self, period: float) -> dict[str, Any]:
+        jitters = sorted(abs(j) for j in self.jitter)
+        execs = sorted(self.exec_time)
+
+        def pct(values: list[float], q: float) -> float:
+            return values[min(len(values) - 1, int(q * len(values)))] if values else 0.0
+
+        return {
+            "period_s": period,
+            "releases": self.releases,
+            "misses": self.misses,
+            "failures": self.failures,
+            "optional_runs": self.optional_runs,
+            "optional_skipped": self.optional_skipped,
+            "jitter_p50_us": round(pct(jitters, 0.5) * 1e6, 1),
+            "jitter_p99_us": round(pct(jitters, 0.99) * 1e6, 1),
+            "jitter_max_us": round(self.max_jitter * 1e6, 1),
+            "exec_mean_us": round(statistics.fmean(execs) * 1e6, 1) if execs else 0.0,
+            "exec_p99_us": round(pct(execs, 0.99) * 1e6, 1),
+        }
+
+
+class Task:
+    """A periodic task: a required part, an optional part, a period and a priority."""
+
+    def __init__(
+        self,
+        name: str,
+        period: float,
+        required: Callable[[], None],
+        *,
+        priority: int = 50,
+        optional: Callable[[], None] | None = None,
+        min_idle: float = 0.2,
+    ) -> None:
+        if period <= 0:
+            raise ValueError(f"task {name!r}: period must be positive, not {period}")
+        self.name = name
+        self.period = period
+        self.required = required
+        self.optional = optional
+        self.min_idle = min_idle
+        self.priority = priority
+        self.stats = TaskStats()
+        self.release = 0.0
+        self.active = True
+
+    def set_period(self, period: float) -> None:
+        """Change the period from the next release on (flexible tasks)."""
+        if period <= 0:
+            raise ValueError(f"task {self.name!r}: period must be positive, not {period}")
+        self.period = period
+
+
+class Scheduler:
+    """Runs periodic tasks on one thread."""
+
+    def __init__(self, name: str = "ckm-scheduler", *, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.name = name
+        self.clock = clock
+        self.tasks: dict[str, Task] = {}
+        self._queue: list[tuple[float, int, int, Task]] = []
+        self._order = itertools.count()
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._busy: deque[tuple[float, float]] = deque()  # (end, duration) of recent runs
+
+    # ------------------------------------------------------------------ tasks
+
+    def add(self, task: Task, *, first_release: float | None = None) -> Task:
+        with self._lock:
+            if task.name in self.tasks:
+                raise ValueError(f"a task named {task.name!r} already runs on {self.name}")
+            task.release = self.clock() + task.period if first_release is None else first_release
+            self.tasks[task.name] = task
+            self._push(task)
+        self._wake.set()
+        return task
+
+    def remove(self, name: str) -> Task | None:
+        with self._lock:
+            task = self.tasks.pop(name, None)
+            if task is not None:
+                task.active = False
+        self._wake.set()
+        return task
+
+    def _push(self, task: Task) -> None:
+        heapq.heappush(self._queue, (task.release, -task.priority, next(self._order), task))
+
+    def idle_share(self) -> float:
+        """Share of the last second the scheduler spent waiting rather than running parts."""
+        now = self.clock()
+        with self._lock:
+            while self._busy and self._busy[0][0] < now - IDLE_WINDOW:
+                self._busy.popleft()
+            busy = sum(duration for _, duration in self._busy)
+        return max(0.0, 1.0 - busy / IDLE_WINDOW)
+
+    def statistics(self) -> dict[str, dict[str, Any]]:
+        with self._lock:
+            tasks = list(self.tasks.values())
+        return {task.name: task.stats.summary(task.period) for task in tasks}
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5)
+
+    # ------------------------------------------------------------------ the loop
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                entry = self._queue[0] if self._queue else None
+            if entry is None:
+                self._wake.wait(0.1)
+                self._wake.clear()
+                continue
+            release, _, _, task = entry
+            if not self._wait_until(release):
+                continue  # woken early: a task was added or removed; look again
+            with self._lock:
+                if not self._queue or self._queue[0][3] is not task:
+                    continue
+                heapq.heappop(self._queue)
+            if task.active:
+                self._execute(task, release)
+
+    def _wait_until(self, release: float) -> bool:
+        remaining = release - self.clock()
+        if remaining > SPIN:
+            self._wake.clear()
+            if self._wake.wait(remaining - SPIN):
+                return False
+        while self.clock() < release:
+            pass
+        return True
+
+    def _execute(self, task: Task, release: float) -> None:
+        start = self.clock()
+        stats = task.stats
+        stats.releases += 1
+        lateness = start - release
+        stats.jitter.append(lateness)
+        stats.max_jitter = max(stats.max_jitter, abs(lateness))
+        try:
+            task.required()
+            if task.optional is not None:
+                if self.idle_share() >= task.min_idle:
+                    task.optional()
+                    stats.optional_runs += 1
+                else:
+                    stats.optional_skipped += 1
+        except Exception:
+            stats.failures += 1
+            LOG.exception("task %s failed", task.name)
+        end = self.clock()
+        stats.exec_time.append(end - start)
+        with self._lock:
+            self._busy.append((end, end - start))
+            # The next release is absolute; releases already past are misses, not a burst of runs.
+            task.release = release + task.period
+            if task.release <= end:
+                skipped = int((end - task.release) // task.period) + 1
+                stats.misses += skipped
+                task.release += skipped * task.period
+            if task.active and task.name in self.tasks:
+                self._push(task)
