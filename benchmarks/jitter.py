@@ -16,7 +16,10 @@ PERIOD = 0.001
 
 def _summary(lateness: list[float], missed: int) -> dict[str, Any]:
     values = sorted(abs(x) for x in lateness)
-    pick = lambda q: values[min(len(values) - 1, int(q * len(values)))] * 1e6 if values else 0.0  # noqa: E731
+
+    def pick(q: float) -> float:
+        return values[min(len(values) - 1, int(q * len(values)))] * 1e6 if values else 0.0
+
     return {"p50": round(pick(0.5), 1), "p99": round(pick(0.99), 1), "max": round(pick(1.0), 1), "missed": missed}
 
 
