@@ -84,6 +84,10 @@ class AdaptationFunction(abc.ABC):
         """Forget any history (filters)."""
         return None  # optional hook
 
+    def inverse(self) -> AdaptationFunction:
+        """The step that undoes this one, for actuators; a filter or limit acts as itself."""
+        return self
+
 
 class Controller(abc.ABC):
     """A control law (§3.1.2.2). ``step`` gives the action; ``future`` the stored next actions."""

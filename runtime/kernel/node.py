@@ -1,0 +1,198 @@
+"""A running CKM node, built from its configuration record through the registry.
+
+``NodeRuntime(node, system, transport)`` only resolves plugins (unknown names are
+ConfigErrors at their element); ``setup()`` opens the hardware; ``start()`` schedules the
+services; ``stop()`` drives every actuator to its safe value and closes the hardware.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+from ckmconf.errors import ConfigError
+from ckmconf.model import Node, System, Topic
+from ckmconf.model.kernel import Controller as ControllerRecord
+
+from ..network.api import Sample, TopicQoS, Transport
+from ..registry import Registry, default_registry
+from .adaptation import build_chain
+from .interfaces import Backend, Controller, ParamError
+from .scheduler import Scheduler, Task
+from .services import ActuationService, ControlService, FutureActions, SensorService
+
+LOG = logging.getLogger("ckm.node")
+
+
+def _commands_to(service: ActuationService) -> Callable[[Sample], None]:
+    return lambda sample: service.command(sample.value)
+
+
+class NodeRuntime:
+    """The kernel of one node: channels, sensors, controllers, actuators on one scheduler."""
+
+    def __init__(
+        self,
+        node: Node,
+        system: System,
+        transport: Transport,
+        *,
+        registry: Registry | None = None,
+        scheduler: Scheduler | None = None,
+    ) -> None:
+        self.node = node
+        self.system = system
+        self.transport = transport
+        self.registry = registry or default_registry()
+        self.scheduler = scheduler or Scheduler(f"ckm-{node.name}")
+        self._own_scheduler = scheduler is None
+        self.backends: dict[str, Backend] = {}
+        self.sensors: dict[str, SensorService] = {}
+        self.controllers: dict[str, ControlService] = {}
+        self.actuators: dict[str, ActuationService] = {}
+        self.futures: dict[str, FutureActions] = {}
+        self.events: list[dict[str, Any]] = []
+        self._alarm_publisher = transport.publisher(TopicQoS(node.alarm_topic(), "event", history=16))
+        self._controller_classes = {c.name: self.registry.resolve("controller", c.kind, c) for c in node.controllers}
+        self._backend_classes = {
+            ch.name: self.registry.resolve("hardware", ch.backend, ch, "backend") for ch in node.channels
+        }
+
+    # ------------------------------------------------------------------ topics
+
+    def topic(self, name: str) -> TopicQoS:
+        """QoS of a topic as this node sees it: its own topics first, then the system's external ones."""
+        found: Topic | None = next((t for t in self.node.topics if t.name == name), None)
+        if found is None:
+            external = list(self.system.topics) + [
+                t for n in self.system.nodes for t in n.topics if t.scope == "external"
+            ]
+            found = next((t for t in external if t.name == name), None)
+        if found is None:
+            return TopicQoS(name)
+        qos = TopicQoS.of(found)
+        if found.scope == "internal":  # internal topics never leave the node: give them a node-local name
+            qos = TopicQoS(
+                f"/{self.node.name}/~{name.lstrip('/')}",
+                qos.type,
+                qos.reliability,
+                qos.history,
+                qos.deadline,
+                qos.lifespan,
+            )
+        return qos
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def setup(self) -> None:
+        node = self.node
+        for channel in node.channels:
+            try:
+                backend = self._backend_classes[channel.name](channel)
+            except ParamError as exc:
+                raise self._error(channel, str(exc)) from None
+            backend.setup()
+            self.backends[channel.name] = backend
+        for sensor in node.sensors:
+            chain = build_chain(sensor.adaptation, self.registry, inverse=False)
+            publisher = self.transport.publisher(self.topic(sensor.topic))
+            self.sensors[sensor.name] = SensorService(sensor, self.backends[sensor.channel], chain, publisher)
+        for actuator in node.actuators:
+            inverse = build_chain(actuator.adaptation, self.registry, inverse=True)
+            service = ActuationService(actuator, self.backends[actuator.channel], inverse, self.futures, self._report)
+            self.actuators[actuator.name] = service
+            self.transport.subscribe(self.topic(actuator.topic), _commands_to(service))
+        extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in node.sensors}
+        for record in node.controllers:
+            self.controllers[record.name] = self._control_service(record, extrapolation)
+
+    def _control_service(self, record: ControllerRecord, extrapolation: dict[str, str]) -> ControlService:
+        try:
+            controller: Controller = self._controller_classes[record.name](record)
+        except ParamError as exc:
+            raise self._error(record, str(exc)) from None
+        inputs = {}
+        methods = {}
+        for port in record.inputs:
+            role = port.role or port.topic
+            qos = self.topic(port.topic)
+            inputs[role] = self.transport.subscribe(
+                TopicQoS(qos.name, qos.type, qos.reliability, max(qos.history, 3), qos.deadline, qos.lifespan)
+            )
+            methods[role] = extrapolation.get(port.topic, "hold")
+        outputs = [self.transport.publisher(self.topic(port.topic)) for port in record.outputs]
+        return ControlService(record, controller, inputs, outputs, extrapolation=methods, futures=self.futures)
+
+    def start(self) -> None:
+        for name, sensor in self.sensors.items():
+            self.scheduler.add(
+                Task(f"{self.node.name}.{name}", sensor.record.period, sensor.tick, priority=sensor.record.priority)
+            )
+        for name, control in self.controllers.items():
+            record = control.record
+            self.scheduler.add(Task(f"{self.node.name}.{name}", record.period, control.tick, priority=record.priority))
+        for name, actuation in self.actuators.items():
+            period = min(actuation.record.command_timeout / 4, 0.01)
+            self.scheduler.add(
+                Task(f"{self.node.name}.{name}", period, actuation.tick, priority=actuation.record.priority)
+            )
+        if self._own_scheduler:
+            self.scheduler.start()
+
+    def stop(self) -> None:
+        """Stop the services, drive every actuator to its safe value, close the hardware."""
+        for name in list(self.scheduler.tasks):
+            if name.startswith(f"{self.node.name}."):
+                self.scheduler.remove(name)
+        if self._own_scheduler:
+            self.scheduler.stop()
+        for actuation in self.actuators.values():
+            try:
+                actuation.safe_stop()
+            except Exception:
+                LOG.exception("could not drive %s to its safe value", actuation.record.name)
+        for backend in self.backends.values():
+            backend.stop()
+
+    # ------------------------------------------------------------------ run-time operations
+
+    def switch(self, to: str, reason: str = "command") -> None:
+        """Hand the outputs of the active controller(s) sharing ``to``'s outputs over to ``to``, bumplessly."""
+        target = self.controllers[to]
+        outputs = {p.topic for p in target.record.outputs}
+        previous = None
+        for control in self.controllers.values():
+            if control is not target and control.active and outputs & {p.topic for p in control.record.outputs}:
+                previous = control.last_output
+                control.deactivate()
+        target.activate(previous)
+        self._report("controller-switched", {"to": to, "reason": reason})
+
+    def statistics(self) -> dict[str, Any]:
+        stats = self.scheduler.statistics()
+        return {
+            "tasks": {k: v for k, v in stats.items() if k.startswith(f"{self.node.name}.")},
+            "actuators": {
+                n: {"mode": a.mode, "value": a.value, "out_of_range": a.out_of_range} for n, a in self.actuators.items()
+            },
+            "controllers": {n: {"active": c.active, "skipped": c.skipped} for n, c in self.controllers.items()},
+        }
+
+    # ------------------------------------------------------------------ events
+
+    def _report(self, kind: str, detail: dict[str, Any]) -> None:
+        event = {"node": self.node.name, "kind": kind, "time": time.time(), **detail}
+        self.events.append(event)
+        if len(self.events) > 10000:
+            del self.events[:5000]
+        level = logging.INFO if kind == "controller-switched" else logging.WARNING
+        LOG.log(level, "%s: %s %s", self.node.name, kind, detail)
+        self._alarm_publisher.publish(event)
+
+    def _error(self, record: Any, message: str) -> ConfigError:
+        loc = record.loc
+        if loc is None:
+            return ConfigError("<memory>", 1, 1, f"/{record.TAG}", message)
+        return ConfigError.at(loc, message)

@@ -1,0 +1,231 @@
+"""The kernel's services for one node: sensory perception, control and actuation (§3.1.2.1–3).
+
+Each runs as a scheduler task (actuation also reacts to every command as it arrives). They talk
+through topics, so a controller may read a sensor of another node; when both sit in one node
+the control service also hands its predicted future actions straight to the actuation service,
+which plays them if commands stop, then the actuator's fallback actions, then its safe value.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from ckmconf.model import Actuator, Sensor
+from ckmconf.model.kernel import Controller as ControllerRecord
+
+from ..network.api import Publisher, Subscription
+from .extrapolate import extrapolate
+from .interfaces import Backend, Controller
+
+LOG = logging.getLogger("ckm.kernel")
+Chain = Callable[[float, float], float]
+
+
+class SensorService:
+    """Samples a channel, adapts the raw value, publishes it timestamped, keeps recent samples."""
+
+    def __init__(self, record: Sensor, backend: Backend, chain: Chain, publisher: Publisher) -> None:
+        self.record = record
+        self.backend = backend
+        self.chain = chain
+        self.publisher = publisher
+        self.samples: deque[tuple[float, float]] = deque(maxlen=8)  # (wall time, engineering value)
+
+    def tick(self) -> None:
+        raw = self.backend.read()
+        value = self.chain(float(raw if not isinstance(raw, tuple) else raw[0]), time.monotonic())
+        stamp = time.time()
+        self.samples.append((stamp, value))
+        self.publisher.publish(value, stamp=stamp)
+
+
+@dataclass
+class FutureActions:
+    """Actions a controller predicted, to be played one per period if its inputs are lost."""
+
+    values: list[float] = field(default_factory=list)
+    period: float = 0.0
+    stamp: float = 0.0  # monotonic time of the last computed action
+
+
+class ControlService:
+    """Runs one controller each period on fresh (extrapolated) inputs."""
+
+    def __init__(
+        self,
+        record: ControllerRecord,
+        controller: Controller,
+        inputs: Mapping[str, Subscription],
+        outputs: list[Publisher],
+        *,
+        extrapolation: Mapping[str, str],
+        futures: dict[str, FutureActions],
+    ) -> None:
+        self.record = record
+        self.controller = controller
+        self.inputs = dict(inputs)
+        self.outputs = outputs
+        self.extrapolation = dict(extrapolation)
+        self.futures = futures
+        self.active = record.active
+        self.last_output: float | None = None
+        self.skipped = 0
+        self.since = time.monotonic()
+
+    def stale_after(self, subscription: Subscription) -> float:
+        """An input older than this is lost: three controller periods, or the topic's lifespan."""
+        return subscription.qos.lifespan or 3 * self.record.period
+
+    def read_inputs(self) -> dict[str, float] | None:
+        now = time.time()
+        values: dict[str, float] = {}
+        for role, subscription in self.inputs.items():
+            history = subscription.history()
+            if not history or now - (history[-1].stamp - history[-1].offset) > self.stale_after(subscription):
+                if role == "setpoint":
+                    continue  # a missing setpoint means the controller's default (zero) setpoint
+                return None
+            samples = [(s.stamp - s.offset, float(s.value)) for s in history[-3:]]
+            values[role] = extrapolate(samples, now, self.extrapolation.get(role, "hold"))
+        return values
+
+    def tick(self) -> None:
+        if not self.active:
+            return
+        inputs = self.read_inputs()
+        if inputs is None:
+            self.skipped += 1  # the actuation service notices the silence and plays stored actions
+            return
+        action = self.controller.step(inputs, self.record.period)
+        self.last_output = action
+        future = FutureActions(list(self.controller.future()), self.record.period, time.monotonic())
+        stamp = time.time()
+        for publisher in self.outputs:
+            self.futures[publisher.qos.name] = future
+            publisher.publish(action, stamp=stamp)
+
+    def activate(self, output: float | None) -> None:
+        """Take over the outputs, starting from the current output (bumpless transfer)."""
+        if output is not None:
+            self.controller.bumpless(output)
+        self.active = True
+        self.since = time.monotonic()
+
+    def deactivate(self) -> None:
+        self.active = False
+
+
+class ActuationService:
+    """Drives a channel from commands, within bounds and rate limits, and fails safe when they stop."""
+
+    def __init__(
+        self,
+        record: Actuator,
+        backend: Backend,
+        inverse: Chain,
+        futures: Mapping[str, FutureActions],
+        report: Callable[[str, dict[str, Any]], None],
+    ) -> None:
+        self.record = record
+        self.backend = backend
+        self.inverse = inverse
+        self.futures = futures
+        self.report = report
+        self.mode = "waiting"  # waiting → commanded → stored → fallback → safe
+        self.value: float | None = None
+        self.out_of_range = 0
+        self._last_command = 0.0
+        self._last_drive = 0.0
+        self._degraded_since = 0.0
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ commands
+
+    def command(self, value: Any) -> None:
+        """A command arrived on the actuator's topic."""
+        with self._lock:
+            self._last_command = time.monotonic()
+            if self.mode != "commanded":
+                self.mode = "commanded"
+            self._drive(value)
+
+    def tick(self) -> None:
+        """Watchdog: commands stale → stored actions → fallback sequence → safe value."""
+        with self._lock:
+            if self.mode == "waiting" or (self.mode == "safe" and self.value == self.record.safe_value):
+                return
+            now = time.monotonic()
+            if self.mode == "commanded" and now - self._last_command <= self.record.command_timeout:
+                return
+            if self.mode == "commanded":
+                self.mode = "stored"
+                self._degraded_since = now
+                self.report("commands-stale", {"actuator": self.record.name, "age_s": now - self._last_command})
+            value = self._degraded_value(now)
+            self._drive(value)
+
+    def _degraded_value(self, now: float) -> float:
+        future = self.futures.get(self.record.topic)
+        if self.mode == "stored" and future is not None and future.values and future.period > 0:
+            index = int((now - future.stamp) / future.period) - 1
+            if 0 <= index < len(future.values):
+                return future.values[index]
+        if self.mode == "stored":
+            self.mode = "fallback"
+            self._degraded_since = now
+        if self.mode == "fallback" and self.record.fallback is not None:
+            elapsed = now - self._degraded_since
+            for action in self.record.fallback.actions:
+                if elapsed < action.duration:
+                    return action.value
+                elapsed -= action.duration
+        if self.mode != "safe":
+            self.mode = "safe"
+            self.report("safe-stop", {"actuator": self.record.name, "value": self.record.safe_value})
+        return self.record.safe_value
+
+    def safe_stop(self) -> None:
+        """Drive the safe value now, without rate limit (shutdown, safe-stop alarms)."""
+        with self._lock:
+            self.mode = "safe"
+            self._write(self.record.safe_value)
+            self.report("safe-stop", {"actuator": self.record.name, "value": self.record.safe_value})
+
+    # ------------------------------------------------------------------ driving
+
+    def _drive(self, value: Any) -> None:
+        record = self.record
+        try:
+            target = float(value)
+        except (TypeError, ValueError):
+            self.report("bad-command", {"actuator": record.name, "value": repr(value)[:60]})
+            return
+        if target != target or not record.min <= target <= record.max:
+            self.out_of_range += 1
+            action = record.on_out_of_range
+            self.report("out-of-range", {"actuator": record.name, "value": target, "action": action})
+            if action == "reject" or target != target:
+                return
+            target = min(max(target, record.min), record.max)
+        now = time.monotonic()
+        if record.rate_limit is not None and self.value is not None:
+            step = record.rate_limit * max(now - self._last_drive, 0.0)
+            target = min(max(target, self.value - step), self.value + step)
+        self._last_drive = now
+        self._write(target)
+
+    def _write(self, target: float) -> None:
+        self.value = target
+        raw = self.inverse(target, time.monotonic())
+        channel = self.backend.channel
+        if channel.min is not None:
+            raw = max(raw, channel.min)
+        if channel.max is not None:
+            raw = min(raw, channel.max)
+        self.backend.write(raw)
