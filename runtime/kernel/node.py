@@ -13,13 +13,15 @@ from collections.abc import Callable
 from typing import Any
 
 from ckmconf.errors import ConfigError
-from ckmconf.model import Node, System, Topic
+from ckmconf.expressions import SWITCH, Condition, Environment, evaluate, parse
+from ckmconf.model import Alarm, Node, System, Topic
 from ckmconf.model.kernel import Controller as ControllerRecord
 
-from ..network.api import Sample, TopicQoS, Transport
+from ..network.api import Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry, default_registry
 from .adaptation import build_chain
 from .interfaces import Backend, Controller, ParamError
+from .monitor import MonitorService
 from .scheduler import Scheduler, Task
 from .services import ActuationService, ControlService, FutureActions, SensorService
 
@@ -54,6 +56,9 @@ class NodeRuntime:
         self.actuators: dict[str, ActuationService] = {}
         self.futures: dict[str, FutureActions] = {}
         self.events: list[dict[str, Any]] = []
+        self.monitor: MonitorService | None = None
+        self._watched: dict[str, Subscription] = {}
+        self._switches: dict[str, list[tuple[str, Condition]]] = {}
         self._alarm_publisher = transport.publisher(TopicQoS(node.alarm_topic(), "event", history=16))
         self._controller_classes = {c.name: self.registry.resolve("controller", c.kind, c) for c in node.controllers}
         self._backend_classes = {
@@ -107,6 +112,29 @@ class NodeRuntime:
         extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in node.sensors}
         for record in node.controllers:
             self.controllers[record.name] = self._control_service(record, extrapolation)
+            self._switches[record.name] = [(sw.to, parse(sw.when, SWITCH)) for sw in record.switches]
+            for _, condition in self._switches[record.name]:
+                for function, args in condition.calls:
+                    if function in ("stale", "value"):
+                        self._watch(str(args[0]))
+        if node.monitor is not None:
+            for alarm in node.monitor.alarms:
+                if alarm.measure == "staleness" and alarm.topic:
+                    self._watch(alarm.topic)
+            self.monitor = MonitorService(
+                node.monitor,
+                node=node.name,
+                scheduler=self.scheduler,
+                subscriptions=self._watched,
+                crashes=lambda partition: 0,
+                report=self._report,
+                react=self._react,
+            )
+
+    def _watch(self, topic: str) -> Subscription:
+        if topic not in self._watched:
+            self._watched[topic] = self.transport.subscribe(self.topic(topic))
+        return self._watched[topic]
 
     def _control_service(self, record: ControllerRecord, extrapolation: dict[str, str]) -> ControlService:
         try:
@@ -132,7 +160,13 @@ class NodeRuntime:
             )
         for name, control in self.controllers.items():
             record = control.record
-            self.scheduler.add(Task(f"{self.node.name}.{name}", record.period, control.tick, priority=record.priority))
+            self.scheduler.add(
+                Task(f"{self.node.name}.{name}", record.period, self._control_tick(control), priority=record.priority)
+            )
+        if self.monitor is not None and self.node.monitor is not None:
+            self.scheduler.add(
+                Task(f"{self.node.name}.monitor", self.node.monitor.period, self.monitor.tick, priority=10)
+            )
         for name, actuation in self.actuators.items():
             period = min(actuation.record.command_timeout / 4, 0.01)
             self.scheduler.add(
@@ -155,6 +189,52 @@ class NodeRuntime:
                 LOG.exception("could not drive %s to its safe value", actuation.record.name)
         for backend in self.backends.values():
             backend.stop()
+
+    # ------------------------------------------------------------------ switching and alarms
+
+    def _control_tick(self, control: ControlService) -> Callable[[], None]:
+        def tick() -> None:
+            if control.active:
+                for target, condition in self._switches.get(control.record.name, ()):
+                    if evaluate(condition, self._switch_environment(control)):
+                        self.switch(target, reason=f"criterion of {control.record.name}")
+                        return
+            control.tick()
+
+        return tick
+
+    def _switch_environment(self, control: ControlService) -> Environment:
+        def stale(topic: str) -> bool:
+            subscription = self._watched.get(topic)
+            history = subscription.history() if subscription is not None else []
+            if not history:
+                return True
+            limit = subscription.qos.lifespan or subscription.qos.deadline or 3 * control.record.period  # type: ignore[union-attr]
+            return time.time() - (history[-1].stamp - history[-1].offset) > limit
+
+        def value(topic: str) -> Any:
+            subscription = self._watched.get(topic)
+            history = subscription.history() if subscription is not None else []
+            return history[-1].value if history else None
+
+        monitor = self.monitor
+        return Environment(
+            functions={
+                "alarm": lambda name: monitor is not None and monitor.active(name),
+                "stale": stale,
+                "value": value,
+            },
+            names={"elapsed": time.monotonic() - control.since},
+        )
+
+    def _react(self, alarm: Alarm) -> None:
+        if alarm.action == "safe-stop":
+            for actuation in self.actuators.values():
+                actuation.safe_stop()
+        elif alarm.action == "switch" and alarm.target is not None:
+            self.switch(alarm.target, reason=f"alarm {alarm.name}")
+        else:
+            self._report("reaction-unavailable", {"alarm": alarm.name, "action": alarm.action})
 
     # ------------------------------------------------------------------ run-time operations
 

@@ -1,0 +1,122 @@
+"""Monitoring and alarms (§3.1.2.4): measures sampled each monitor period, thresholds, reactions.
+
+An alarm is raised when its measure goes above ``above`` or below ``below`` and stays there for
+``hold`` seconds; it clears when the measure is back within bounds. Raising and clearing are
+events on the node's alarm topic and in the log; a raised alarm may trigger the kernel's
+reaction (safe stop, controller switch, delegation, partition restart).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import psutil
+
+from ckmconf.model import Alarm, Monitor
+
+from ..network.api import Subscription
+from .scheduler import Scheduler
+
+
+@dataclass
+class AlarmState:
+    record: Alarm
+    active: bool = False
+    since: float | None = None  # when the condition started to hold
+    value: float = 0.0
+    raised: int = 0
+
+
+class MonitorService:
+    """Samples the node's measures and raises, clears and acts on its alarms."""
+
+    def __init__(
+        self,
+        monitor: Monitor,
+        *,
+        node: str,
+        scheduler: Scheduler,
+        subscriptions: dict[str, Subscription],
+        crashes: Callable[[str], int],
+        report: Callable[[str, dict[str, Any]], None],
+        react: Callable[[Alarm], None],
+    ) -> None:
+        self.monitor = monitor
+        self.node = node
+        self.scheduler = scheduler
+        self.subscriptions = subscriptions
+        self.crashes = crashes
+        self.report = report
+        self.react = react
+        self.alarms = {a.name: AlarmState(a) for a in monitor.alarms}
+        self._misses: dict[str, int] = {}
+        self._crashes: dict[str, int] = {}
+        psutil.cpu_percent(None)  # the first reading only starts the measurement
+
+    def active(self, name: str) -> bool:
+        state = self.alarms.get(name)
+        return state is not None and state.active
+
+    def measure(self, alarm: Alarm) -> float:
+        kind = alarm.measure
+        if kind == "cpu":
+            return float(psutil.cpu_percent(None)) / 100
+        if kind == "memory":
+            return float(psutil.virtual_memory().percent) / 100
+        if kind == "staleness":
+            subscription = self.subscriptions.get(alarm.topic or "")
+            sample = subscription.history()[-1] if subscription is not None and subscription.history() else None
+            return math.inf if sample is None else time.time() - (sample.stamp - sample.offset)
+        if kind == "partition-crash":
+            total = self.crashes(alarm.partition or "")
+            new = total - self._crashes.get(alarm.name, 0)
+            self._crashes[alarm.name] = total
+            return float(new)
+        task = self.scheduler.tasks.get(f"{self.node}.{alarm.task}")
+        if task is None:
+            return 0.0
+        if kind == "deadline-misses":
+            new = task.stats.misses - self._misses.get(alarm.name, 0)
+            self._misses[alarm.name] = task.stats.misses
+            return float(new)
+        recent = list(task.stats.jitter)[-200:] if kind == "jitter" else list(task.stats.exec_time)[-200:]
+        return max((abs(v) for v in recent), default=0.0)
+
+    def tick(self) -> None:
+        now = time.monotonic()
+        for state in self.alarms.values():
+            alarm = state.record
+            value = self.measure(alarm)
+            state.value = value
+            if alarm.measure == "partition-crash":
+                breached = value > 0
+            else:
+                breached = (alarm.above is not None and value > alarm.above) or (
+                    alarm.below is not None and value < alarm.below
+                )
+            if not breached:
+                state.since = None
+                if state.active:
+                    state.active = False
+                    self.report("alarm-cleared", {"alarm": alarm.name, "value": value})
+                continue
+            state.since = now if state.since is None else state.since
+            if not state.active and now - state.since >= alarm.hold:
+                state.active = True
+                state.raised += 1
+                self.report(
+                    "alarm",
+                    {
+                        "alarm": alarm.name,
+                        "measure": alarm.measure,
+                        "value": value,
+                        "severity": alarm.severity,
+                        "action": alarm.action,
+                    },
+                )
+                if alarm.action != "none":
+                    self.react(alarm)
