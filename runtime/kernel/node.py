@@ -105,7 +105,8 @@ class NodeRuntime:
             publisher = self.transport.publisher(self.topic(sensor.topic))
             self.sensors[sensor.name] = SensorService(sensor, self.backends[sensor.channel], chain, publisher)
         for actuator in node.actuators:
-            inverse = build_chain(actuator.adaptation, self.registry, inverse=True)
+            # kernel.xsd: an actuator's steps are applied in order, engineering units → raw.
+            inverse = build_chain(actuator.adaptation, self.registry, inverse=False)
             service = ActuationService(actuator, self.backends[actuator.channel], inverse, self.futures, self._report)
             self.actuators[actuator.name] = service
             self.transport.subscribe(self.topic(actuator.topic), _commands_to(service))

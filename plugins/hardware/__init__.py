@@ -1,0 +1,1 @@
+"""Hardware backends: the loopback plant simulator."""
