@@ -143,6 +143,7 @@ class ActuationService:
         self._last_command = 0.0
         self._last_drive = 0.0
         self._degraded_since = 0.0
+        self._last_range_report = -1e9
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ commands
@@ -209,7 +210,13 @@ class ActuationService:
         if target != target or not record.min <= target <= record.max:
             self.out_of_range += 1
             action = record.on_out_of_range
-            self.report("out-of-range", {"actuator": record.name, "value": target, "action": action})
+            now = time.monotonic()
+            if now - self._last_range_report >= 1.0:  # every time counted, reported at most once a second
+                self._last_range_report = now
+                self.report(
+                    "out-of-range",
+                    {"actuator": record.name, "value": target, "action": action, "count": self.out_of_range},
+                )
             if action == "reject" or target != target:
                 return
             target = min(max(target, record.min), record.max)

@@ -1,0 +1,147 @@
+"""A node built from XML runs its loops on the loopback plant, fails safe and switches bumplessly."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+import ckmconf
+from ckmconf.model import System
+from runtime.kernel.node import NodeRuntime
+from runtime.network import Transport, open_transport
+from tests.conftest import REPO
+from tests.runtime.network.conftest import private_network
+
+
+@pytest.fixture
+def transport() -> Iterator[Transport]:
+    running = open_transport(private_network(), name="kernel-test")
+    running.setup()
+    running.start()
+    yield running
+    running.stop()
+
+
+@pytest.fixture
+def nodes(transport: Transport) -> Iterator[Callable[[System, str], NodeRuntime]]:
+    made: list[NodeRuntime] = []
+
+    def make(system: System, name: str) -> NodeRuntime:
+        node = next(n for n in system.nodes if n.name == name)
+        runtime = NodeRuntime(node, system, transport)
+        made.append(runtime)
+        runtime.setup()
+        runtime.start()
+        return runtime
+
+    yield make
+    for runtime in made:
+        runtime.stop()
+
+
+def until(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def example(name: str) -> System:
+    return ckmconf.load(REPO / "configs" / "examples" / name)
+
+
+def test_closed_loop_reaches_its_set_point(nodes: Callable[[System, str], NodeRuntime], transport: Transport) -> None:
+    node = nodes(example("closed_loop.xml"), "motor-node")
+    setpoint = transport.publisher(node.topic("setpoint"))
+    speed = transport.subscribe(node.topic("speed"))
+
+    def settled() -> bool:
+        setpoint.publish(0.5)
+        sample = speed.latest()
+        return sample is not None and abs(sample.value - 0.5) < 0.02
+
+    assert until(settled, timeout=15)
+    stats = node.statistics()["tasks"]
+    assert stats["motor-node.pid"]["releases"] > 10 and stats["motor-node.pid"]["failures"] == 0
+
+
+def test_a_stale_sensor_plays_stored_actions_then_the_fallback_then_the_safe_value(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport
+) -> None:
+    node = nodes(example("safe_actuation.xml"), "lift")
+    target = transport.publisher(node.topic("/lift/target"))
+    motor = node.actuators["motor"]
+    assert until(lambda: (target.publish(1.0), motor.mode == "commanded")[1])
+    node.scheduler.remove("lift.height")  # the sensor stops: the controller's input goes stale
+    assert until(lambda: motor.mode == "safe", timeout=10)
+    kinds = [e["kind"] for e in node.events]
+    assert kinds.index("commands-stale") < kinds.index("safe-stop")
+    assert motor.value == 0.0
+    assert node.backends["motor"].read() == 0.0
+
+
+def test_out_of_range_commands_never_reach_the_channel(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport
+) -> None:
+    node = nodes(example("safe_actuation.xml"), "lift")
+    node.scheduler.remove("lift.gpc")  # we command the actuator ourselves
+    command = transport.publisher(node.topic("command"))
+    motor = node.actuators["motor"]
+    command.publish(0.1)
+    assert until(lambda: motor.value is not None and motor.value > 0)
+    before = node.backends["motor"].read()
+    for value in (5.0, -7.0, float("nan"), 0.81):
+        command.publish(value)
+    time.sleep(0.05)
+    assert motor.out_of_range == 4
+    written = node.backends["motor"].read()
+    assert -0.8 <= written <= 0.8  # onOutOfRange="reject": the previous value holds
+    assert written == before
+    assert any(e["kind"] == "out-of-range" for e in node.events)
+
+
+SWITCHING = """<System xmlns="urn:ckm:1" version="1.0" name="switching">
+  <Node name="n">
+    <HWChannel name="y" direction="in"><Param name="plant" value="p"/></HWChannel>
+    <HWChannel name="u" direction="out" min="-10" max="10">
+      <Param name="plant" value="p"/><Param name="gain" value="1"/><Param name="timeConstant" value="0.1"/>
+    </HWChannel>
+    <Topic name="y" type="float64" scope="internal"/>
+    <Topic name="u" type="float64" scope="internal"/>
+    <Topic name="r" type="float64" scope="internal"/>
+    <Sensor name="y" channel="y" topic="y" period="0.01"/>
+    <Controller name="a" kind="pid" period="0.01">
+      <Param name="kp" value="0.5"/><Param name="ki" value="5"/>
+      <Input topic="y" role="measure"/><Input topic="r" role="setpoint"/><Output topic="u"/>
+    </Controller>
+    <Controller name="b" kind="pid" period="0.01" active="false">
+      <Param name="kp" value="2"/><Param name="ki" value="1"/>
+      <Input topic="y" role="measure"/><Input topic="r" role="setpoint"/><Output topic="u"/>
+    </Controller>
+    <Actuator name="u" channel="u" topic="u" min="-10" max="10" safeValue="0"/>
+  </Node>
+</System>"""
+
+
+def test_switching_controllers_keeps_the_output_continuous(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport, tmp_path: Path
+) -> None:
+    path = tmp_path / "switching.xml"
+    path.write_text(SWITCHING)
+    node = nodes(ckmconf.load(path), "n")
+    reference = transport.publisher(node.topic("r"))
+    outputs: list[float] = []
+    transport.subscribe(node.topic("u"), lambda sample: outputs.append(sample.value))
+    assert until(lambda: (reference.publish(1.0), len(outputs) > 50)[1])
+    node.switch("b")
+    count = len(outputs)
+    assert until(lambda: len(outputs) > count + 20)
+    jump = abs(outputs[count] - outputs[count - 1])
+    steps = [abs(b - a) for a, b in zip(outputs[count - 20 : count - 1], outputs[count - 19 : count], strict=True)]
+    assert jump <= 3 * max(steps) + 0.05  # no bump: the new controller starts from the current output
+    assert node.controllers["b"].active and not node.controllers["a"].active
