@@ -57,6 +57,7 @@ class NodeRuntime:
         self.futures: dict[str, FutureActions] = {}
         self.events: list[dict[str, Any]] = []
         self.monitor: MonitorService | None = None
+        self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
         self._switches: dict[str, list[tuple[str, Condition]]] = {}
         self._alarm_publisher = transport.publisher(TopicQoS(node.alarm_topic(), "event", history=16))
@@ -178,6 +179,7 @@ class NodeRuntime:
 
     def stop(self) -> None:
         """Stop the services, drive every actuator to its safe value, close the hardware."""
+        self._final_tasks = self._task_statistics()
         for name in list(self.scheduler.tasks):
             if name.startswith(f"{self.node.name}."):
                 self.scheduler.remove(name)
@@ -251,10 +253,13 @@ class NodeRuntime:
         target.activate(previous)
         self._report("controller-switched", {"to": to, "reason": reason})
 
+    def _task_statistics(self) -> dict[str, Any]:
+        return {k: v for k, v in self.scheduler.statistics().items() if k.startswith(f"{self.node.name}.")}
+
     def statistics(self) -> dict[str, Any]:
-        stats = self.scheduler.statistics()
+        """Per-task scheduling figures (as they were at stop, once stopped), actuators, controllers."""
         return {
-            "tasks": {k: v for k, v in stats.items() if k.startswith(f"{self.node.name}.")},
+            "tasks": self._final_tasks if self._final_tasks is not None else self._task_statistics(),
             "actuators": {
                 n: {"mode": a.mode, "value": a.value, "out_of_range": a.out_of_range} for n, a in self.actuators.items()
             },

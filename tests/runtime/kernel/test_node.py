@@ -99,7 +99,7 @@ def test_out_of_range_commands_never_reach_the_channel(
         command.publish(value)
     time.sleep(0.05)
     assert motor.out_of_range == 4
-    written = node.backends["motor"].read()
+    written = float(node.backends["motor"].read())  # type: ignore[arg-type]
     assert -0.8 <= written <= 0.8  # onOutOfRange="reject": the previous value holds
     assert written == before
     assert any(e["kind"] == "out-of-range" for e in node.events)
