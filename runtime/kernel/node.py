@@ -7,6 +7,7 @@ services; ``stop()`` drives every actuator to its safe value and closes the hard
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Callable
@@ -28,6 +29,20 @@ from .services import ActuationService, ControlService, FutureActions, SensorSer
 LOG = logging.getLogger("ckm.node")
 
 
+def _only_partition(node: Node, partition: str) -> Node:
+    """The node reduced to one partition's sensors, controllers and actuators and the channels they use."""
+    wanted = partition or None
+    sensors = tuple(s for s in node.sensors if s.partition == wanted)
+    controllers = tuple(c for c in node.controllers if c.partition == wanted)
+    actuators = tuple(a for a in node.actuators if a.partition == wanted)
+    used = {s.channel for s in sensors} | {a.channel for a in actuators}
+    channels = tuple(ch for ch in node.channels if ch.name in used)
+    monitor = node.monitor if not partition else None  # the monitor lives with the node's main process
+    return dataclasses.replace(
+        node, sensors=sensors, controllers=controllers, actuators=actuators, channels=channels, monitor=monitor
+    )
+
+
 def _commands_to(service: ActuationService) -> Callable[[Sample], None]:
     return lambda sample: service.command(sample.value)
 
@@ -43,7 +58,13 @@ class NodeRuntime:
         *,
         registry: Registry | None = None,
         scheduler: Scheduler | None = None,
+        partition: str | None = None,
     ) -> None:
+        """``partition``: None runs every component; a name runs only that partition's components,
+        and "" only the components outside any partition (the node's main process)."""
+        if partition is not None:
+            node = _only_partition(node, partition)
+        self.partition = partition
         self.node = node
         self.system = system
         self.transport = transport
