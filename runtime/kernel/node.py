@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -21,6 +22,7 @@ from ckmconf.model.kernel import Controller as ControllerRecord
 from ..network.api import Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry, default_registry
 from .adaptation import build_chain
+from .delegation import Delegation
 from .interfaces import Backend, Controller, ParamError
 from .monitor import MonitorService
 from .scheduler import Scheduler, Task
@@ -78,6 +80,7 @@ class NodeRuntime:
         self.futures: dict[str, FutureActions] = {}
         self.events: list[dict[str, Any]] = []
         self.monitor: MonitorService | None = None
+        self.delegation: Delegation | None = None
         self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
         self._switches: dict[str, list[tuple[str, Condition]]] = {}
@@ -115,6 +118,7 @@ class NodeRuntime:
 
     def setup(self) -> None:
         node = self.node
+        self.delegation = Delegation(self)
         for channel in node.channels:
             try:
                 backend = self._backend_classes[channel.name](channel)
@@ -257,8 +261,17 @@ class NodeRuntime:
                 actuation.safe_stop()
         elif alarm.action == "switch" and alarm.target is not None:
             self.switch(alarm.target, reason=f"alarm {alarm.name}")
+        elif alarm.action == "delegate" and alarm.target in self.controllers and self.delegation is not None:
+            taker = self.idle_node()
+            if taker is not None:  # handing over waits for the taker: not on the monitor's thread
+                threading.Thread(target=self.delegation.give, args=(alarm.target, taker), daemon=True).start()
         else:
             self._report("reaction-unavailable", {"alarm": alarm.name, "action": alarm.action})
+
+    def idle_node(self) -> str | None:
+        """Where delegated work goes: the first other service node of the system (FCKM, §3.1.1.2)."""
+        others = [n.name for n in self.system.nodes if n.name != self.node.name and n.kind == "service"]
+        return others[0] if others else None
 
     # ------------------------------------------------------------------ run-time operations
 
