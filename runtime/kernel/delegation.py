@@ -101,6 +101,7 @@ class Delegation:
             )
             done.set()
 
+        task.optional = task.finish = None  # this release only hands over: nothing else may publish
         task.required = hand_over
         if not done.wait(self.timeout):
             return False

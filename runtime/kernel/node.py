@@ -178,7 +178,17 @@ class NodeRuntime:
             )
             methods[role] = extrapolation.get(port.topic, "hold")
         outputs = [self.transport.publisher(self.topic(port.topic)) for port in record.outputs]
-        return ControlService(record, controller, inputs, outputs, extrapolation=methods, futures=self.futures)
+        service = ControlService(record, controller, inputs, outputs, extrapolation=methods, futures=self.futures)
+        if record.optional is not None:
+            part = record.optional
+            derived = dataclasses.replace(
+                record, name=f"{record.name}.optional", kind=part.kind, params=part.params, optional=None, switches=()
+            )
+            try:
+                service.optional = self.registry.resolve("controller", part.kind, part)(derived)
+            except ParamError as exc:
+                raise self._error(part, str(exc)) from None
+        return service
 
     def start(self) -> None:
         for name, sensor in self.sensors.items():
@@ -187,8 +197,17 @@ class NodeRuntime:
             )
         for name, control in self.controllers.items():
             record = control.record
+            optional = record.optional
             self.scheduler.add(
-                Task(f"{self.node.name}.{name}", record.period, self._control_tick(control), priority=record.priority)
+                Task(
+                    f"{self.node.name}.{name}",
+                    record.period,
+                    self._control_tick(control),
+                    priority=record.priority,
+                    optional=control.compute_optional if optional is not None else None,
+                    min_idle=optional.min_idle if optional is not None else 0.0,
+                    finish=control.publish,
+                )
             )
         if self.monitor is not None and self.node.monitor is not None:
             self.scheduler.add(
@@ -227,7 +246,7 @@ class NodeRuntime:
                     if evaluate(condition, self._switch_environment(control)):
                         self.switch(target, reason=f"criterion of {control.record.name}")
                         return
-            control.tick()
+            control.compute()
 
         return tick
 
@@ -297,7 +316,10 @@ class NodeRuntime:
             "actuators": {
                 n: {"mode": a.mode, "value": a.value, "out_of_range": a.out_of_range} for n, a in self.actuators.items()
             },
-            "controllers": {n: {"active": c.active, "skipped": c.skipped} for n, c in self.controllers.items()},
+            "controllers": {
+                n: {"active": c.active, "skipped": c.skipped, "optional_used": c.optional_used}
+                for n, c in self.controllers.items()
+            },
         }
 
     # ------------------------------------------------------------------ events

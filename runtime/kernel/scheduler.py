@@ -76,6 +76,7 @@ class Task:
         priority: int = 50,
         optional: Callable[[], None] | None = None,
         min_idle: float = 0.2,
+        finish: Callable[[], None] | None = None,
     ) -> None:
         if period <= 0:
             raise ValueError(f"task {name!r}: period must be positive, not {period}")
@@ -84,6 +85,7 @@ class Task:
         self.required = required
         self.optional = optional
         self.min_idle = min_idle
+        self.finish = finish  # runs after the required part and, when it ran, the optional one
         self.priority = priority
         self.stats = TaskStats()
         self.release = 0.0
@@ -205,6 +207,8 @@ class Scheduler:
                     stats.optional_runs += 1
                 else:
                     stats.optional_skipped += 1
+            if task.finish is not None:
+                task.finish()
         except Exception:
             stats.failures += 1
             LOG.exception("task %s failed", task.name)

@@ -77,6 +77,12 @@ class ControlService:
         self.last_output: float | None = None
         self.skipped = 0
         self.since = time.monotonic()
+        self.optional: Controller | None = None  # the advanced part, run when the CPU allows (§3.1.2.8)
+        self.optional_used = 0
+        self._pending: tuple[float, list[float]] | None = None
+        self._inputs: dict[str, float] | None = None
+        self._optional_ran = False  # did the optional part give the previous period's output
+        self._optional_now = False
 
     def stale_after(self, subscription: Subscription) -> float:
         """An input older than this is lost: three controller periods, or the topic's lifespan."""
@@ -96,15 +102,43 @@ class ControlService:
         return values
 
     def tick(self) -> None:
+        """One period: the required part, then publish (what the scheduler runs without an optional part)."""
+        self.compute()
+        self.publish()
+
+    def compute(self) -> None:
+        """The required part: the basic control law's action, held until ``publish``."""
+        self._pending = None
+        self._inputs = None
+        self._optional_now = False
         if not self.active:
             return
         inputs = self.read_inputs()
         if inputs is None:
             self.skipped += 1  # the actuation service notices the silence and plays stored actions
             return
+        self._inputs = inputs
         action = self.controller.step(inputs, self.record.period)
+        self._pending = (action, list(self.controller.future()))
+
+    def compute_optional(self) -> None:
+        """The optional part: when it runs, the advanced law's action replaces the basic one."""
+        if self.optional is None or self._inputs is None or self._pending is None:
+            return
+        if not self._optional_ran and self.last_output is not None:
+            self.optional.bumpless(self.last_output)  # it sat out some periods: start from the output
+        action = self.optional.step(self._inputs, self.record.period)
+        self._pending = (action, list(self.optional.future()) or self._pending[1])
+        self._optional_now = True
+        self.optional_used += 1
+
+    def publish(self) -> None:
+        self._optional_ran = self._optional_now
+        if self._pending is None:
+            return
+        action, future_values = self._pending
         self.last_output = action
-        future = FutureActions(list(self.controller.future()), self.record.period, time.monotonic())
+        future = FutureActions(future_values, self.record.period, time.monotonic())
         stamp = time.time()
         for publisher in self.outputs:
             self.futures[publisher.qos.name] = future

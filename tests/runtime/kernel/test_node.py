@@ -11,6 +11,7 @@ import pytest
 import ckmconf
 from ckmconf.model import System
 from runtime.kernel.node import NodeRuntime
+from runtime.kernel.scheduler import Task
 from runtime.network import Transport, open_transport
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
@@ -145,3 +146,27 @@ def test_switching_controllers_keeps_the_output_continuous(
     steps = [abs(b - a) for a, b in zip(outputs[count - 20 : count - 1], outputs[count - 19 : count], strict=True)]
     assert jump <= 3 * max(steps) + 0.05  # no bump: the new controller starts from the current output
     assert node.controllers["b"].active and not node.controllers["a"].active
+
+
+OPTIONAL = SWITCHING.replace(
+    '<Output topic="u"/>\n    </Controller>\n    <Controller name="b"',
+    '<Output topic="u"/>\n      <Optional kind="gpc" minIdle="0.5"><Param name="gain" value="1"/>'
+    '<Param name="timeConstant" value="0.1"/></Optional>\n    </Controller>\n    <Controller name="b"',
+)
+
+
+def test_the_optional_part_runs_only_while_the_scheduler_is_idle(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport, tmp_path: Path
+) -> None:
+    path = tmp_path / "optional.xml"
+    path.write_text(OPTIONAL)
+    node = nodes(ckmconf.load(path), "n")
+    reference = transport.publisher(node.topic("r"))
+    control = node.controllers["a"]
+    assert until(lambda: (reference.publish(1.0), control.optional_used > 20)[1])
+    # A task keeping the scheduler 80 % busy leaves no room for an optional part needing 50 %.
+    node.scheduler.add(Task("n.hog", 0.01, lambda: time.sleep(0.008)))
+    task = node.scheduler.tasks["n.a"]
+    skipped = task.stats.optional_skipped
+    assert until(lambda: (reference.publish(1.0), task.stats.optional_skipped > skipped + 20)[1], timeout=15)
+    node.scheduler.remove("n.hog")
