@@ -11,13 +11,14 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from . import config, jitter, netbench
+from . import config, jitter, netbench, rates
 
 BENCHMARKS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any]], list[tuple[str, str]]]]] = {
     "config": (config.run, config.describe),
     "pubsub": (netbench.run_pubsub, netbench.describe_pubsub),
     "discovery": (netbench.run_discovery, netbench.describe_discovery),
     "jitter": (jitter.run, jitter.describe),
+    "rates": (rates.run, rates.describe),
 }
 
 
