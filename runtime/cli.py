@@ -1,9 +1,12 @@
-"""ckm-run CONFIG [--node NAME] [--duration S] [--log-dir DIR]: run the nodes of a configuration.
+"""ckm-run CONFIG [--node NAME [--partition PART]] [--duration S] [--log-dir DIR]: run a configuration.
 
 Without ``--node`` every node runs in this process (the embedded default); with it, just that
-node (one process per node, on any machine of the network). SIGINT or SIGTERM stop the run
-cleanly: the services stop, every actuator is driven to its safe value, the hardware closes.
-The run directory receives the log, the events and each task's statistics.
+node (one process per node, on any machine of the network). A node with partitions (§3.1.3.2)
+runs its unpartitioned components and its monitor here and each partition as a child process
+(``--partition``), supervised and restarted on its own, logging to RUN_DIR/PART (RUN_DIR/NODE/PART
+when several nodes run). SIGINT or SIGTERM stop the run cleanly: the partitions stop, the
+services stop, every actuator is driven to its safe value, the hardware closes. The run
+directory receives the log, the events and each task's statistics.
 """
 
 from __future__ import annotations
@@ -21,10 +24,11 @@ from types import FrameType
 from typing import Any
 
 from ckmconf import ConfigError, load
-from ckmconf.model import Network, System
+from ckmconf.model import Network, Node, Partition, System
 
 from .kernel.node import NodeRuntime
-from .network import open_transport, read_group_key
+from .kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor, enter_partition
+from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
 
@@ -35,6 +39,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ckm-run", description="Run the CKM nodes of a configuration.")
     parser.add_argument("config", help="System file")
     parser.add_argument("--node", help="run only this node (default: every node, in this process)")
+    parser.add_argument("--partition", help="with --node: run only this partition of the node (as its supervisor does)")
     parser.add_argument("--duration", type=float, help="stop after this many seconds (default: until a signal)")
     parser.add_argument("--log-dir", type=Path, help="run directory (default: runs/SYSTEM-TIMESTAMP)")
     return parser
@@ -54,6 +59,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             names = ", ".join(n.name for n in system.nodes) or "none"
             print(f"{args.config}: no node {args.node!r} (nodes: {names})", file=sys.stderr)
             return 1
+    partition: Partition | None = None
+    if args.partition is not None:
+        if args.node is None:
+            print("ckm-run: --partition needs --node", file=sys.stderr)
+            return 1
+        partition = next((p for p in nodes[0].partitions if p.name == args.partition), None)
+        if partition is None:
+            names = ", ".join(p.name for p in nodes[0].partitions) or "none"
+            print(f"{args.config}: no partition {args.partition!r} (partitions: {names})", file=sys.stderr)
+            return 1
+        enter_partition(partition)  # first: tie this process to its supervisor
     run_dir = args.log_dir or Path("runs") / f"{system.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(run_dir / "ckm.log")
@@ -61,13 +77,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.getLogger().addHandler(handler)
     logging.getLogger().setLevel(logging.INFO)
     try:
-        return _run(system, Path(args.config), nodes, args.duration, run_dir, args.node or system.name)
+        name = f"{args.node}.{args.partition}" if partition is not None else args.node or system.name
+        return _run(system, Path(args.config), nodes, args.duration, run_dir, name, partition)
     finally:
         logging.getLogger().removeHandler(handler)
         handler.close()
 
 
-def _run(system: System, config: Path, nodes: list[Any], duration: float | None, run_dir: Path, name: str) -> int:
+def _runtime(
+    node: Node, system: System, transport: Transport, config: Path, run_dir: Path, several: bool
+) -> NodeRuntime:
+    """The node's runtime here: all of it, or, for a node with partitions, its unpartitioned part
+    and the monitor, with a supervisor for the partition processes."""
+    if not node.partitions:
+        return NodeRuntime(node, system, transport)
+    runtime = NodeRuntime(node, system, transport, partition="")
+    runtime.partitions = PartitionSupervisor(node, config, run_dir / node.name if several else run_dir, runtime.report)
+    return runtime
+
+
+def _run(
+    system: System,
+    config: Path,
+    nodes: list[Node],
+    duration: float | None,
+    run_dir: Path,
+    name: str,
+    partition: Partition | None,
+) -> int:
     network = system.network or Network()
     try:
         key = read_group_key(network, config.parent)
@@ -77,6 +114,7 @@ def _run(system: System, config: Path, nodes: list[Any], duration: float | None,
         print(f"{config}: cannot join the network: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()
+    code = 0
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         LOG.info("signal %s: stopping", signal.Signals(signum).name)
@@ -84,38 +122,64 @@ def _run(system: System, config: Path, nodes: list[Any], duration: float | None,
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     runtimes: list[NodeRuntime] = []
+    supervisors: list[PartitionSupervisor] = []
+    memory: MemoryWatch | None = None
     started = time.time()
     try:
         transport.start()
         for node in nodes:
-            runtime = NodeRuntime(node, system, transport)
+            if partition is not None:
+                runtime = NodeRuntime(node, system, transport, partition=partition.name)
+            else:
+                runtime = _runtime(node, system, transport, config, run_dir, len(nodes) > 1)
             runtime.setup()
             runtimes.append(runtime)
         for runtime in runtimes:
             runtime.start()
+        supervisors = [r.partitions for r in runtimes if r.partitions is not None]
+        for supervisor in supervisors:
+            supervisor.start()
+        if partition is not None:  # its memory budget counts from the runtime it started with
+
+            def over_budget(used: int, limit: int) -> None:
+                nonlocal code
+                LOG.error("partition %s: %d MiB over its memory budget: stopping", partition.name, (used - limit) >> 20)
+                code = MEMORY_EXIT
+                stop.set()
+
+            memory = MemoryWatch(partition, over_budget)
         LOG.info("running %s (%d node(s)) for %s", system.name, len(runtimes), duration or "ever")
         stop.wait(duration)
     except ConfigError as error:
         print(error, file=sys.stderr)
         return 1
     finally:
+        for supervisor in supervisors:  # the partitions stop first, their actuators safe
+            supervisor.stop()
         for runtime in reversed(runtimes):
             runtime.stop()
         transport.stop()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-        _write_run(run_dir, config, system, runtimes, started)
-    return 0
+        extra = {"partition": partition.name, "memory": memory.statistics() if memory else None} if partition else {}
+        _write_run(run_dir, config, system, runtimes, started, extra)
+    return code
 
 
-def _write_run(run_dir: Path, config: Path, system: System, runtimes: list[NodeRuntime], started: float) -> None:
+def _write_run(
+    run_dir: Path, config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
+) -> None:
     summary = {
         "config": str(config),
         "system": system.name,
         "started": started,
         "stopped": time.time(),
+        **extra,
         "nodes": {r.node.name: r.statistics() for r in runtimes},
     }
+    partitions = {r.node.name: r.partitions.statistics() for r in runtimes if r.partitions is not None}
+    if partitions:
+        summary["partitions"] = partitions
     (run_dir / "stats.json").write_text(json.dumps(summary, indent=2, default=str))
     with (run_dir / "events.jsonl").open("w") as events:
         for runtime in runtimes:

@@ -25,6 +25,7 @@ from .adaptation import build_chain
 from .delegation import Delegation
 from .interfaces import Backend, Controller, ParamError
 from .monitor import MonitorService
+from .partitions import PartitionSupervisor
 from .scheduler import Scheduler, Task
 from .services import ActuationService, ControlService, FutureActions, SensorService
 
@@ -81,6 +82,7 @@ class NodeRuntime:
         self.events: list[dict[str, Any]] = []
         self.monitor: MonitorService | None = None
         self.delegation: Delegation | None = None
+        self.partitions: PartitionSupervisor | None = None  # the partition processes (ckm-run sets it)
         self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
         self._switches: dict[str, list[tuple[str, Condition]]] = {}
@@ -153,7 +155,7 @@ class NodeRuntime:
                 node=node.name,
                 scheduler=self.scheduler,
                 subscriptions=self._watched,
-                crashes=lambda partition: 0,
+                crashes=lambda partition: self.partitions.crashes(partition) if self.partitions is not None else 0,
                 report=self._report,
                 react=self._react,
             )
@@ -284,6 +286,8 @@ class NodeRuntime:
             taker = self.idle_node()
             if taker is not None:  # handing over waits for the taker: not on the monitor's thread
                 threading.Thread(target=self.delegation.give, args=(alarm.target, taker), daemon=True).start()
+        elif alarm.action == "restart" and self.partitions is not None:
+            self.partitions.on_alarm(alarm)
         else:
             self._report("reaction-unavailable", {"alarm": alarm.name, "action": alarm.action})
 
@@ -323,6 +327,10 @@ class NodeRuntime:
         }
 
     # ------------------------------------------------------------------ events
+
+    def report(self, kind: str, detail: dict[str, Any]) -> None:
+        """Record a node event: kept, logged, and published on the node's alarm topic."""
+        self._report(kind, detail)
 
     def _report(self, kind: str, detail: dict[str, Any]) -> None:
         event = {"node": self.node.name, "kind": kind, "time": time.time(), **detail}

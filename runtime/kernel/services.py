@@ -178,13 +178,16 @@ class ActuationService:
         self._last_drive = 0.0
         self._degraded_since = 0.0
         self._last_range_report = -1e9
+        self.latched = False
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ commands
 
     def command(self, value: Any) -> None:
-        """A command arrived on the actuator's topic."""
+        """A command arrived on the actuator's topic (ignored once a safe stop is latched)."""
         with self._lock:
+            if self.latched:
+                return
             self._last_command = time.monotonic()
             if self.mode != "commanded":
                 self.mode = "commanded"
@@ -226,8 +229,14 @@ class ActuationService:
         return self.record.safe_value
 
     def safe_stop(self) -> None:
-        """Drive the safe value now, without rate limit (shutdown, safe-stop alarms)."""
+        """Drive the safe value now, without rate limit, and hold it: later commands are ignored.
+
+        Used on shutdown and by safe-stop alarms; a late command arriving over the network must
+        not drive the channel again. (Stale commands, by contrast, end in a safe value that
+        fresh commands may leave.)
+        """
         with self._lock:
+            self.latched = True
             self.mode = "safe"
             self._write(self.record.safe_value)
             self.report("safe-stop", {"actuator": self.record.name, "value": self.record.safe_value})

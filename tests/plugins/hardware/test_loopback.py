@@ -150,7 +150,8 @@ def test_example_params_on_either_channel_merge(clock: ManualClock) -> None:
     pwm.setup()
     pwm.write(0.5)
     clock.advance(0.2)
-    assert read(encoder) == pytest.approx(2.0 * 0.5 * (1.0 - math.exp(-1.0)), abs=1e-12)
+    gain = 2000.0  # the example's pwm channel: ticks/s per unit of duty
+    assert read(encoder) == pytest.approx(gain * 0.5 * (1.0 - math.exp(-1.0)), abs=1e-9)
 
 
 def test_conflicting_params_name_both_channels(clock: ManualClock) -> None:

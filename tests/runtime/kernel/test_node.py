@@ -170,3 +170,18 @@ def test_the_optional_part_runs_only_while_the_scheduler_is_idle(
     skipped = task.stats.optional_skipped
     assert until(lambda: (reference.publish(1.0), task.stats.optional_skipped > skipped + 20)[1], timeout=15)
     node.scheduler.remove("n.hog")
+
+
+def test_a_latched_safe_stop_ignores_late_commands(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport
+) -> None:
+    node = nodes(example("safe_actuation.xml"), "lift")
+    node.scheduler.remove("lift.gpc")
+    motor = node.actuators["motor"]
+    command = transport.publisher(node.topic("command"))
+    assert until(lambda: (command.publish(0.2), motor.value is not None and motor.value > 0)[1])
+    motor.safe_stop()
+    command.publish(0.3)
+    time.sleep(0.05)
+    assert motor.mode == "safe" and motor.value == 0.0
+    assert float(node.backends["motor"].read()) == 0.0  # type: ignore[arg-type]
