@@ -18,13 +18,13 @@ from ckmconf.model import Network
 from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import Frame, FrameType, encode
 from .multipeer import MultiPeer, PeerEvent
-from .qos import DeadlineWatchdog, deliver, emit_event
+from .qos import DeadlineWatchdog, SubscriptionTable, deliver
 
 LOG = logging.getLogger("ckm.pubsub")
 BEST_EFFORT_WAIT = 0.002  # a best-effort sample waits this long for a busy link, then is dropped
 
 
-class MultiPeerTransport(Transport):
+class MultiPeerTransport(SubscriptionTable, Transport):
     """The CKMultiPeer transport (``<Network transport="multipeer">``)."""
 
     def __init__(self, network: Network, *, name: str = "peer", key: bytes | None = None) -> None:
@@ -178,12 +178,3 @@ class MultiPeerTransport(Transport):
             if event.kind == "lost":
                 self.peer.clock.forget(event.guid)
         self._emit(NetworkEvent(event.kind, event.guid, None, event.reason or event.name))
-
-    def _emit(self, event: NetworkEvent) -> None:
-        with self._lock:
-            local = list(self._subs.get(EVENTS_TOPIC, ()))
-        emit_event(event, self._callbacks, local, self.guid)
-
-    def _watched(self) -> list[Subscription]:
-        with self._lock:
-            return [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]

@@ -100,3 +100,24 @@ class DeadlineWatchdog:
                     )
                 due = subscription.last_arrival + deadline - now
                 sleep = max(MIN_WATCH_SLEEP, min(sleep, due))
+
+
+class SubscriptionTable:
+    """What both transports keep of their local subscribers, and the two queries they share.
+
+    The owner sets ``_subs`` (topic → subscriptions), ``_lock``, ``_callbacks`` and ``guid``.
+    """
+
+    _subs: dict[str, list[Subscription]]
+    _lock: threading.RLock
+    _callbacks: list[Callable[[NetworkEvent], None]]
+    guid: int
+
+    def _emit(self, event: NetworkEvent) -> None:
+        with self._lock:
+            local = list(self._subs.get(EVENTS_TOPIC, ()))
+        emit_event(event, self._callbacks, local, self.guid)
+
+    def _watched(self) -> list[Subscription]:
+        with self._lock:
+            return [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]

@@ -42,7 +42,7 @@ from ckmconf.model import Network
 from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import FrameError, unpack_body
 from .multipeer import NetworkError
-from .qos import DeadlineWatchdog, deliver, emit_event
+from .qos import DeadlineWatchdog, SubscriptionTable, deliver
 
 LOG = logging.getLogger("ckm.zenoh")
 
@@ -123,7 +123,7 @@ def zenoh_config(network: Network) -> zenoh.Config:
     return config
 
 
-class ZenohTransport(Transport):
+class ZenohTransport(SubscriptionTable, Transport):
     """The Zenoh transport: same lifecycle, QoS and events as ``MultiPeerTransport``."""
 
     def __init__(self, network: Network, *, name: str = "peer", key: bytes | None = None) -> None:
@@ -358,15 +358,6 @@ class ZenohTransport(Transport):
             else:
                 guids.discard(guid)
             self._changed.notify_all()
-
-    def _emit(self, event: NetworkEvent) -> None:
-        with self._lock:
-            local = list(self._subs.get(EVENTS_TOPIC, ()))
-        emit_event(event, self._callbacks, local, self.guid)
-
-    def _watched(self) -> list[Subscription]:
-        with self._lock:
-            return [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]
 
 
 def _guid_after(key: str, prefix: str) -> int | None:
