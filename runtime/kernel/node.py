@@ -167,7 +167,8 @@ class NodeRuntime:
 
     def _control_service(self, record: ControllerRecord, extrapolation: dict[str, str]) -> ControlService:
         try:
-            controller: Controller = self._controller_classes[record.name](record)
+            cls = self._controller_classes.get(record.name) or self.registry.resolve("controller", record.kind, record)
+            controller: Controller = cls(record)
         except ParamError as exc:
             raise self._error(record, str(exc)) from None
         inputs = {}
@@ -197,20 +198,8 @@ class NodeRuntime:
             self.scheduler.add(
                 Task(f"{self.node.name}.{name}", sensor.record.period, sensor.tick, priority=sensor.record.priority)
             )
-        for name, control in self.controllers.items():
-            record = control.record
-            optional = record.optional
-            self.scheduler.add(
-                Task(
-                    f"{self.node.name}.{name}",
-                    record.period,
-                    self._control_tick(control),
-                    priority=record.priority,
-                    optional=control.compute_optional if optional is not None else None,
-                    min_idle=optional.min_idle if optional is not None else 0.0,
-                    finish=control.publish,
-                )
-            )
+        for control in self.controllers.values():
+            self._schedule_control(control)
         if self.monitor is not None and self.node.monitor is not None:
             self.scheduler.add(
                 Task(f"{self.node.name}.monitor", self.node.monitor.period, self.monitor.tick, priority=10)
@@ -297,6 +286,43 @@ class NodeRuntime:
         return others[0] if others else None
 
     # ------------------------------------------------------------------ run-time operations
+
+    def _schedule_control(self, control: ControlService) -> None:
+        record = control.record
+        optional = record.optional
+        self.scheduler.add(
+            Task(
+                f"{self.node.name}.{record.name}",
+                record.period,
+                self._control_tick(control),
+                priority=record.priority,
+                optional=control.compute_optional if optional is not None else None,
+                min_idle=optional.min_idle if optional is not None else 0.0,
+                finish=control.publish,
+            )
+        )
+
+    def add_controller(self, record: ControllerRecord) -> ControlService:
+        """Add a controller while the node runs (§3.1.2.7); active ones take over their outputs bumplessly."""
+        if record.name in self.controllers:
+            raise ValueError(f"node {self.node.name!r} already runs a controller named {record.name!r}")
+        extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in self.node.sensors}
+        control = self._control_service(record, extrapolation)
+        self._switches[record.name] = [(sw.to, parse(sw.when, SWITCH)) for sw in record.switches]
+        self.controllers[record.name] = control
+        if record.active:
+            control.active = False
+            self.switch(record.name, reason="added")
+        self._schedule_control(control)
+        return control
+
+    def remove_controller(self, name: str) -> None:
+        """Stop and forget a controller; its outputs fall silent (the actuators then fail safe)."""
+        control = self.controllers.pop(name)
+        control.deactivate()
+        self.scheduler.remove(f"{self.node.name}.{name}")
+        self._switches.pop(name, None)
+        self.report("controller-removed", {"controller": name})
 
     def switch(self, to: str, reason: str = "command") -> None:
         """Hand the outputs of the active controller(s) sharing ``to``'s outputs over to ``to``, bumplessly."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -12,7 +13,7 @@ import ckmconf
 from ckmconf.model import System
 from runtime.kernel.node import NodeRuntime
 from runtime.kernel.scheduler import Task
-from runtime.network import Transport, open_transport
+from runtime.network import Sample, Transport, open_transport
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
 
@@ -185,3 +186,26 @@ def test_a_latched_safe_stop_ignores_late_commands(
     time.sleep(0.05)
     assert motor.mode == "safe" and motor.value == 0.0
     assert float(node.backends["motor"].read()) == 0.0  # type: ignore[arg-type]
+
+
+def test_controllers_can_be_added_and_removed_at_run_time(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport, tmp_path: Path
+) -> None:
+    path = tmp_path / "switching.xml"
+    path.write_text(SWITCHING)
+    system = ckmconf.load(path)
+    node = nodes(system, "n")
+    reference = transport.publisher(node.topic("r"))
+    outputs: list[Sample] = []
+    transport.subscribe(node.topic("u"), outputs.append)
+    assert until(lambda: (reference.publish(1.0), len(outputs) > 30)[1])
+    template = system.nodes[0].controllers[1]  # "b", inactive in the file
+    added = node.add_controller(dataclasses.replace(template, name="c", active=True))
+    count = len(outputs)
+    assert until(lambda: (reference.publish(1.0), len(outputs) > count + 20)[1])
+    assert added.active and not node.controllers["a"].active
+    jump = abs(outputs[count].value - outputs[count - 1].value)
+    assert jump < 0.5  # taken over from the current output
+    node.remove_controller("c")
+    assert "c" not in node.controllers and "n.c" not in node.scheduler.tasks
+    assert "controller-removed" in [e["kind"] for e in node.events]
