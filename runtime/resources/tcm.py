@@ -1,0 +1,502 @@
+"""The Task Configuring Module of one service (thesis §4.2.1.3–4.2.1.5, eq. 4.6–4.10, Algorithm 1).
+
+A scenario is an SPT profile with the quality policies it must meet (eq. 4.6); the TCM keeps one
+active and switches when it must. Every ``period`` the service layer calls :meth:`evaluate`,
+which rates every scenario on the current measure windows:
+
+- **Conditions** of a scenario: its policies, then the client's quality requirements QR (a list
+  of Require-like bounds per measure, changed at run time with :meth:`set_requirements`).
+- **f_ev** (Algorithm 1, eq. 4.8): ``acc`` counts the conditions that hold — the line
+  ``if Q_i = RQ_i`` is read as "the condition's probability condition holds",
+  ``P(lower ≤ Q ≤ upper) ≥ probability`` over its window (eq. 4.4); ``suit = acc / n``;
+  ``f_ev = suit · (1 − ξ)``. Conditions on a measure without samples yet are unknown and left
+  out of both ``acc`` and ``n`` (no condition known: ``suit = 1``), so a fresh TCM stays in its
+  initial scenario and raises no alarm before evidence arrives. A requirement holds for a
+  scenario when it holds on the measured window *and* the scenario's own policies on that
+  measure lie within the requirement's bounds: a scenario that tolerates values the client
+  forbids cannot promise the requirement. That is what lets a changed QR select another profile.
+- **State** (eq. 4.7): ``S_state = w_i · c_i · f_ev − th``; ``fy`` is read as the decision
+  function of the soft-margin classifier, positive meaning usable. ``c_i`` is 1 unless
+  ``learning="svm"`` has trained the scenario's model, see :mod:`runtime.resources.learning`;
+  it is applied to the candidates only — the active scenario is judged by its conditions.
+- **Usable** (eq. 4.9, ``F(Q_x) ≠ 0`` for all of its policies): no known condition fails and
+  ``S_state > 0``. Whenever the TCM switches, it goes to the argmax of ``S_state`` among the
+  scenarios it may switch to (eq. 4.9); it does not re-run the argmax at every evaluation.
+
+Switching (the thesis: "active scenario will remain selected while the quality requirements
+(QR) are maintained and the implied quality measures remain between the expected ranges"):
+
+1. **neglected** — the active scenario is not usable. The TCM moves to the usable scenario of
+   highest state; the left scenario's ``ξ`` grows by ``penalty_step`` (capped at
+   :data:`MAX_PENALTY`, so ξ stays in [0, 1)). When no scenario is usable an :class:`Alarm` is
+   raised and, when the active scenario's own policies fail, the TCM falls back to the scenario
+   whose policies are closest to holding (the largest worst-policy quantile margin) if that is
+   strictly closer than the active one's — a service at the edge of its capacity still
+   degrades. A failing requirement whose scenario is merely incompatible with it makes a
+   requirements switch, not neglect (no penalty).
+2. **requirements** — :meth:`set_requirements` reselects at once, without penalty (eq. 4.7:
+   ξ is updated on neglect "instead of a change of the quality requirements"): the argmax of
+   ``S_state`` over the active scenario if still usable and the eligible others (see 3; no
+   dwell, no margin), or over the usable others when the active one is not usable any more.
+3. **recovered** — another scenario merely scoring higher never switches. A candidate takes
+   over only when, for ``dwell`` consecutive evaluations, it is *eligible* (every condition
+   known and holding, its policies even on bounds narrowed by ``band`` · scale — a Schmitt
+   trigger around each bound) and its state beats the active one's by ``margin``. No penalty.
+
+Penalty decay: at each evaluation where a scenario is *satisfied* (every condition known and
+holding on the current windows) its ``ξ`` decreases by ``penalty_step / decay_evaluations``
+(linear, floor 0): one neglect is forgiven after ``decay_evaluations`` satisfied evaluations.
+An inactive scenario is measured on the active profile's output, so a higher scenario looks
+satisfied once the load drops; its ξ decays and it comes back (§7.2: "always evaluating the
+resources in order to increase again the resolution"). While the load stays high each futile
+try costs a full step and is forgiven only slowly, so the tries become rare: that, plus the
+band and the dwell, is what stops oscillation at a bound.
+
+Learning (eq. 4.10, ``learning="svm"``): the question the model answers is "if this candidate
+were activated now, would its policies hold?", so a record is made per activation: the
+scenario's features (per policy: probability and quantile margin) at the evaluation that
+activated it — measured, for a switch, on the previous profile's output; for the initial
+scenario, at its first evaluation with all of them known. The record is labelled +1 when the
+scenario is still active and not neglected ``horizon`` evaluations later, −1 when it is left for
+neglect before; it is dropped when the scenario is left within ``horizon`` for another reason.
+The learned factor ``c_i`` then scales the weight of the candidates (eq. 4.7, see
+:mod:`runtime.resources.learning`): a scenario that failed every time it was tried from similar
+measures is no longer tried, while its ξ keeps decaying, so it comes back as soon as the
+measures look like those it held with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from ckmconf.model.resources import TCM, Scenario, Service
+
+from .learning import ScenarioLearner
+from .quality import DEFAULT_WINDOW, Distribution, MeasureWindow, PolicyEvaluator, QualityBounds, combined_distribution
+
+Reason = Literal["neglected", "requirements", "recovered"]
+MAX_PENALTY = 0.99
+"""Upper cap of ξ: a scenario's evaluation is scaled by 1 − ξ, which must stay positive."""
+
+
+@dataclass(frozen=True)
+class ConditionResult:
+    """One condition of a scenario at one evaluation; ``met`` None = unknown (no samples)."""
+
+    kind: Literal["policy", "requirement"]
+    measure: str
+    probability: float | None
+    required: float
+    met: bool | None
+    margin: float | None
+    compatible: bool = True
+
+    def describe(self) -> str:
+        if not self.compatible:
+            return f"{self.measure}: the scenario's policy exceeds the requested bounds"
+        shown = "?" if self.probability is None else f"{self.probability:.2f}"
+        relation = "≥" if self.met else "<"
+        return f"{self.kind} {self.measure}: P={shown} {relation} {self.required:g}"
+
+
+@dataclass(frozen=True)
+class ScenarioEvaluation:
+    """Algorithm 1 and eq. 4.7 for one scenario at one evaluation."""
+
+    name: str
+    profile: str
+    conditions: tuple[ConditionResult, ...]
+    accepted: int
+    known: int
+    suit: float
+    penalty: float
+    fev: float
+    confidence: float
+    state: float
+    usable: bool
+    satisfied: bool
+    eligible: bool
+    margin: float
+    features: tuple[float, ...] | None
+
+    @property
+    def failing(self) -> tuple[ConditionResult, ...]:
+        return tuple(c for c in self.conditions if c.met is False)
+
+    @property
+    def holds(self) -> bool:
+        """No known condition fails (the state aside)."""
+        return not self.failing
+
+
+@dataclass(frozen=True)
+class ScenarioEvent:
+    """A scenario change, for the service's quality topic."""
+
+    time: float
+    previous: str
+    current: str
+    profile: str
+    reason: Reason
+    detail: str
+    penalty: float
+    """ξ of the scenario left, after its update."""
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """Requirements met by no scenario (``raised``) or met again (not raised), for the alarm topic."""
+
+    time: float
+    raised: bool
+    active: str
+    unmet: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What one evaluation decided."""
+
+    time: float
+    active: str
+    profile: str
+    events: tuple[ScenarioEvent, ...]
+    alarms: tuple[Alarm, ...]
+    evaluations: Mapping[str, ScenarioEvaluation]
+
+    @property
+    def changed(self) -> bool:
+        return bool(self.events)
+
+
+@dataclass
+class _Scenario:
+    record: Scenario
+    evaluators: tuple[PolicyEvaluator, ...]
+    penalty: float
+    learner: ScenarioLearner | None
+    streak: int = 0
+    pending: tuple[int, tuple[float, ...]] | None = None
+
+
+def _within(policy: QualityBounds, requirement: QualityBounds) -> bool:
+    """The policy's interval lies inside the requirement's (None = unbounded)."""
+    low = requirement.lower is None or (policy.lower is not None and policy.lower >= requirement.lower)
+    high = requirement.upper is None or (policy.upper is not None and policy.upper <= requirement.upper)
+    return low and high
+
+
+class TaskConfiguringModule:
+    """Selects the active scenario of one service (see the module docstring for the rules)."""
+
+    def __init__(
+        self,
+        scenarios: Sequence[Scenario],
+        settings: TCM | None = None,
+        *,
+        requirements: Iterable[QualityBounds] = (),
+        combined: Mapping[str, Sequence[str]] | None = None,
+        resolution: float | None = None,
+        band: float = 0.05,
+        margin: float = 0.2,
+        dwell: int = 3,
+        decay_evaluations: int | None = 100,
+        horizon: int = 10,
+        on_event: Callable[[ScenarioEvent], None] | None = None,
+        on_alarm: Callable[[Alarm], None] | None = None,
+    ) -> None:
+        if not scenarios:
+            raise ValueError("a TCM needs at least one scenario")
+        self.settings = settings if settings is not None else TCM()
+        self.combined = {name: tuple(parts) for name, parts in (combined or {}).items()}
+        self.resolution, self.band, self.margin, self.dwell = resolution, band, margin, max(1, dwell)
+        self.decay = self.settings.penalty_step / decay_evaluations if decay_evaluations else 0.0
+        self.horizon = max(1, horizon)
+        self.on_event, self.on_alarm = on_event, on_alarm
+        learning = self.settings.learning == "svm"
+        initial_penalty = min(MAX_PENALTY, max(0.0, self.settings.penalty))
+        self._scenarios = {
+            s.name: _Scenario(
+                s,
+                tuple(PolicyEvaluator(p) for p in s.policies),
+                initial_penalty,
+                ScenarioLearner(self.settings.c) if learning else None,
+            )
+            for s in scenarios
+        }
+        if len(self._scenarios) != len(scenarios):
+            raise ValueError("scenario names must be unique")
+        initial = self.settings.initial or scenarios[0].name
+        if initial not in self._scenarios:
+            raise ValueError(f"initial scenario {initial!r} is not one of {sorted(self._scenarios)}")
+        self._active = initial
+        self._windows: dict[str, MeasureWindow] = {}
+        self._requirements: tuple[PolicyEvaluator, ...] = ()
+        self._tick = 0
+        self._alarm = False
+        self._starting = True
+        self.switches = 0
+        self.last: Decision | None = None
+        self._set_requirements(requirements)
+
+    @classmethod
+    def from_service(cls, service: Service, **options: Any) -> TaskConfiguringModule:
+        """The TCM of a configured service (its Scenario records and TCM settings)."""
+        return cls(service.scenarios, service.tcm, **options)
+
+    # -- state -------------------------------------------------------------------------------
+
+    @property
+    def active(self) -> str:
+        return self._active
+
+    @property
+    def profile(self) -> str:
+        return self._scenarios[self._active].record.profile
+
+    @property
+    def penalties(self) -> dict[str, float]:
+        return {name: s.penalty for name, s in self._scenarios.items()}
+
+    @property
+    def requirements(self) -> tuple[QualityBounds, ...]:
+        return tuple(e.policy for e in self._requirements)
+
+    @property
+    def alarm_active(self) -> bool:
+        return self._alarm
+
+    def learner(self, scenario: str) -> ScenarioLearner | None:
+        return self._scenarios[scenario].learner
+
+    # -- measures ----------------------------------------------------------------------------
+
+    def _need(self, measure: str, window: int) -> None:
+        for name in self.combined.get(measure, (measure,)):
+            current = self._windows.get(name)
+            if current is None or current.window < window:
+                grown = MeasureWindow(window)
+                if current is not None:
+                    grown.extend(current.last())
+                self._windows[name] = grown
+
+    def observe(self, measure: str, value: float) -> None:
+        """A new sample of a measure (a component of a combined measure feeds the sum)."""
+        if measure not in self._windows:
+            self._need(measure, DEFAULT_WINDOW)
+        self._windows[measure].push(value)
+
+    def observe_many(self, samples: Mapping[str, float]) -> None:
+        for measure, value in samples.items():
+            self.observe(measure, value)
+
+    def _source(self, measure: str, window: int) -> MeasureWindow | Distribution | tuple[()]:
+        parts = self.combined.get(measure)
+        if parts is None:
+            return self._windows[measure]
+        windows = [self._windows[p].last(window) for p in parts]
+        if any(w.size == 0 for w in windows):
+            return ()
+        return combined_distribution(windows, self.resolution)
+
+    # -- requirements ------------------------------------------------------------------------
+
+    def _set_requirements(self, requirements: Iterable[QualityBounds]) -> None:
+        evaluators = []
+        for requirement in requirements:
+            windows = [
+                e.window for s in self._scenarios.values() for e in s.evaluators if e.measure == requirement.measure
+            ]
+            evaluators.append(PolicyEvaluator(requirement, max(windows, default=DEFAULT_WINDOW)))
+        self._requirements = tuple(evaluators)
+        for evaluator in (*self._requirements, *(e for s in self._scenarios.values() for e in s.evaluators)):
+            self._need(evaluator.measure, evaluator.window)
+
+    def set_requirements(self, requirements: Iterable[QualityBounds], now: float | None = None) -> Decision:
+        """The client's new QR: reselect at once (eq. 4.9), without penalty."""
+        self._set_requirements(requirements)
+        time = now if now is not None else self._tick * self.settings.period
+        evaluations = self._evaluate_all()
+        events: list[ScenarioEvent] = []
+        active = evaluations[self._active]
+        candidates = [e for e in evaluations.values() if (e.usable if e.name == self._active else e.eligible)]
+        if not active.usable:
+            candidates = [e for e in evaluations.values() if e.usable]
+        if candidates:
+            best = max(candidates, key=lambda e: e.state)
+            if best.name != self._active:
+                events.append(self._switch(best, "requirements", time, "quality requirements changed", False))
+        return self._finish(time, evaluations, events)
+
+    # -- evaluation --------------------------------------------------------------------------
+
+    def _evaluate(self, scenario: _Scenario) -> ScenarioEvaluation:
+        is_active = scenario.record.name == self._active
+        conditions: list[ConditionResult] = []
+        entry_ok = True
+        for evaluator in scenario.evaluators:
+            source = self._source(evaluator.measure, evaluator.window)
+            result = evaluator.evaluate(source)
+            conditions.append(
+                ConditionResult(
+                    "policy", result.measure, result.probability, result.required, result.met, result.margin
+                )
+            )
+            entry_ok = entry_ok and evaluator.evaluate(source, band=self.band).met is True
+        for evaluator in self._requirements:
+            compatible = all(
+                _within(e.policy, evaluator.policy) for e in scenario.evaluators if e.measure == evaluator.measure
+            )
+            result = evaluator.evaluate(self._source(evaluator.measure, evaluator.window))
+            met = False if not compatible else result.met
+            conditions.append(
+                ConditionResult(
+                    "requirement", result.measure, result.probability, result.required, met, result.margin, compatible
+                )
+            )
+        known = [c for c in conditions if c.met is not None]
+        accepted = sum(1 for c in known if c.met)
+        suit = accepted / len(known) if known else 1.0
+        fev = suit * (1.0 - scenario.penalty)
+        policies = conditions[: len(scenario.evaluators)]
+        features = None
+        if all(c.probability is not None and c.margin is not None for c in policies):
+            features = tuple(v for c in policies for v in (c.probability or 0.0, c.margin or 0.0))
+        confidence = 1.0
+        if scenario.learner is not None and not is_active:
+            confidence = scenario.learner.confidence(features)
+        state = scenario.record.weight * confidence * fev - self.settings.threshold
+        holds = all(c.met is not False for c in conditions)
+        satisfied = len(known) == len(conditions) and accepted == len(conditions)
+        margins = [c.margin for c in policies if c.margin is not None]
+        return ScenarioEvaluation(
+            name=scenario.record.name,
+            profile=scenario.record.profile,
+            conditions=tuple(conditions),
+            accepted=accepted,
+            known=len(known),
+            suit=suit,
+            penalty=scenario.penalty,
+            fev=fev,
+            confidence=confidence,
+            state=state,
+            usable=holds and state > 0.0,
+            satisfied=satisfied,
+            eligible=satisfied and entry_ok and state > 0.0,
+            margin=min(margins) if margins else float("-inf"),
+            features=features,
+        )
+
+    def _evaluate_all(self) -> dict[str, ScenarioEvaluation]:
+        return {name: self._evaluate(s) for name, s in self._scenarios.items()}
+
+    def evaluate(self, now: float | None = None) -> Decision:
+        """One TCM period: rate every scenario, switch if the active one is neglected or a better one has recovered."""
+        self._tick += 1
+        time = now if now is not None else self._tick * self.settings.period
+        evaluations = self._evaluate_all()
+        active = evaluations[self._active]
+        events: list[ScenarioEvent] = []
+        others = [e for e in evaluations.values() if e.name != self._active]
+        if not active.usable:
+            failing = active.failing
+            by_requirements = bool(failing) and all(not c.compatible for c in failing)
+            reason: Reason = "requirements" if by_requirements else "neglected"
+            detail = "; ".join(c.describe() for c in failing) or f"state {active.state:.2f} ≤ 0"
+            usable = [e for e in others if e.usable]
+            if usable:
+                best = max(usable, key=lambda e: e.state)
+                events.append(self._switch(best, reason, time, detail, not by_requirements))
+            elif others and any(c.kind == "policy" for c in failing):
+                closest = max(others, key=lambda e: e.margin)
+                if closest.margin > active.margin:
+                    detail += "; no scenario meets its policies, closest taken"
+                    events.append(self._switch(closest, reason, time, detail, not by_requirements))
+        else:
+            for e in others:
+                scenario = self._scenarios[e.name]
+                scenario.streak = scenario.streak + 1 if e.eligible and e.state > active.state + self.margin else 0
+            ready = [e for e in others if self._scenarios[e.name].streak >= self.dwell]
+            if ready:
+                best = max(ready, key=lambda e: e.state)
+                detail = f"state {best.state:.2f} > {active.state:.2f} for {self.dwell} evaluations"
+                events.append(self._switch(best, "recovered", time, detail, False))
+        penalized = {e.previous for e in events if e.reason == "neglected"}
+        for name, e in evaluations.items():
+            if e.satisfied and name not in penalized:
+                scenario = self._scenarios[name]
+                scenario.penalty = max(0.0, scenario.penalty - self.decay)
+        return self._finish(time, evaluations, events)
+
+    def _switch(
+        self, target: ScenarioEvaluation, reason: Reason, time: float, detail: str, penalize: bool
+    ) -> ScenarioEvent:
+        left = self._scenarios[self._active]
+        if penalize:
+            left.penalty = min(MAX_PENALTY, left.penalty + self.settings.penalty_step)
+        if left.learner is not None and left.pending is not None and penalize:
+            left.learner.record(left.pending[1], False)
+        left.pending, self._starting = None, False
+        entered = self._scenarios[target.name]
+        if entered.learner is not None and target.features is not None:
+            entered.pending = (self._tick, target.features)
+        event = ScenarioEvent(time, self._active, target.name, entered.record.profile, reason, detail, left.penalty)
+        self._active = target.name
+        self.switches += 1
+        for scenario in self._scenarios.values():
+            scenario.streak = 0
+        if self.on_event is not None:
+            self.on_event(event)
+        return event
+
+    def _finish(self, time: float, evaluations: dict[str, ScenarioEvaluation], events: list[ScenarioEvent]) -> Decision:
+        active = self._scenarios[self._active]
+        if active.learner is not None:
+            features = evaluations[self._active].features
+            if self._starting and features is not None:  # the initial scenario: activated at its first evidence
+                active.pending, self._starting = (self._tick, features), False
+            elif active.pending is not None and active.pending[0] <= self._tick - self.horizon:
+                active.learner.record(active.pending[1], True)
+                active.pending = None
+        alarms: list[Alarm] = []
+        any_holds = any(e.holds for e in evaluations.values())
+        if any_holds == self._alarm:  # raised when none holds, cleared when one does again
+            self._alarm = not any_holds
+            unmet = tuple(c.describe() for c in evaluations[self._active].failing)
+            alarm = Alarm(time, self._alarm, self._active, unmet)
+            alarms.append(alarm)
+            if self.on_alarm is not None:
+                self.on_alarm(alarm)
+        self.last = Decision(time, self._active, active.record.profile, tuple(events), tuple(alarms), evaluations)
+        return self.last
+
+
+class ThresholdSwitcher:
+    """Baseline without windows, penalty or hysteresis: the highest-weight scenario whose policy
+    bounds contain the latest sample of each measure (the lowest-weight one when none does)."""
+
+    def __init__(self, scenarios: Sequence[Scenario], initial: str | None = None) -> None:
+        self._ranked = sorted(scenarios, key=lambda s: -s.weight)
+        self.active = initial or scenarios[0].name
+        self._latest: dict[str, float] = {}
+        self.switches = 0
+
+    def observe(self, measure: str, value: float) -> None:
+        self._latest[measure] = value
+
+    def evaluate(self) -> str:
+        def contains(scenario: Scenario) -> bool:
+            for p in scenario.policies:
+                value = self._latest.get(p.measure)
+                if value is not None and not (
+                    (p.lower is None or value >= p.lower) and (p.upper is None or value <= p.upper)
+                ):
+                    return False
+            return True
+
+        chosen = next((s.name for s in self._ranked if contains(s)), self._ranked[-1].name)
+        if chosen != self.active:
+            self.active, self.switches = chosen, self.switches + 1
+        return self.active
