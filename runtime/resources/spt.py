@@ -33,13 +33,10 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-import numpy as np
-import numpy.typing as npt
-
 from ckmconf.binding import Record
 from ckmconf.errors import ConfigError, Loc
 from ckmconf.model.resources import Plugin, Profile, SmartResource, Use
-from runtime.kernel.interfaces import ParamError, read_params
+from runtime.kernel.interfaces import read_params
 from runtime.registry import Registry, default_registry
 
 Path = tuple[str, ...]
@@ -345,100 +342,3 @@ class Topology:
     def reset_stats(self) -> None:
         with self._lock:
             self._stats = {name: PluginStats() for name in self.plugins}
-
-
-# ---------------------------------------------------------------------- image plugins
-
-Image = npt.NDArray[Any]
-
-
-def _image(data: Any, owner: str) -> Image:
-    image = np.asarray(data)
-    if image.ndim not in (2, 3):
-        raise ValueError(f"{owner} expects an image of shape (H, W) or (H, W, C), got {image.shape}")
-    return image
-
-
-def resize(image: Image, height: int, width: int, *, area: bool = True) -> Image:
-    """``image`` resampled to ``height`` × ``width`` (channels kept, dtype kept).
-
-    With ``area`` and whole factors (VGA → QVGA → QQVGA) it is a block average, an anti-aliased
-    downscale; otherwise nearest-neighbour sampling at the centres of the target pixels (what
-    depth images need: averaging depths across an object's edge invents surfaces).
-    """
-    rows, cols = image.shape[:2]
-    if (rows, cols) == (height, width):
-        return image
-    if area and rows % height == 0 and cols % width == 0:
-        blocks = image.reshape(height, rows // height, width, cols // width, *image.shape[2:])
-        mean: Image = blocks.mean(axis=(1, 3), dtype=np.float64)
-        return (np.rint(mean) if np.issubdtype(image.dtype, np.integer) else mean).astype(image.dtype)
-    pick_rows = ((np.arange(height) + 0.5) * rows / height).astype(np.intp)
-    pick_cols = ((np.arange(width) + 0.5) * cols / width).astype(np.intp)
-    picked: Image = image[pick_rows][:, pick_cols]
-    return picked
-
-
-class Resize(ProcessingPlugin):
-    """``plugin.resize`` / ``plugin.image-resize``: an image resized to ``width`` × ``height`` pixels.
-
-    Params: ``width`` and ``height`` (0: unset; one alone keeps the aspect ratio) or, when neither
-    is set, ``scale`` (default 1); ``interpolation``: ``area`` (default: block average for whole
-    factors) or ``nearest``. The resolution profiles of the recognition services use it.
-    """
-
-    PARAMS: ClassVar[Mapping[str, Any]] = {"scale": 1.0, "width": 0, "height": 0, "interpolation": "area"}
-
-    def __init__(self, record: Plugin) -> None:
-        super().__init__(record)
-        if not self.params["scale"] > 0.0:
-            raise ParamError(f"{self.owner}: parameter 'scale' = {self.params['scale']} must be greater than 0")
-        for name in ("width", "height"):
-            if self.params[name] < 0:
-                raise ParamError(f"{self.owner}: parameter {name!r} = {self.params[name]} must not be negative")
-        if self.params["interpolation"] not in ("area", "nearest"):
-            value = self.params["interpolation"]
-            raise ParamError(f"{self.owner}: parameter 'interpolation' = {value!r} is not 'area' or 'nearest'")
-        self.area = self.params["interpolation"] == "area"
-
-    def target(self, rows: int, cols: int) -> tuple[int, int]:
-        """The output (height, width) for an input of ``rows`` × ``cols``."""
-        width, height, scale = self.params["width"], self.params["height"], self.params["scale"]
-        if width and height:
-            return height, width
-        if width:
-            return max(1, round(rows * width / cols)), width
-        if height:
-            return height, max(1, round(cols * height / rows))
-        return max(1, round(rows * scale)), max(1, round(cols * scale))
-
-    def process(self, data: Any, context: Context) -> Image:
-        image = _image(data, self.owner)
-        return resize(image, *self.target(*image.shape[:2]), area=self.area)
-
-
-class Grayscale(ProcessingPlugin):
-    """``plugin.grayscale``: the luma of a colour image (ITU-R BT.601 weights), dtype kept.
-
-    Param ``order``: ``rgb`` (default, the cameras' rgb8) or ``bgr`` (OpenCV's). A 2-D image passes
-    through; a fourth (alpha) channel is ignored.
-    """
-
-    PARAMS: ClassVar[Mapping[str, Any]] = {"order": "rgb"}
-    WEIGHTS = (0.299, 0.587, 0.114)
-
-    def __init__(self, record: Plugin) -> None:
-        super().__init__(record)
-        if self.params["order"] not in ("rgb", "bgr"):
-            raise ParamError(f"{self.owner}: parameter 'order' = {self.params['order']!r} is not 'rgb' or 'bgr'")
-        weights = self.WEIGHTS if self.params["order"] == "rgb" else self.WEIGHTS[::-1]
-        self.weights = np.asarray(weights, dtype=np.float64)
-
-    def process(self, data: Any, context: Context) -> Image:
-        image = _image(data, self.owner)
-        if image.ndim == 2:
-            return image
-        if image.shape[2] not in (3, 4):
-            raise ValueError(f"{self.owner} expects 3 or 4 channels, got {image.shape[2]}")
-        luma = image[..., :3] @ self.weights
-        return (np.rint(luma) if np.issubdtype(image.dtype, np.integer) else luma).astype(image.dtype)

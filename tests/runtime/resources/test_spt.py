@@ -16,16 +16,14 @@ from ckmconf.errors import ConfigError
 from ckmconf.loader import load
 from ckmconf.model import Param, params_dict
 from ckmconf.model.resources import Plugin, Profile, SmartResource, Use
+from plugins.processing.image import Grayscale, Resize, resize
 from runtime.registry import Registry, default_registry
 from runtime.resources.spt import (
     Composite,
     Context,
-    Grayscale,
     PluginError,
     ProcessingPlugin,
-    Resize,
     Topology,
-    resize,
 )
 from tests.conftest import CONFIGS
 
