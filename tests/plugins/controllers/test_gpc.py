@@ -9,12 +9,11 @@ import msgpack
 import pytest
 
 from ckmconf.loader import load
-from ckmconf.model import Param
-from ckmconf.model.kernel import Controller as ControllerRecord
 from plugins.controllers.gpc import GPC
 from plugins.lti import PlantModel, Vector
 from runtime.kernel.interfaces import ParamError
 from tests.conftest import CONFIGS
+from tests.plugins.controllers.records import controller_record
 
 DT = 0.01
 PLANT = PlantModel(order=1, gain=2.0, time_constant=0.2)
@@ -22,14 +21,7 @@ MODEL: dict[str, object] = {"gain": 2.0, "timeConstant": 0.2}
 
 
 def gpc(horizon: int = 30, /, **params: object) -> GPC:
-    record = ControllerRecord(
-        name="gpc",
-        kind="gpc",
-        period=DT,
-        horizon=horizon,
-        params=tuple(Param(name=k, value=str(v)) for k, v in params.items()),
-    )
-    return GPC(record)
+    return GPC(controller_record("gpc", DT, horizon, **params))
 
 
 Run = tuple[Vector, list[float], list[float]]

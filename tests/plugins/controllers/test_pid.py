@@ -8,25 +8,17 @@ import math
 import msgpack
 import pytest
 
-from ckmconf.model import Param
-from ckmconf.model.kernel import Controller as ControllerRecord
 from plugins.controllers.pid import PID
 from plugins.lti import PlantModel, Vector
 from runtime.kernel.interfaces import ParamError
+from tests.plugins.controllers.records import controller_record
 
 DT = 0.01
-PLANT = PlantModel(order=1, gain=2.0, time_constant=0.2)  # the motor of configs/examples/closed_loop.xml
+PLANT = PlantModel(order=1, gain=2.0, time_constant=0.2)  # a first-order motor like the loopback plant
 
 
 def pid(horizon: int = 10, /, **params: object) -> PID:
-    record = ControllerRecord(
-        name="pid",
-        kind="pid",
-        period=DT,
-        horizon=horizon,
-        params=tuple(Param(name=k, value=str(v)) for k, v in params.items()),
-    )
-    return PID(record)
+    return PID(controller_record("pid", DT, horizon, **params))
 
 
 class Loop:
