@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -29,16 +30,21 @@ def resize(image: Image, height: int, width: int, *, area: bool = True) -> Image
     """``image`` resampled to ``height`` × ``width`` (channels kept, dtype kept).
 
     With ``area`` and whole factors (VGA → QVGA → QQVGA) it is a block average, an anti-aliased
-    downscale; otherwise nearest-neighbour sampling at the centres of the target pixels (what
-    depth images need: averaging depths across an object's edge invents surfaces).
+    downscale (integers rounded half up, as OpenCV's INTER_AREA which computes it); otherwise
+    nearest-neighbour sampling at the centres of the target pixels (what depth images need:
+    averaging depths across an object's edge invents surfaces).
     """
     rows, cols = image.shape[:2]
     if (rows, cols) == (height, width):
         return image
     if area and rows % height == 0 and cols % width == 0:
+        if image.dtype in (np.uint8, np.uint16, np.float32) and (image.ndim == 2 or image.shape[-1] <= 4):
+            # OpenCV's area interpolation is this block average, ~20x faster than numpy's float64 mean.
+            scaled: Image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+            return scaled.reshape(height, width, *image.shape[2:])
         blocks = image.reshape(height, rows // height, width, cols // width, *image.shape[2:])
         mean: Image = blocks.mean(axis=(1, 3), dtype=np.float64)
-        return (np.rint(mean) if np.issubdtype(image.dtype, np.integer) else mean).astype(image.dtype)
+        return (np.floor(mean + 0.5) if np.issubdtype(image.dtype, np.integer) else mean).astype(image.dtype)
     pick_rows = ((np.arange(height) + 0.5) * rows / height).astype(np.intp)
     pick_cols = ((np.arange(width) + 0.5) * cols / width).astype(np.intp)
     picked: Image = image[pick_rows][:, pick_cols]
