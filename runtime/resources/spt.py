@@ -211,6 +211,7 @@ class Topology:
         self.profiles: dict[str, ProfilePlan] = {p.name: self._plan(p) for p in resource.profiles}
         self._lock = threading.Lock()
         self._requested: dict[str, str] = {}
+        self._private: set[str] = set()
         self._frames = 0
         self._stats: dict[str, PluginStats] = {name: PluginStats() for name in self.plugins}
 
@@ -275,8 +276,18 @@ class Topology:
 
     # ------------------------------------------------------------------ selection
 
-    def select(self, service: str, profile: str) -> None:
-        """Run ``profile`` for ``service`` from the next frame on (``service`` is any client key)."""
+    def select(self, service: str, profile: str, *, share: bool = True) -> None:
+        """Run ``profile`` for ``service`` from the next frame on (``service`` is any client key).
+
+        ``share=False`` makes ``service`` a *replica*: its tree runs on a memo of its own below the
+        root, so two replicas on one profile process the frame twice (the thesis' replicated
+        services of §7.2); only the root (the acquisition) stays shared.
+        """
+        with self._lock:
+            if share:
+                self._private.discard(service)
+            else:
+                self._private.add(service)
         self.select_all({service: profile})
 
     def select_all(self, selection: Mapping[str, str]) -> None:
@@ -292,6 +303,7 @@ class Topology:
         """Stop producing output for ``service`` from the next frame on."""
         with self._lock:
             self._requested.pop(service, None)
+            self._private.discard(service)
 
     def selection(self) -> dict[str, str]:
         """The selection the next frame will run, service → profile."""
@@ -312,13 +324,21 @@ class Topology:
         """Process one frame for every active service; a plugin failure raises PluginError."""
         with self._lock:
             selection = dict(self._requested)
+            private = self._private & selection.keys()
             index = self._frames
             self._frames += 1
         frame = FramePass(Context(index, time.monotonic() if stamp is None else stamp, self.name), record=self._tally)
-        for name in dict.fromkeys(selection.values()):
+        for name in dict.fromkeys(p for s, p in selection.items() if s not in private):
             self.profiles[name].tree.run(data, frame)
-        outputs = {service: frame.memo[self.profiles[name].output] for service, name in selection.items()}
-        return Frame(index, frame.context.stamp, selection, outputs)
+        outputs = {s: frame.memo[self.profiles[p].output] for s, p in selection.items() if s not in private}
+        for service in sorted(private):
+            plan = self.profiles[selection[service]]
+            own = FramePass(frame.context, {k: v for k, v in frame.memo.items() if len(k) == 1}, frame.record)
+            plan.tree.run(data, own)
+            root = (plan.tree.plugin.name,)
+            frame.memo.setdefault(root, own.memo[root])
+            outputs[service] = own.memo[plan.output]
+        return Frame(index, frame.context.stamp, selection, {s: outputs[s] for s in selection})
 
     @property
     def frames(self) -> int:

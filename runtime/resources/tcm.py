@@ -238,6 +238,7 @@ class TaskConfiguringModule:
         self._alarm = False
         self._starting = True
         self.switches = 0
+        self._ceiling: float | None = None
         self.last: Decision | None = None
         self._set_requirements(requirements)
 
@@ -321,13 +322,35 @@ class TaskConfiguringModule:
         evaluations = self._evaluate_all()
         events: list[ScenarioEvent] = []
         active = evaluations[self._active]
-        candidates = [e for e in evaluations.values() if (e.usable if e.name == self._active else e.eligible)]
+        allowed = [e for e in evaluations.values() if self._allowed(e.name)]
+        candidates = [e for e in allowed if (e.usable if e.name == self._active else e.eligible)]
         if not active.usable:
-            candidates = [e for e in evaluations.values() if e.usable]
+            candidates = [e for e in allowed if e.usable]
         if candidates:
             best = max(candidates, key=lambda e: e.state)
             if best.name != self._active:
                 events.append(self._switch(best, "requirements", time, "quality requirements changed", False))
+        return self._finish(time, evaluations, events)
+
+    def _allowed(self, scenario: str) -> bool:
+        return self._ceiling is None or self._scenarios[scenario].record.weight <= self._ceiling
+
+    def prefer(self, scenario: str, now: float | None = None) -> Decision:
+        """The client names a scenario (a resolution parameter): switch to it now, without penalty.
+
+        It is a ceiling, not a lock: the TCM lowers it when its policies are neglected (Table 7.1:
+        "the TCM may lower it") and comes back up to it, never above it (no scenario of a higher
+        weight is taken while the preference holds).
+        """
+        if scenario not in self._scenarios:
+            raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._scenarios)})")
+        self._ceiling = self._scenarios[scenario].record.weight
+        time = now if now is not None else self._tick * self.settings.period
+        evaluations = self._evaluate_all()
+        events: list[ScenarioEvent] = []
+        if scenario != self._active:
+            detail = "the client prefers this scenario"
+            events.append(self._switch(evaluations[scenario], "requirements", time, detail, False))
         return self._finish(time, evaluations, events)
 
     # -- evaluation --------------------------------------------------------------------------
@@ -399,7 +422,7 @@ class TaskConfiguringModule:
         evaluations = self._evaluate_all()
         active = evaluations[self._active]
         events: list[ScenarioEvent] = []
-        others = [e for e in evaluations.values() if e.name != self._active]
+        others = [e for e in evaluations.values() if e.name != self._active and self._allowed(e.name)]
         if not active.usable:
             failing = active.failing
             by_requirements = bool(failing) and all(not c.compatible for c in failing)
@@ -500,3 +523,86 @@ class ThresholdSwitcher:
         if chosen != self.active:
             self.active, self.switches = chosen, self.switches + 1
         return self.active
+
+
+class ThresholdSelector:
+    """The :class:`ThresholdSwitcher` behind the TCM's interface, so a service can run the baseline
+    on the same load (``ckm-bench adaptation``). No QR, no penalty; an alarm is raised while the
+    latest samples lie outside the bounds of every scenario, cleared when one contains them again."""
+
+    def __init__(
+        self,
+        scenarios: Sequence[Scenario],
+        settings: TCM | None = None,
+        *,
+        on_event: Callable[[ScenarioEvent], None] | None = None,
+        on_alarm: Callable[[Alarm], None] | None = None,
+        **_: Any,
+    ) -> None:
+        self._records = {s.name: s for s in scenarios}
+        self._switcher = ThresholdSwitcher(scenarios, (settings or TCM()).initial)
+        self.on_event, self.on_alarm = on_event, on_alarm
+        self.alarm_active = False
+        self.requirements: tuple[QualityBounds, ...] = ()
+        self.last: Decision | None = None
+
+    @property
+    def active(self) -> str:
+        return self._switcher.active
+
+    @property
+    def profile(self) -> str:
+        return self._records[self.active].profile
+
+    @property
+    def switches(self) -> int:
+        return self._switcher.switches
+
+    @property
+    def penalties(self) -> dict[str, float]:
+        return dict.fromkeys(self._records, 0.0)
+
+    def observe(self, measure: str, value: float) -> None:
+        self._switcher.observe(measure, value)
+
+    def set_requirements(self, requirements: Iterable[QualityBounds], now: float | None = None) -> Decision:
+        self.requirements = tuple(requirements)  # kept for the record: thresholds know no QR
+        return self._decide(now or 0.0, self.active)
+
+    def prefer(self, scenario: str, now: float | None = None) -> Decision:
+        if scenario not in self._records:
+            raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._records)})")
+        return self._decide(now or 0.0, scenario)
+
+    def evaluate(self, now: float | None = None) -> Decision:
+        ranked = sorted(self._records.values(), key=lambda s: -s.weight)  # the switcher's own rule
+        chosen = next((s.name for s in ranked if self._contains(s)), ranked[-1].name)
+        return self._decide(now or 0.0, chosen)
+
+    def _contains(self, scenario: Scenario) -> bool:
+        latest = self._switcher._latest
+        return all(
+            (p.lower is None or latest.get(p.measure, p.lower) >= p.lower)
+            and (p.upper is None or latest.get(p.measure, p.upper) <= p.upper)
+            for p in scenario.policies
+        )
+
+    def _decide(self, time: float, chosen: str) -> Decision:
+        events: list[ScenarioEvent] = []
+        if chosen != self.active:
+            previous, self._switcher.active = self.active, chosen
+            self._switcher.switches += 1
+            event = ScenarioEvent(time, previous, chosen, self.profile, "neglected", "threshold crossed", 0.0)
+            events.append(event)
+            if self.on_event is not None:
+                self.on_event(event)
+        alarms: list[Alarm] = []
+        none_holds = not any(self._contains(s) for s in self._records.values())
+        if none_holds != self.alarm_active:
+            self.alarm_active = none_holds
+            alarm = Alarm(time, none_holds, self.active, ("no scenario contains the latest measures",) * none_holds)
+            alarms.append(alarm)
+            if self.on_alarm is not None:
+                self.on_alarm(alarm)
+        self.last = Decision(time, self.active, self.profile, tuple(events), tuple(alarms), {})
+        return self.last

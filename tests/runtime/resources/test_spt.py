@@ -212,6 +212,29 @@ def test_a_shared_prefix_runs_once_per_frame(example: SmartResource) -> None:
     assert topology.stats()["grab"].total > 0.0
 
 
+def test_private_replicas_process_again_below_the_shared_root(example: SmartResource) -> None:
+    topology = _example_topology(example)
+    topology.select("client-1", "vga", share=False)
+    topology.select("client-2", "vga", share=False)
+    topology.select("client-3", "vga")
+    frames = [topology.run(VGA) for _ in range(3)]
+    calls = {name: s.calls for name, s in topology.stats().items() if s.calls}
+    # The root runs once per frame; each replica and the shared service run the rest on their own.
+    assert calls == {"grab": 3, "undistort": 9, "surf-vga": 9}
+    for frame in frames:
+        assert set(frame.outputs) == {"client-1", "client-2", "client-3"}
+        assert len(set(frame.outputs.values())) == 1
+    topology.select("client-1", "vga")  # sharing again: one run for client-1 and client-3
+    topology.release("client-2")
+    topology.reset_stats()
+    topology.run(VGA)
+    assert {name: s.calls for name, s in topology.stats().items() if s.calls} == {
+        "grab": 1,
+        "undistort": 1,
+        "surf-vga": 1,
+    }
+
+
 def test_replicated_services_on_the_use_case_profiles(camera: SmartResource) -> None:
     """Four clients on three resolutions: the frame is acquired once, each resize runs once."""
     topology = _camera_topology(camera)
@@ -405,7 +428,7 @@ def test_resize_averages_whole_blocks_and_samples_otherwise() -> None:
     assert _plugin(Resize, width="160", height="120").process(VGA, context).shape == (120, 160, 3)
     half = _plugin(Resize, scale="0.5").process(VGA, context)
     expected = VGA.reshape(240, 2, 320, 2, 3).astype(float).mean(axis=(1, 3))
-    assert np.array_equal(half, np.rint(expected).astype(np.uint8))
+    assert np.array_equal(half, np.floor(expected + 0.5).astype(np.uint8))
     depth = _plugin(Resize, scale="0.5", interpolation="nearest").process(VGA, context)
     assert np.array_equal(depth, VGA[1::2, 1::2])
     with pytest.raises(ValueError, match="is not 'area' or 'nearest'"):

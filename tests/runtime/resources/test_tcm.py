@@ -13,7 +13,15 @@ import ckmconf
 from ckmconf.model.missions import Require
 from ckmconf.model.resources import TCM, Policy, Scenario
 from runtime.resources.learning import ScenarioLearner
-from runtime.resources.tcm import MAX_PENALTY, Alarm, Decision, ScenarioEvent, TaskConfiguringModule, ThresholdSwitcher
+from runtime.resources.tcm import (
+    MAX_PENALTY,
+    Alarm,
+    Decision,
+    ScenarioEvent,
+    TaskConfiguringModule,
+    ThresholdSelector,
+    ThresholdSwitcher,
+)
 
 REPO = Path(__file__).resolve().parents[3]
 BOUNDS = {"VGA": 0.012, "QVGA": 0.017, "QQVGA": 0.020}  # configs/usecase/resources.xml, RGBRecog
@@ -360,3 +368,40 @@ def test_svm_learns_when_a_higher_resolution_will_hold() -> None:
     second_high = slice(430, 730)
     assert len(events(with_svm[second_high])) < len(events(without[second_high]))
     assert learned.switches < plain.switches
+
+
+def test_a_preferred_scenario_is_taken_without_penalty_and_left_when_neglected() -> None:
+    module = tcm(initial="QQVGA")
+    decision = module.prefer("VGA")
+    assert decision.active == "VGA" and decision.events[0].reason == "requirements"
+    assert module.penalties == {"VGA": 0.0, "QVGA": 0.0, "QQVGA": 0.0}
+    assert module.prefer("VGA").events == ()  # already active: nothing happens
+    decisions = feed(module, [0.015] * 60)  # too slow for VGA, fine for QVGA
+    assert actives(decisions) == ["QVGA"]
+    assert decisions[0].events[0].previous == "VGA" and decisions[0].events[0].reason == "neglected"
+    assert module.penalties["VGA"] > 0.0
+    with pytest.raises(ValueError, match="no scenario 'HD'"):
+        module.prefer("HD")
+
+
+def test_a_preferred_scenario_is_a_ceiling() -> None:
+    module = tcm(initial="VGA")
+    assert module.prefer("QVGA").active == "QVGA"
+    decisions = feed(module, [0.005] * 200)  # VGA would hold and be recovered without the preference
+    assert actives(decisions) == ["QVGA"]
+    assert module.prefer("VGA").active == "VGA"
+
+
+def test_threshold_selector_runs_the_baseline_behind_the_tcm_interface() -> None:
+    events: list[ScenarioEvent] = []
+    alarms: list[Alarm] = []
+    selector = ThresholdSelector(scenarios(), TCM(initial="VGA"), on_event=events.append, on_alarm=alarms.append)
+    for value, expected in [(0.010, "VGA"), (0.015, "QVGA"), (0.011, "VGA"), (0.019, "QQVGA"), (0.030, "QQVGA")]:
+        selector.observe("deadline", value)
+        assert selector.evaluate(1.0).active == expected
+    assert selector.switches == 3 and [e.current for e in events] == ["QVGA", "VGA", "QQVGA"]
+    assert [a.raised for a in alarms] == [True]  # 0.030 is outside every scenario's bounds
+    selector.observe("deadline", 0.005)
+    assert selector.evaluate(2.0).active == "VGA" and [a.raised for a in alarms] == [True, False]
+    assert selector.penalties == {"VGA": 0.0, "QVGA": 0.0, "QQVGA": 0.0}
+    assert selector.prefer("QVGA").active == "QVGA"

@@ -1,0 +1,203 @@
+"""One client's instance of a Smart Resource service: its TCM, parameters, publishers and measures.
+
+The service's own instance has client ``""`` and publishes on the configured output topics; a
+client's instance (a *replica*, §7.2) publishes on ``OUTPUT/CLIENT``. Instances are driven by
+:class:`runtime.resources.resource.SmartResourceRuntime`: the processing thread calls
+:meth:`Instance.deliver` with each fresh result, the TCM thread calls :meth:`Instance.tick`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from ckmconf.model.resources import Service
+
+from ..network.api import Publisher, TopicQoS, Transport
+from . import codec
+from .api import Bounds, client_topic, preferred_scenario
+from .tcm import Alarm, Decision, ScenarioEvent, TaskConfiguringModule, ThresholdSelector
+
+Send = Callable[[str, dict[str, Any]], None]
+"""Publishes a message on the service's ``quality`` or ``alarms`` topic."""
+
+
+@dataclass
+class MeasureLog:
+    """Last value and count of each measure of an instance (for the quality messages and reports)."""
+
+    last: dict[str, float] = field(default_factory=dict)
+    count: dict[str, int] = field(default_factory=dict)
+
+    def add(self, name: str, value: float) -> None:
+        self.last[name] = value
+        self.count[name] = self.count.get(name, 0) + 1
+
+
+class Instance:
+    """A service run for one client (see the module docstring)."""
+
+    def __init__(
+        self,
+        resource: str,
+        service: Service,
+        client: str,
+        transport: Transport,
+        send: Send,
+        *,
+        initial: str | None = None,
+        requirements: tuple[Bounds, ...] = (),
+        parameters: Mapping[str, Any] | None = None,
+        baseline: bool = False,
+    ) -> None:
+        if service.tcm is None or not service.scenarios:
+            raise ValueError(f"service {resource}.{service.name} has no scenarios and no TCM")
+        self.resource, self.service, self.client = resource, service, client
+        self.key = service.name if not client else f"{service.name}/{client}"
+        self.parameters = {p.name: p.default for p in service.parameters if p.default is not None}
+        self.parameters.update(parameters or {})
+        preferred = preferred_scenario(service, self.parameters)
+        initial = initial or preferred
+        settings = service.tcm if initial is None else dataclasses.replace(service.tcm, initial=initial)
+        selector = ThresholdSelector if baseline else TaskConfiguringModule
+        self.tcm: TaskConfiguringModule | ThresholdSelector = selector(
+            service.scenarios, settings, requirements=requirements, on_event=self._event, on_alarm=self._alarm
+        )
+        if preferred is not None:
+            self.tcm.prefer(preferred, 0.0)  # the ceiling; the TCM starts there already
+        self.requirements = requirements
+        self._send = send
+        self._lock = threading.Lock()
+        self.outputs: dict[str, Publisher] = {
+            o.name: transport.publisher(TopicQoS(client_topic(o.topic, client), "ckm/service-data"))
+            for o in service.outputs
+        }
+        self._sources = {m.source: m.name for m in service.measures if m.source not in ("deadline", "cpu")}
+        self._kernel_measures = {m.source: m.name for m in service.measures if m.source in ("deadline", "cpu")}
+        self.measures = MeasureLog()
+        self.published = 0
+        self.events: list[ScenarioEvent] = []
+        self.alarms: list[Alarm] = []
+        self._now = 0.0
+
+    # ------------------------------------------------------------------ TCM
+
+    @property
+    def profile(self) -> str:
+        with self._lock:
+            return self.tcm.profile
+
+    @property
+    def scenario(self) -> str:
+        with self._lock:
+            return self.tcm.active
+
+    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...] | None, now: float) -> None:
+        """New parameters and/or QR from the client: reselect at once, without penalty (eq. 4.7)."""
+        with self._lock:
+            self._now = now
+            self.parameters.update(parameters)
+            if requirements is not None:
+                self.requirements = requirements
+                self.tcm.set_requirements(requirements, now)
+            preferred = preferred_scenario(self.service, parameters)
+            if preferred is not None:
+                self.tcm.prefer(preferred, now)
+
+    def observe(self, measure: str, value: float) -> None:
+        """A kernel measure (``deadline``, ``cpu``) under the service's name for it."""
+        name = self._kernel_measures.get(measure)
+        if name is not None and math.isfinite(value):
+            with self._lock:
+                self.tcm.observe(name, value)
+                self.measures.add(name, value)
+
+    def tick(self, now: float) -> Decision:
+        """One TCM period: evaluate, then publish the quality message (events and alarms go out as they happen)."""
+        with self._lock:
+            self._now = now
+            decision = self.tcm.evaluate(now)
+            message = {
+                "type": "quality",
+                "resource": self.resource,
+                "service": self.service.name,
+                "client": self.client,
+                "time": now,
+                "scenario": decision.active,
+                "profile": decision.profile,
+                "measures": dict(self.measures.last),
+                "probabilities": {
+                    c.measure: c.probability
+                    for e in (decision.evaluations.get(decision.active),)
+                    if e is not None
+                    for c in e.conditions
+                    if c.kind == "policy" and c.probability is not None
+                },
+                "penalties": self.tcm.penalties,
+                "alarm": self.tcm.alarm_active,
+                "published": self.published,
+            }
+        self._send("quality", message)
+        return decision
+
+    def _event(self, event: ScenarioEvent) -> None:  # called by the TCM, under self._lock
+        self.events.append(event)
+        self._send(
+            "quality",
+            {
+                "type": "event",
+                "resource": self.resource,
+                "service": self.service.name,
+                "client": self.client,
+                "time": event.time,
+                "from": event.previous,
+                "to": event.current,
+                "profile": event.profile,
+                "reason": event.reason,
+                "detail": event.detail,
+                "penalty": event.penalty,
+            },
+        )
+
+    def _alarm(self, alarm: Alarm) -> None:  # called by the TCM, under self._lock
+        self.alarms.append(alarm)
+        self._send(
+            "alarms",
+            {
+                "type": "alarm",
+                "resource": self.resource,
+                "service": self.service.name,
+                "client": self.client,
+                "time": alarm.time,
+                "raised": alarm.raised,
+                "scenario": alarm.active,
+                "unmet": list(alarm.unmet),
+            },
+        )
+
+    # ------------------------------------------------------------------ data
+
+    def deliver(self, value: Any, stamp: float, now_wall: float) -> None:
+        """Publish a fresh result (``stamp``: its acquisition time, wall clock) and record its measures."""
+        ports = self.outputs
+        if len(ports) == 1:
+            items = [(next(iter(ports.values())), value)]
+        elif isinstance(value, Mapping):
+            items = [(ports[name], v) for name, v in value.items() if name in ports]
+        else:
+            items = []
+        for publisher, item in items:
+            publisher.publish(codec.encode(item), stamp=stamp)
+        self.published += 1
+        self.observe("deadline", now_wall - stamp)
+        if isinstance(value, Mapping):
+            for source, name in self._sources.items():
+                field_value = value.get(source)
+                if isinstance(field_value, int | float) and not isinstance(field_value, bool):
+                    with self._lock:
+                        self.tcm.observe(name, float(field_value))
+                        self.measures.add(name, float(field_value))

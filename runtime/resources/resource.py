@@ -1,0 +1,400 @@
+"""A Smart Resource at run time (thesis §3.2, §4.2–4.3): SPT streams, service instances, the service API.
+
+Streams. Every profile tree starts at an acquisition plugin (its root). The profiles that share
+a root form a *stream*: one Topology (the plugins of those trees), one triple buffer (§3.2.3)
+whose acquisition takes the newest value of the stream's input — the first Input topic of its
+services, or a ``source`` callable given by the caller (a camera driver, a benchmark) — and
+whose processing runs the profiles every instance of the stream has selected, so frames are
+grabbed once for all clients (§3.2.2).
+
+Instances. Each service with scenarios runs one :class:`Instance` per client: its own TCM picks
+the instance's scenario, hence the profile it selects in the stream's topology. With
+``share=True`` (the default) two instances on one profile get the same result from one run
+(no duplicate processing); ``share=False`` reproduces the thesis' replicated services, where
+every client costs its own processing below the acquisition.
+
+Measures. ``deadline``: from acquisition to publication of a fresh result (wall clock, seconds).
+``cpu``: the CPU time of the stream's processing thread over the TCM period, as a share of one
+CPU (``time.thread_time``: other work in the process is not counted). Any other measure is read
+from the field of the result its ``source`` names (e.g. ``reliability``).
+
+The service API (see :mod:`runtime.resources.api`): requests on the config topic, every answer,
+the periodic quality messages and the scenario events on the quality topic, alarms on the alarm
+topic, and a directory entry on :data:`~runtime.resources.api.DIRECTORY_TOPIC` every
+``announce_period``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from ckmconf.model.resources import Service, SmartResource
+
+from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
+from ..registry import Registry
+from .api import DIRECTORY_TOPIC, Request, describe, parse_request, preferred_scenario, topics
+from .buffers import Supplied, TripleBuffer
+from .instance import Instance
+from .spt import Frame, Topology
+
+LOG = logging.getLogger("ckm.resources")
+DEFAULT_FRAME_PERIOD = 1 / 30
+Source = Callable[[], Any]
+
+
+@dataclass
+class _Input:
+    seq: int
+    stamp: float  # acquisition time, wall clock
+    data: Any
+
+
+class Stream:
+    """The profiles rooted at one acquisition plugin: a Topology, a triple buffer and its instances."""
+
+    def __init__(self, root: str, topology: Topology, period: float, supply: float, source: Source) -> None:
+        self.root, self.topology, self.period, self.source = root, topology, period, source
+        self.instances: dict[str, Instance] = {}
+        self.lock = threading.Lock()
+        self._seq = 0
+        self._last_processed = -1
+        self.busy_cpu = 0.0
+        self.errors = 0
+        self.buffer: TripleBuffer[_Input, tuple[_Input, Frame] | None] = TripleBuffer(
+            self._acquire,
+            self._process,
+            self._supply,
+            acquire_period=period,
+            supply_period=supply,
+            repeat=False,
+            name=f"stream-{root}",
+        )
+
+    def _acquire(self, reuse: _Input | None) -> _Input:
+        data = self.source()
+        if data is not None:
+            self._seq += 1
+        return _Input(self._seq if data is not None else -1, time.time(), data)
+
+    def _process(self, item: _Input) -> tuple[_Input, Frame] | None:
+        if item.data is None or item.seq == self._last_processed:
+            return None
+        self._last_processed = item.seq
+        start = time.thread_time()
+        try:
+            return item, self.topology.run(item.data, item.stamp)
+        except Exception:
+            self.errors += 1
+            raise
+        finally:
+            self.busy_cpu += time.thread_time() - start
+
+    def _supply(self, supplied: Supplied[tuple[_Input, Frame] | None]) -> None:
+        if supplied.value is None:
+            return
+        item, frame = supplied.value
+        with self.lock:
+            instances = dict(self.instances)
+        now = time.time()
+        for key, value in frame.outputs.items():
+            instance = instances.get(key)
+            if instance is not None:
+                instance.deliver(value, item.stamp, now)
+
+
+class SmartResourceRuntime:
+    """Runs the SPT services of one SmartResource record on a transport (see the module docstring)."""
+
+    def __init__(
+        self,
+        resource: SmartResource,
+        transport: Transport,
+        *,
+        node: str | None = None,
+        registry: Registry | None = None,
+        sources: Mapping[str, Source] | None = None,
+        frame_period: float | None = None,
+        share: bool = True,
+        primary: bool = True,
+        announce_period: float = 1.0,
+        max_clients: int = 16,
+        supply_period: float | None = None,
+        baseline: bool = False,
+    ) -> None:
+        self.resource, self.transport = resource, transport
+        self.node = node or resource.node
+        self.share, self.primary, self.max_clients = share, primary, max_clients
+        self.baseline = baseline  # the threshold switcher instead of the TCM (benchmark baseline)
+        self._supply_period = supply_period
+        self.announce_period = announce_period
+        self.services = {s.name: s for s in resource.services if s.scenarios and s.tcm is not None}
+        self.streams: dict[str, Stream] = {}
+        self._service_stream: dict[str, Stream] = {}
+        self._inputs: dict[str, Subscription] = {}
+        self._sources = dict(sources or {})
+        self._frame_period = frame_period
+        self._registry = registry
+        self._pub: dict[str, dict[str, Publisher]] = {}
+        self._directory: Publisher | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._start_time = time.monotonic()
+        self._lock = threading.Lock()
+        self._answered: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
+
+    # ------------------------------------------------------------------ build
+
+    def _roots(self, service: Service) -> set[str]:
+        profiles = {p.name: p for p in self.resource.profiles}
+        return {profiles[s.profile].root.plugin for s in service.scenarios if s.profile in profiles}
+
+    def _build_streams(self) -> None:
+        by_root: dict[str, list[Service]] = {}
+        for service in self.services.values():
+            roots = self._roots(service)
+            if len(roots) != 1:
+                raise ValueError(
+                    f"service {self.resource.name}.{service.name}: its profiles must share one acquisition plugin, "
+                    f"found {sorted(roots) or 'none'}"
+                )
+            by_root.setdefault(roots.pop(), []).append(service)
+        for root, services in by_root.items():
+            profiles = [p for p in self.resource.profiles if p.root.plugin == root]
+            used = {name for p in profiles for name in p.root.plugins()}
+            part = dataclasses.replace(
+                self.resource,
+                plugins=tuple(p for p in self.resource.plugins if p.name in used),
+                profiles=tuple(profiles),
+            )
+            period = self._frame_period or min((s.rate for s in services if s.rate), default=DEFAULT_FRAME_PERIOD)
+            supply = self._supply_period or period / 8  # a short poll: publication adds little latency
+            stream = Stream(root, Topology(part, self._registry), period, supply, self._source_for(root, services))
+            self.streams[root] = stream
+            for service in services:
+                self._service_stream[service.name] = stream
+
+    def _source_for(self, root: str, services: list[Service]) -> Source:
+        source = self._sources.get(root)
+        if source is not None:
+            return source
+        topic = next((s.inputs[0].topic for s in services if s.inputs), None)
+        if topic is None:
+            raise ValueError(f"resource {self.resource.name}: stream {root!r} has no input topic and no source")
+        subscription = self.transport.subscribe(TopicQoS(topic, "ckm/raw", reliability="best-effort"))
+        self._inputs[root] = subscription
+
+        def latest() -> Any:
+            sample: Sample | None = subscription.latest()
+            return None if sample is None else sample.value
+
+        return latest
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def setup(self) -> None:
+        self._build_streams()
+        for stream in self.streams.values():
+            stream.topology.setup()
+        for name, service in self.services.items():
+            qos = topics(self.resource, service)
+            self._pub[name] = {kind: self.transport.publisher(q) for kind, q in qos.items() if kind != "config"}
+            self.transport.subscribe(qos["config"], functools.partial(self._on_request, service))
+        self._directory = self.transport.publisher(TopicQoS(DIRECTORY_TOPIC, "ckm/service", history=64))
+
+    def start(self) -> None:
+        self._start_time = time.monotonic()
+        if self.primary:
+            for name, service in self.services.items():
+                initial = preferred_scenario(service, {p.name: p.default for p in service.parameters})
+                send = self._sender(name)
+                instance = Instance(
+                    self.resource.name, service, "", self.transport, send, initial=initial, baseline=self.baseline
+                )
+                self._add(instance)
+        for stream in self.streams.values():
+            stream.buffer.start()
+        for target, label in ((self._tcm_loop, "tcm"), (self._announce_loop, "announce")):
+            thread = threading.Thread(target=target, name=f"{self.resource.name}-{label}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+
+    def stop(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(2.0)
+        for stream in self.streams.values():
+            stream.buffer.stop()
+            stream.topology.stop()
+        for subscription in self._inputs.values():
+            subscription.close()
+
+    def __enter__(self) -> SmartResourceRuntime:
+        self.setup()
+        self.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------------ instances
+
+    def now(self) -> float:
+        return time.monotonic() - self._start_time
+
+    def _sender(self, service: str) -> Callable[[str, dict[str, Any]], None]:
+        def send(kind: str, message: dict[str, Any]) -> None:
+            publisher = self._pub.get(service, {}).get(kind)
+            if publisher is not None:
+                publisher.publish(message)
+            if message.get("type") in ("event", "alarm"):
+                LOG.info("%s.%s %s: %s", self.resource.name, service, message["type"], message)
+
+        return send
+
+    def _add(self, instance: Instance) -> None:
+        stream = self._service_stream[instance.service.name]
+        with stream.lock:
+            stream.instances[instance.key] = instance
+        stream.topology.select(instance.key, instance.profile, share=self.share)
+
+    def instances(self) -> list[Instance]:
+        return [i for stream in self.streams.values() for i in list(stream.instances.values())]
+
+    def instance(self, service: str, client: str = "") -> Instance | None:
+        stream = self._service_stream.get(service)
+        key = service if not client else f"{service}/{client}"
+        return None if stream is None else stream.instances.get(key)
+
+    def _on_request(self, service: Service, sample: Sample) -> None:
+        request, errors = parse_request(service, sample.value)
+        if request is None:
+            client = sample.value.get("client") if isinstance(sample.value, Mapping) else None
+            self._answer(service, client, sample.value, errors)
+            LOG.warning("%s.%s: refused a request: %s", self.resource.name, service.name, "; ".join(errors))
+            return
+        with self._lock:
+            key = (service.name, request.client)
+            repeated = request.request_id and self._answered.get(key, (0, None))[0] == request.request_id
+            if repeated:  # a client resending a request it has no answer for: answer again, apply once
+                self._pub[service.name]["quality"].publish(self._answered[key][1])
+                return
+            errors = self._apply(service, request)
+            answer = self._answer(service, request.client, sample.value, errors, request)
+            self._answered[key] = (request.request_id, answer)
+
+    def _apply(self, service: Service, request: Request) -> list[str]:
+        existing = self.instance(service.name, request.client)
+        if request.op == "disconnect":
+            if not request.client:
+                return ["the service's own instance cannot be disconnected"]
+            if existing is None:
+                return [f"client {request.client!r} is not connected"]
+            stream = self._service_stream[service.name]
+            with stream.lock:
+                stream.instances.pop(existing.key, None)
+            stream.topology.release(existing.key)
+            return []
+        if existing is None:
+            if request.op == "configure":
+                return [f"client {request.client!r} is not connected (send op=connect first)"]
+            clients = sum(1 for i in self.instances() if i.service.name == service.name and i.client)
+            if clients >= self.max_clients:
+                return [f"service {service.name} already has its {self.max_clients} clients"]
+            instance = Instance(
+                self.resource.name,
+                service,
+                request.client,
+                self.transport,
+                self._sender(service.name),
+                initial=preferred_scenario(service, request.parameters),
+                requirements=request.requirements or (),
+                parameters=request.parameters,
+                baseline=self.baseline,
+            )
+            if request.requirements:
+                instance.configure({}, request.requirements, self.now())
+            self._add(instance)
+            return []
+        existing.configure(request.parameters, request.requirements, self.now())
+        self._service_stream[service.name].topology.select(existing.key, existing.profile, share=self.share)
+        return []
+
+    def _answer(
+        self, service: Service, client: Any, message: Any, errors: list[str], request: Request | None = None
+    ) -> dict[str, Any]:
+        instance = self.instance(service.name, request.client) if request is not None else None
+        answer: dict[str, Any] = {
+            "type": "ack",
+            "resource": self.resource.name,
+            "service": service.name,
+            "client": client if isinstance(client, str) else None,
+            "op": message.get("op") if isinstance(message, Mapping) else None,
+            "id": request.request_id if request is not None else _request_id(message),
+            "accepted": not errors,
+            "errors": errors,
+        }
+        if instance is not None and not errors:
+            answer.update(
+                scenario=instance.scenario,
+                profile=instance.profile,
+                outputs={name: p.qos.name for name, p in instance.outputs.items()},
+                parameters=dict(instance.parameters),
+            )
+        self._pub[service.name]["quality"].publish(answer)
+        return answer
+
+    # ------------------------------------------------------------------ periodic work
+
+    def _tcm_loop(self) -> None:
+        periods = {name: (s.tcm.period if s.tcm else 0.5) for name, s in self.services.items()}
+        due = dict.fromkeys(periods, time.monotonic())
+        cpu_mark = {name: (time.monotonic(), 0.0) for name in periods}  # per service: its own TCM period
+        while not self._stop.is_set():
+            now = time.monotonic()
+            for name, period in periods.items():
+                if now < due[name]:
+                    continue
+                due[name] += period * max(1, int((now - due[name]) / period) + 1)
+                stream = self._service_stream[name]
+                last_wall, last_busy = cpu_mark[name]
+                if now - last_wall > 1e-3:
+                    busy = stream.busy_cpu
+                    share = (busy - last_busy) / (now - last_wall)
+                    cpu_mark[name] = (now, busy)
+                    for instance in list(stream.instances.values()):
+                        if instance.service.name == name:
+                            instance.observe("cpu", share)
+                self._tick(name)
+            self._stop.wait(max(0.001, min(due.values()) - time.monotonic()))
+
+    def _tick(self, service: str) -> None:
+        stream = self._service_stream[service]
+        with self._lock:
+            instances = [i for i in list(stream.instances.values()) if i.service.name == service]
+            selection = {}
+            for instance in instances:
+                instance.tick(self.now())
+                selection[instance.key] = instance.profile
+            if selection:
+                stream.topology.select_all(selection)
+
+    def _announce_loop(self) -> None:
+        while True:
+            if self._directory is not None:
+                for service in self.services.values():
+                    self._directory.publish(describe(self.resource, service, self.node))
+            if self._stop.wait(self.announce_period):
+                return
+
+
+def _request_id(message: Any) -> int | None:
+    """The id of a refused request, when it has a usable one (so its client gets the refusal)."""
+    value = message.get("id") if isinstance(message, Mapping) else None
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
