@@ -11,24 +11,30 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from . import config, jitter, netbench, rates
+from . import adaptation, config, jitter, netbench, rates
 
-BENCHMARKS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any]], list[tuple[str, str]]]]] = {
+Runner = Callable[[], dict[str, Any]]
+Describer = Callable[[dict[str, Any]], list[tuple[str, str]]]
+BENCHMARKS: dict[str, tuple[Runner, Describer]] = {
+    "adaptation": (adaptation.run, adaptation.describe),
     "config": (config.run, config.describe),
     "pubsub": (netbench.run_pubsub, netbench.describe_pubsub),
     "discovery": (netbench.run_discovery, netbench.describe_discovery),
     "jitter": (jitter.run, jitter.describe),
     "rates": (rates.run, rates.describe),
 }
+TAKES_OPTIONS = {"adaptation"}  # ckm-bench adaptation --help lists them
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ckm-bench", description="Run a CKM benchmark.")
     parser.add_argument("name", choices=sorted(BENCHMARKS), help="which benchmark")
     parser.add_argument("--json", action="store_true", help="end with one line of JSON")
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
     run, describe = BENCHMARKS[args.name]
-    result = run()
+    if extra and args.name not in TAKES_OPTIONS:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    result = adaptation.run(extra) if args.name == "adaptation" else run()
     table = Table(title=f"ckm-bench {args.name}")
     table.add_column("measure")
     table.add_column("value", justify="right")
