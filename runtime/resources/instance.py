@@ -15,12 +15,15 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from ckmconf.model.resources import Service
+from ckmconf.model.resources import TCM, Service
 
 from ..network.api import Publisher, TopicQoS, Transport
 from . import codec
 from .api import Bounds, client_topic, preferred_scenario
 from .tcm import Alarm, Decision, ScenarioEvent, TaskConfiguringModule, ThresholdSelector
+
+KERNEL_MEASURES = ("deadline", "latency", "rate", "cpu", "memory")
+"""Measures the runtime takes itself (a QualityMeasure's ``source``); any other source is a result field."""
 
 Send = Callable[[str, dict[str, Any]], None]
 """Publishes a message on the service's ``quality`` or ``alarms`` topic."""
@@ -54,21 +57,22 @@ class Instance:
         parameters: Mapping[str, Any] | None = None,
         baseline: bool = False,
     ) -> None:
-        if service.tcm is None or not service.scenarios:
-            raise ValueError(f"service {resource}.{service.name} has no scenarios and no TCM")
+        if not service.scenarios:
+            raise ValueError(f"service {resource}.{service.name} has no scenarios")
         self.resource, self.service, self.client = resource, service, client
         self.key = service.name if not client else f"{service.name}/{client}"
         self.parameters = {p.name: p.default for p in service.parameters if p.default is not None}
         self.parameters.update(parameters or {})
         preferred = preferred_scenario(service, self.parameters)
         initial = initial or preferred
-        settings = service.tcm if initial is None else dataclasses.replace(service.tcm, initial=initial)
+        tcm = service.tcm or TCM(learning="none")  # one scenario and no TCM: a fixed profile
+        settings = tcm if initial is None else dataclasses.replace(tcm, initial=initial)
         selector = ThresholdSelector if baseline else TaskConfiguringModule
         self.tcm: TaskConfiguringModule | ThresholdSelector = selector(
             service.scenarios, settings, requirements=requirements, on_event=self._event, on_alarm=self._alarm
         )
         if preferred is not None:
-            self.tcm.prefer(preferred, 0.0)  # the ceiling; the TCM starts there already
+            self.tcm.set_ceiling(preferred)
         self.requirements = requirements
         self._send = send
         self._lock = threading.Lock()
@@ -76,8 +80,9 @@ class Instance:
             o.name: transport.publisher(TopicQoS(client_topic(o.topic, client), "ckm/service-data"))
             for o in service.outputs
         }
-        self._sources = {m.source: m.name for m in service.measures if m.source not in ("deadline", "cpu")}
-        self._kernel_measures = {m.source: m.name for m in service.measures if m.source in ("deadline", "cpu")}
+        self._sources = {m.source: m.name for m in service.measures if m.source not in KERNEL_MEASURES}
+        self._kernel_measures = {m.source: m.name for m in service.measures if m.source in KERNEL_MEASURES}
+        self._last_publication: float | None = None
         self.measures = MeasureLog()
         self.published = 0
         self.events: list[ScenarioEvent] = []
@@ -109,7 +114,7 @@ class Instance:
                 self.tcm.prefer(preferred, now)
 
     def observe(self, measure: str, value: float) -> None:
-        """A kernel measure (``deadline``, ``cpu``) under the service's name for it."""
+        """A kernel measure (one of :data:`KERNEL_MEASURES`) under the service's name for it."""
         name = self._kernel_measures.get(measure)
         if name is not None and math.isfinite(value):
             with self._lock:
@@ -181,8 +186,9 @@ class Instance:
 
     # ------------------------------------------------------------------ data
 
-    def deliver(self, value: Any, stamp: float, now_wall: float) -> None:
-        """Publish a fresh result (``stamp``: its acquisition time, wall clock) and record its measures."""
+    def deliver(self, value: Any, stamp: float, now_wall: float, latency: float | None = None) -> None:
+        """Publish a fresh result (``stamp``: its acquisition time, wall clock; ``latency``: its
+        processing time) and record its measures."""
         ports = self.outputs
         if len(ports) == 1:
             items = [(next(iter(ports.values())), value)]
@@ -194,6 +200,11 @@ class Instance:
             publisher.publish(codec.encode(item), stamp=stamp)
         self.published += 1
         self.observe("deadline", now_wall - stamp)
+        if latency is not None:
+            self.observe("latency", latency)
+        if self._last_publication is not None:
+            self.observe("rate", now_wall - self._last_publication)
+        self._last_publication = now_wall
         if isinstance(value, Mapping):
             for source, name in self._sources.items():
                 field_value = value.get(source)

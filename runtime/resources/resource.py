@@ -13,10 +13,12 @@ the instance's scenario, hence the profile it selects in the stream's topology. 
 (no duplicate processing); ``share=False`` reproduces the thesis' replicated services, where
 every client costs its own processing below the acquisition.
 
-Measures. ``deadline``: from acquisition to publication of a fresh result (wall clock, seconds).
-``cpu``: the CPU time of the stream's processing thread over the TCM period, as a share of one
-CPU (``time.thread_time``: other work in the process is not counted). Any other measure is read
-from the field of the result its ``source`` names (e.g. ``reliability``).
+Measures (a QualityMeasure's ``source``). ``deadline``: from acquisition to publication of a
+fresh result (wall clock, s). ``latency``: the processing time of that frame (s). ``rate``: the
+time between two fresh publications of the instance (s). ``cpu``: the CPU time of the stream's
+processing thread over the TCM period, as a share of one CPU (``time.thread_time``: other work in
+the process is not counted). ``memory``: the process's resident memory (MiB, psutil) at each TCM
+period. Any other source is the field of the result it names (e.g. ``reliability``).
 
 The service API (see :mod:`runtime.resources.api`): requests on the config topic, every answer,
 the periodic quality messages and the scenario events on the quality topic, alarms on the alarm
@@ -35,10 +37,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import psutil
+
 from ckmconf.model.resources import Service, SmartResource
 
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry
+from . import codec
 from .api import DIRECTORY_TOPIC, Request, describe, parse_request, preferred_scenario, topics
 from .buffers import Supplied, TripleBuffer
 from .instance import Instance
@@ -67,7 +72,7 @@ class Stream:
         self._last_processed = -1
         self.busy_cpu = 0.0
         self.errors = 0
-        self.buffer: TripleBuffer[_Input, tuple[_Input, Frame] | None] = TripleBuffer(
+        self.buffer: TripleBuffer[_Input, tuple[_Input, Frame, float] | None] = TripleBuffer(
             self._acquire,
             self._process,
             self._supply,
@@ -83,30 +88,31 @@ class Stream:
             self._seq += 1
         return _Input(self._seq if data is not None else -1, time.time(), data)
 
-    def _process(self, item: _Input) -> tuple[_Input, Frame] | None:
+    def _process(self, item: _Input) -> tuple[_Input, Frame, float] | None:
         if item.data is None or item.seq == self._last_processed:
             return None
         self._last_processed = item.seq
-        start = time.thread_time()
+        start, began = time.thread_time(), time.perf_counter()
         try:
-            return item, self.topology.run(item.data, item.stamp)
+            frame = self.topology.run(item.data, item.stamp)
+            return item, frame, time.perf_counter() - began
         except Exception:
             self.errors += 1
             raise
         finally:
             self.busy_cpu += time.thread_time() - start
 
-    def _supply(self, supplied: Supplied[tuple[_Input, Frame] | None]) -> None:
+    def _supply(self, supplied: Supplied[tuple[_Input, Frame, float] | None]) -> None:
         if supplied.value is None:
             return
-        item, frame = supplied.value
+        item, frame, latency = supplied.value
         with self.lock:
             instances = dict(self.instances)
         now = time.time()
         for key, value in frame.outputs.items():
             instance = instances.get(key)
             if instance is not None:
-                instance.deliver(value, item.stamp, now)
+                instance.deliver(value, item.stamp, now, latency)
 
 
 class SmartResourceRuntime:
@@ -134,7 +140,7 @@ class SmartResourceRuntime:
         self.baseline = baseline  # the threshold switcher instead of the TCM (benchmark baseline)
         self._supply_period = supply_period
         self.announce_period = announce_period
-        self.services = {s.name: s for s in resource.services if s.scenarios and s.tcm is not None}
+        self.services = {s.name: s for s in resource.services if s.scenarios}
         self.streams: dict[str, Stream] = {}
         self._service_stream: dict[str, Stream] = {}
         self._inputs: dict[str, Subscription] = {}
@@ -148,6 +154,7 @@ class SmartResourceRuntime:
         self._start_time = time.monotonic()
         self._lock = threading.Lock()
         self._answered: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
+        self._process_info = psutil.Process()
 
     # ------------------------------------------------------------------ build
 
@@ -181,18 +188,34 @@ class SmartResourceRuntime:
                 self._service_stream[service.name] = stream
 
     def _source_for(self, root: str, services: list[Service]) -> Source:
+        """The stream's acquisition: a given source, or the newest sample of its input topics.
+
+        One input: its newest value. Several (a fusion service): ``{input name: newest value or
+        None}``. Either way None — nothing to process — until a sample arrives that the stream has
+        not taken yet, so a frame is never processed twice. Values are decoded with the codec.
+        """
         source = self._sources.get(root)
         if source is not None:
             return source
-        topic = next((s.inputs[0].topic for s in services if s.inputs), None)
-        if topic is None:
+        inputs = {i.name: i.topic for s in services for i in s.inputs}
+        if not inputs:
             raise ValueError(f"resource {self.resource.name}: stream {root!r} has no input topic and no source")
-        subscription = self.transport.subscribe(TopicQoS(topic, "ckm/raw", reliability="best-effort"))
-        self._inputs[root] = subscription
+        subscriptions = {
+            name: self.transport.subscribe(TopicQoS(topic, "ckm/raw", reliability="best-effort"))
+            for name, topic in inputs.items()
+        }
+        self._inputs.update({f"{root}/{name}": sub for name, sub in subscriptions.items()})
+        taken: dict[str, tuple[int, int]] = {}
 
         def latest() -> Any:
-            sample: Sample | None = subscription.latest()
-            return None if sample is None else sample.value
+            samples = {name: sub.latest() for name, sub in subscriptions.items()}
+            fresh = {n: (s.source, s.seq) for n, s in samples.items() if s is not None}
+            if not fresh or fresh == taken:
+                return None
+            taken.clear()
+            taken.update(fresh)
+            values = {n: None if s is None else codec.decode(s.value) for n, s in samples.items()}
+            return next(iter(values.values())) if len(values) == 1 else values
 
         return latest
 
@@ -313,7 +336,7 @@ class SmartResourceRuntime:
                 request.client,
                 self.transport,
                 self._sender(service.name),
-                initial=preferred_scenario(service, request.parameters),
+                initial=self._joining_scenario(service, request.parameters),
                 requirements=request.requirements or (),
                 parameters=request.parameters,
                 baseline=self.baseline,
@@ -325,6 +348,19 @@ class SmartResourceRuntime:
         existing.configure(request.parameters, request.requirements, self.now())
         self._service_stream[service.name].topology.select(existing.key, existing.profile, share=self.share)
         return []
+
+    def _joining_scenario(self, service: Service, parameters: Mapping[str, Any]) -> str | None:
+        """Where a new client's instance starts: its preference, or lower if the service's other
+        instances have been pushed lower (joining at the current operating point, not above it,
+        avoids a load spike that would hit every client); it may recover upwards as usual."""
+        weights = {s.name: s.weight for s in service.scenarios}
+        preferred = preferred_scenario(service, {p.name: p.default for p in service.parameters} | dict(parameters))
+        ceiling = weights.get(preferred or "", max(weights.values()))
+        others = [i.scenario for i in self.instances() if i.service.name == service.name]
+        candidates = [name for name in others if weights[name] <= ceiling]
+        if not candidates:
+            return preferred
+        return min(candidates, key=lambda name: weights[name])
 
     def _answer(
         self, service: Service, client: Any, message: Any, errors: list[str], request: Request | None = None
@@ -368,9 +404,11 @@ class SmartResourceRuntime:
                     busy = stream.busy_cpu
                     share = (busy - last_busy) / (now - last_wall)
                     cpu_mark[name] = (now, busy)
+                    memory = self._process_info.memory_info().rss / 2**20
                     for instance in list(stream.instances.values()):
                         if instance.service.name == name:
                             instance.observe("cpu", share)
+                            instance.observe("memory", memory)
                 self._tick(name)
             self._stop.wait(max(0.001, min(due.values()) - time.monotonic()))
 

@@ -335,6 +335,12 @@ class TaskConfiguringModule:
     def _allowed(self, scenario: str) -> bool:
         return self._ceiling is None or self._scenarios[scenario].record.weight <= self._ceiling
 
+    def set_ceiling(self, scenario: str) -> None:
+        """No scenario of a higher weight than ``scenario`` is taken from now on (no switch now)."""
+        if scenario not in self._scenarios:
+            raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._scenarios)})")
+        self._ceiling = self._scenarios[scenario].record.weight
+
     def prefer(self, scenario: str, now: float | None = None) -> Decision:
         """The client names a scenario (a resolution parameter): switch to it now, without penalty.
 
@@ -342,9 +348,7 @@ class TaskConfiguringModule:
         "the TCM may lower it") and comes back up to it, never above it (no scenario of a higher
         weight is taken while the preference holds).
         """
-        if scenario not in self._scenarios:
-            raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._scenarios)})")
-        self._ceiling = self._scenarios[scenario].record.weight
+        self.set_ceiling(scenario)
         time = now if now is not None else self._tick * self.settings.period
         evaluations = self._evaluate_all()
         events: list[ScenarioEvent] = []
@@ -568,6 +572,10 @@ class ThresholdSelector:
     def set_requirements(self, requirements: Iterable[QualityBounds], now: float | None = None) -> Decision:
         self.requirements = tuple(requirements)  # kept for the record: thresholds know no QR
         return self._decide(now or 0.0, self.active)
+
+    def set_ceiling(self, scenario: str) -> None:
+        if scenario not in self._records:
+            raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._records)})")
 
     def prefer(self, scenario: str, now: float | None = None) -> Decision:
         if scenario not in self._records:

@@ -4,6 +4,7 @@ alarms on the alarm topic; hostile requests are refused with the field named."""
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -41,6 +42,9 @@ SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
       <QualityMeasure name="reliability" kind="qoc" domain="performance" source="reliability"/>
       <QualityMeasure name="deadline" kind="qos" domain="temporal" source="deadline" unit="s"/>
       <QualityMeasure name="cpu" kind="qoc" domain="spatial" source="cpu"/>
+      <QualityMeasure name="processing" kind="qos" domain="temporal" source="latency" unit="s"/>
+      <QualityMeasure name="period" kind="qos" domain="temporal" source="rate" unit="s"/>
+      <QualityMeasure name="rss" kind="qoc" domain="spatial" source="memory" unit="MiB"/>
       <Scenario name="HI" profile="HI" weight="2">
         <Policy measure="deadline" upper="0.05" probability="0.9" window="5"/>
       </Scenario>
@@ -144,7 +148,11 @@ def test_a_client_discovers_configures_and_sees_the_scenario_change(
             assert until(lambda: len(received) >= 5)
             assert {r["by"] for r in received} == {"work_hi"}
             assert client.wait(lambda c: len(c.quality) >= 3, 10)
-            assert client.quality[-1]["scenario"] == "HI" and "deadline" in client.quality[-1]["measures"]
+            measures = client.quality[-1]["measures"]
+            assert client.quality[-1]["scenario"] == "HI"
+            assert {"deadline", "cpu", "processing", "period", "rss", "reliability"} <= set(measures)
+            assert measures["reliability"] == 0.9 and measures["rss"] > 1.0  # a Python process: MiBs
+            assert 0.0 < measures["processing"] <= measures["deadline"]
 
             Load.unit = 0.03  # HI now takes 90 ms per frame: its deadline policy is neglected
             assert client.wait(lambda c: any(e["to"] == "LO" for e in c.events), 10)
@@ -249,3 +257,90 @@ def test_replicas_share_processing_unless_replicated(
         assert (grabs - 1 <= works <= grabs + 1) if share else (3 * grabs - 3 <= works <= 3 * grabs + 3)
         for client in clients:
             client.close()
+
+
+FUSION = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="fusion-test">
+  <Topic name="/a" type="bytes"/>
+  <Topic name="/b" type="bytes"/>
+  <Topic name="/fused" type="bytes"/>
+  <Node name="pc" kind="service"/>
+  <SmartResource name="Global" node="pc">
+    <Plugin name="merge" kind="test-source"/>
+    <Profile name="ONLY" output="merge"><Use plugin="merge"/></Profile>
+    <Service name="Fusion" rate="0.02">
+      <Input name="a" topic="/a"/>
+      <Input name="b" topic="/b"/>
+      <Output name="fused" topic="/fused"/>
+      <QualityMeasure name="deadline" kind="qos" domain="temporal" source="deadline" unit="s"/>
+      <Scenario name="ONLY" profile="ONLY"><Policy measure="deadline" upper="1"/></Scenario>
+    </Service>
+  </SmartResource>
+</System>
+"""
+
+
+def test_input_topics_feed_the_stream_each_sample_once(
+    resource: SmartResource, registry: Registry, pair: tuple[Transport, Transport]
+) -> None:
+    from runtime.network import TopicQoS
+
+    server, remote = pair
+    runtime = SmartResourceRuntime(resource, server, registry=registry, frame_period=0.005)
+    with runtime:
+        out = remote.subscribe(TopicQoS("/recog/objects", "ckm/service-data", history=64))
+        camera = remote.publisher(TopicQoS("/cam/raw", "ckm/raw", reliability="best-effort"))
+        assert remote.wait_for_subscribers("/cam/raw", 1, 10)
+
+        def seen(index: int) -> bool:
+            return any(s.value["frame"] == {"frame": index} for s in out.history())
+
+        for index in range(5):
+            camera.publish({"frame": index})
+            assert until(functools.partial(seen, index))
+        time.sleep(0.1)  # several acquisition periods with no new sample
+        assert Load.calls.get("work_hi", 0) == 5  # each sample processed once, none twice
+
+
+def test_a_service_with_several_inputs_and_no_tcm_gets_them_together(
+    tmp_path: Path, registry: Registry, pair: tuple[Transport, Transport]
+) -> None:
+    from runtime.network import TopicQoS
+
+    path = tmp_path / "fusion.xml"
+    path.write_text(FUSION)
+    record = load(path).resource("Global")
+    assert record is not None
+    server, remote = pair
+    with SmartResourceRuntime(record, server, registry=registry) as runtime:
+        received: list[Any] = []
+        remote.subscribe(TopicQoS("/fused", "ckm/service-data", history=64), lambda s: received.append(s.value))
+        a = remote.publisher(TopicQoS("/a", "ckm/raw"))
+        b = remote.publisher(TopicQoS("/b", "ckm/raw"))
+        assert remote.wait_for_subscribers("/a", 1, 10) and remote.wait_for_subscribers("/b", 1, 10)
+        a.publish(1)
+        assert until(lambda: {"a": 1, "b": None} in received)
+        b.publish(2)
+        assert until(lambda: {"a": 1, "b": 2} in received)
+        instance = runtime.instance("Fusion")
+        assert instance is not None and instance.scenario == "ONLY"
+
+
+def test_a_new_client_joins_at_the_current_operating_point_then_recovers(
+    resource: SmartResource, registry: Registry, pair: tuple[Transport, Transport]
+) -> None:
+    server, remote = pair
+    runtime = SmartResourceRuntime(
+        resource, server, registry=registry, sources={"grab": frames()}, frame_period=0.01, primary=False
+    )
+    with runtime:
+        entry = ServiceDirectory(remote).wait_for("Camera", "Recog", timeout=10)
+        first, second = ServiceClient(remote, entry, "first"), ServiceClient(remote, entry, "second")
+        assert first.connect(parameters={"resolution": "LO"}, timeout=10)["scenario"] == "LO"
+        ack = second.connect(timeout=10)  # prefers HI (the default) but the service runs at LO
+        assert ack["scenario"] == "LO"
+        # Light load: the newcomer recovers to its preference; the first stays under its ceiling.
+        assert second.wait(lambda c: any(e["to"] == "HI" and e["reason"] == "recovered" for e in c.events), 10)
+        assert not any(e["to"] == "HI" for e in first.events)
+        first.close()
+        second.close()
