@@ -114,3 +114,44 @@ class Grayscale(ProcessingPlugin):
             raise ValueError(f"{self.owner} expects 3 or 4 channels, got {image.shape[2]}")
         luma = image[..., :3] @ self.weights
         return (np.rint(luma) if np.issubdtype(image.dtype, np.integer) else luma).astype(image.dtype)
+
+
+class Undistort(ProcessingPlugin):
+    """``plugin.undistort``: lens distortion removed with the Brown–Conrady model (OpenCV's).
+
+    Params: the intrinsics ``fx``, ``fy``, ``cx``, ``cy`` in pixels at the input's resolution
+    (0: focal = image width, centre = image centre) and the coefficients ``k1 k2 p1 p2 k3``. With
+    every coefficient 0 the image passes through untouched; otherwise the remap tables are built
+    once per image size and reused, so a frame costs one ``cv2.remap``.
+    """
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {
+        "fx": 0.0, "fy": 0.0, "cx": 0.0, "cy": 0.0, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "k3": 0.0,
+    }  # fmt: skip
+
+    def __init__(self, record: Plugin) -> None:
+        super().__init__(record)
+        for name in ("fx", "fy"):
+            if self.params[name] < 0:
+                raise ParamError(f"{self.owner}: parameter {name!r} = {self.params[name]} must not be negative")
+        self.coefficients = np.array([self.params[k] for k in ("k1", "k2", "p1", "p2", "k3")], dtype=np.float64)
+        self._maps: dict[tuple[int, int], tuple[Image, Image]] = {}
+
+    def _camera(self, rows: int, cols: int) -> Image:
+        p = self.params
+        fx, fy = p["fx"] or cols, p["fy"] or p["fx"] or cols
+        cx, cy = p["cx"] or (cols - 1) / 2, p["cy"] or (rows - 1) / 2
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+    def process(self, data: Any, context: Context) -> Image:
+        image = _image(data, self.owner)
+        if not self.coefficients.any():
+            return image
+        rows, cols = image.shape[:2]
+        maps = self._maps.get((rows, cols))
+        if maps is None:
+            camera = self._camera(rows, cols)
+            maps = cv2.initUndistortRectifyMap(camera, self.coefficients, None, camera, (cols, rows), cv2.CV_32FC1)
+            self._maps[(rows, cols)] = maps
+        undistorted: Image = cv2.remap(image, maps[0], maps[1], cv2.INTER_LINEAR)
+        return undistorted

@@ -21,6 +21,7 @@ from ckmconf.model.kernel import Controller as ControllerRecord
 
 from ..network.api import Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry, default_registry
+from ..resources.resource import SmartResourceRuntime
 from .adaptation import build_chain
 from .delegation import Delegation
 from .interfaces import Backend, Controller, ParamError
@@ -83,7 +84,9 @@ class NodeRuntime:
         self.monitor: MonitorService | None = None
         self.delegation: Delegation | None = None
         self.partitions: PartitionSupervisor | None = None  # the partition processes (ckm-run sets it)
+        self.resources: dict[str, SmartResourceRuntime] = {}  # Smart Resources hosted here (main process)
         self._final_tasks: dict[str, Any] | None = None
+        self._final_resources: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
         self._switches: dict[str, list[tuple[str, Condition]]] = {}
         self._alarm_publisher = transport.publisher(TopicQoS(node.alarm_topic(), "event", history=16))
@@ -160,6 +163,26 @@ class NodeRuntime:
                 react=self._react,
             )
 
+        if self.partition in (None, ""):
+            self._setup_resources()
+
+    def _setup_resources(self) -> None:
+        """The SPT services of the Smart Resources this node hosts on the CKM kernel (ROS-kernel
+        resources are bridged, not run here)."""
+        for resource in self.system.resources:
+            if resource.node != self.node.name or resource.kernel != "ckm":
+                continue
+            if not any(s.scenarios for s in resource.services):
+                continue
+            runtime = SmartResourceRuntime(resource, self.transport, node=self.node.name, registry=self.registry)
+            try:
+                runtime.setup()
+            except (OSError, ValueError) as exc:  # a model file, a plugin's own check
+                if isinstance(exc, ConfigError):
+                    raise
+                raise self._error(resource, f"Smart Resource {resource.name!r}: {exc}") from None
+            self.resources[resource.name] = runtime
+
     def _watch(self, topic: str) -> Subscription:
         if topic not in self._watched:
             self._watched[topic] = self.transport.subscribe(self.topic(topic))
@@ -211,10 +234,18 @@ class NodeRuntime:
             )
         if self._own_scheduler:
             self.scheduler.start()
+        for resource in self.resources.values():
+            resource.start()
 
     def stop(self) -> None:
         """Stop the services, drive every actuator to its safe value, close the hardware."""
         self._final_tasks = self._task_statistics()
+        self._final_resources = self._resource_statistics()
+        for resource in self.resources.values():
+            try:
+                resource.stop()
+            except Exception:
+                LOG.exception("could not stop Smart Resource %s", resource.resource.name)
         for name in list(self.scheduler.tasks):
             if name.startswith(f"{self.node.name}."):
                 self.scheduler.remove(name)
@@ -350,6 +381,22 @@ class NodeRuntime:
                 n: {"active": c.active, "skipped": c.skipped, "optional_used": c.optional_used}
                 for n, c in self.controllers.items()
             },
+            "resources": self._final_resources if self._final_resources is not None else self._resource_statistics(),
+        }
+
+    def _resource_statistics(self) -> dict[str, Any]:
+        return {
+            name: {
+                "instances": {
+                    i.key: {"scenario": i.scenario, "published": i.published, "switches": i.tcm.switches}
+                    for i in runtime.instances()
+                },
+                "streams": {
+                    root: {"frames": s.topology.frames, "errors": s.errors, "dropped": s.buffer.stats().dropped}
+                    for root, s in runtime.streams.items()
+                },
+            }
+            for name, runtime in self.resources.items()
         }
 
     # ------------------------------------------------------------------ events

@@ -6,6 +6,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -209,3 +210,27 @@ def test_controllers_can_be_added_and_removed_at_run_time(
     node.remove_controller("c")
     assert "c" not in node.controllers and "n.c" not in node.scheduler.tasks
     assert "controller-removed" in [e["kind"] for e in node.events]
+
+
+def test_a_node_runs_the_smart_resources_it_hosts(
+    nodes: Callable[[System, str], NodeRuntime], transport: Transport
+) -> None:
+    from plugins.processing.scenes import render_rgb_scene
+
+    runtime = nodes(example("smart_resource_tcm.xml"), "camera-node")
+    assert set(runtime.resources) == {"RGBD"}
+    objects = transport.subscribe(runtime.topic("/rgbd/objects"))
+    camera = transport.publisher(runtime.topic("/camera/image"))
+    image = render_rgb_scene(["box_cereal"], seed=3).image
+    found: list[Any] = []
+
+    def recognized() -> bool:
+        camera.publish({"width": 640, "height": 480, "encoding": "rgb8", "data": image.tobytes()})
+        sample = objects.latest()
+        if sample is not None:
+            found[:] = [o["name"] for o in sample.value["objects"]]
+        return "box_cereal" in found
+
+    assert until(recognized)
+    stats = runtime.statistics()["resources"]["RGBD"]
+    assert stats["streams"]["grab"]["frames"] > 0 and stats["instances"]["RGB-recog"]["published"] > 0

@@ -83,7 +83,8 @@ def _registry(resource: SmartResource, real: Mapping[str, type[ProcessingPlugin]
         registry.register("plugin", kind, cls)
     for record in resource.plugins:
         if record.kind not in real:
-            stand_in = Describe if ("match" in record.kind or "shape" in record.kind) else Passthrough
+            recognizer = any(word in record.kind for word in ("match", "shape", "recognition"))
+            stand_in = Describe if recognizer else Passthrough
             registry.register("plugin", record.kind, stand_in)
     return registry
 
@@ -148,14 +149,14 @@ def test_the_image_plugins_are_registered_as_entry_points() -> None:
 
 def test_an_unknown_plugin_kind_is_a_config_error_at_the_plugin(example: SmartResource) -> None:
     registry = Registry(load_entry_points=False)
-    registry.register("plugin", "camera-source", Passthrough)
+    registry.register("plugin", "camera-acquisition", Passthrough)
     with pytest.raises(ConfigError) as caught:
         Topology(example, registry)
     error = caught.value
-    record = next(p for p in example.plugins if p.kind not in ("camera-source",))
+    record = next(p for p in example.plugins if p.kind not in ("camera-acquisition",))
     assert record.loc is not None and (error.file, error.line) == (record.loc.file, record.loc.line)
     assert error.xpath.endswith("Plugin[@name='undistort']/@kind")
-    assert "undistort" in error.message and "camera-source" in error.message
+    assert "undistort" in error.message and "camera-acquisition" in error.message
 
 
 def test_a_bad_param_is_a_config_error_at_the_plugin(example: SmartResource) -> None:

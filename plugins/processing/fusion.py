@@ -1,0 +1,346 @@
+"""``plugin.feature-fusion``: the GlobalRecog.Fusion service (thesis §6.3, Algorithm 4, Fig. 7.17).
+
+Input: ``{input name: latest result or None}`` of the recognition services feeding the service.
+Each input is declared (Param ``inputs``) as ``line`` (2D: ``keypoint-matching``, objects with
+normalized image ``x``, ``y``) or ``point`` (3D: ``kdtree-shape-classifier``, objects with ``x y
+z`` in metres). A 2D object becomes the projection ray of eq. 6.32–6.34 through its pixel; a 3D
+object a point. Both are put in one common frame by the sensor's pose (``sensor_pose``).
+Noise: a point is isotropic, σ = ``pointSigma`` (3 cm: the depth service reports the visible
+surface's centroid, a few cm off the solid's centre); a ray's error is angular, ``lineSigma``
+(0.01 rad, ~5 px at VGA), so its lateral σ grows with range.
+
+Feature model θ (eq. 6.35). Services name features differently: the RGB one the object
+(``cylinder_red_stripes``), the depth one the shape class (``cylinder``). The catalog (Param
+``objects``, and the environment file's Objects, whose semantic ``tag`` is the shape) maps an
+object name to its shape and texture; θ is that shape, or the name itself when unmapped. So
+C(cylinder) holds every cylinder's line and point, and geometry tells the instances apart.
+
+Matching (Algorithm 4): in reliability order, x₁ seeds an estimate θ̂ (eq. 6.36); every other
+observation within Mahalanobis ``dThreshold`` of θ̂ (eq. 6.38) joins, and θ̂ is re-estimated from
+all joined (the θ̂' of eq. 6.41); the rest form C(θ') and the loop repeats. A service observes an
+instance once, so a second observation from an input already joined goes to C(θ').
+
+Knowledge (eq. 6.39–6.40): each observation's ``object``/``shape``/``texture`` is added unless a
+more reliable one already gave it. Reliability (eq. 6.41): r̂ = r₁ + Σ 1/(1 + dᵢ), dᵢ to x₁ when
+xᵢ's magnitude (2D texture, 3D shape) is already in ψ̂, else to θ̂'. The formula exceeds 1 with
+any match; ``reliability`` is r̂ clamped to [0, 1] (the service's QoC measure of Table 7.1 is a
+share) and ``reinforcement`` the raw r̂.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ckmconf import ConfigError, ConfigErrors, read_document
+from ckmconf.model.resources import Plugin
+from runtime.kernel.interfaces import ParamError
+from runtime.resources.spt import Context, ProcessingPlugin
+
+from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
+from .shapes import Camera
+
+KINDS = ("line", "point")
+MAGNITUDE = {"line": "texture", "point": "shape"}
+"""The magnitude γ each kind of input observes (eq. 6.32): 2D texture patterns, 3D shapes."""
+MAX_OBJECTS = 1000
+"""Most objects an input may report per result: matching is quadratic, and a recognizer reports a few."""
+UNKNOWN = "unknown"
+"""The depth classifier's name for a cluster below its threshold: no feature model, not fused."""
+
+
+@dataclass
+class Observation:
+    """S(θ)ᵢ of eq. 6.35: one recognised object of one input, placed in the common frame."""
+
+    source: str
+    index: int
+    model: str
+    reliability: float
+    geometry: Geometry
+    magnitude: str
+    knowledge: dict[str, str] = field(default_factory=dict)
+
+
+def _entries(text: str, param: str, owner: str) -> dict[str, list[str]]:
+    """``"name: v1 v2; name: v…"`` as {name: [values]} (the per-input Params)."""
+    found: dict[str, list[str]] = {}
+    for entry in (e.strip() for e in text.split(";")):
+        if not entry:
+            continue
+        name, colon, values = entry.partition(":")
+        if not colon or not name.strip() or name.strip() in found:
+            raise ParamError(f"{owner}: parameter {param!r} entry {entry!r} is not 'name: values' with a new name")
+        found[name.strip()] = values.split()
+    return found
+
+
+def _numbers(values: list[str], count: int, param: str, name: str, owner: str) -> list[float]:
+    try:
+        numbers = [float(v) for v in values]
+    except ValueError:
+        numbers = []
+    if len(numbers) != count or not all(math.isfinite(v) for v in numbers):
+        raise ParamError(f"{owner}: parameter {param!r} for {name!r} needs {count} finite numbers, got {values}")
+    return numbers
+
+
+class FeatureFusion(ProcessingPlugin):
+    """``plugin.feature-fusion``: fused objects of several recognition services (§6.3.4, Algorithm 4).
+
+    Params: ``inputs`` (``"name: line|point; …"``); ``poses`` (``"name: x y z roll pitch yaw; …"``,
+    the sensor's optical frame in the common frame; default identity, so the common frame is the
+    RGB-D camera's); ``cameras`` (``"name: fx fy cx cy width height; …"`` for line inputs, default
+    ``fx fy cx cy calibrationWidth calibrationHeight``); ``lineSigma`` (rad) / ``pointSigma`` (m)
+    and per-input ``sigmas`` (``"name: σ; …"``); ``dThreshold`` (eq. 6.38); ``minReliability``
+    (r_th of eq. 6.31); ``minRange`` (m, nearest feature along a ray); ``objects`` (``"name: shape
+    [texture]; …"``) and ``environment`` (an environment XML file, relative to the configuration
+    file, read in ``setup()``; ``objects`` entries win).
+
+    Output (msgpack-able): ``{"objects": [{"name", "shape", "texture", "x", "y", "z", "sigma",
+    "origin", "direction", "reliability", "reinforcement", "sources", "observations"}],
+    "reliability"}``. A lone 2D observation has no position (``x y z sigma`` None) but its ray's
+    ``origin`` and ``direction``; a positioned object has ``sigma`` (RMS per axis, m) and no ray.
+    ``reliability`` is the mean fused reliability, 0 with no object.
+    """
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {
+        "inputs": "rgb: line; depth: point; pantilt: line",
+        "poses": "",
+        "cameras": "",
+        "fx": 525.0,
+        "fy": 525.0,
+        "cx": 319.5,
+        "cy": 239.5,
+        "calibrationWidth": 640,
+        "calibrationHeight": 480,
+        "lineSigma": 0.01,
+        "pointSigma": 0.03,
+        "sigmas": "",
+        "dThreshold": 3.0,
+        "minReliability": 0.0,
+        "minRange": 0.3,
+        "objects": "",
+        "environment": "",
+    }
+
+    def __init__(self, record: Plugin) -> None:
+        super().__init__(record)
+        p, owner = self.params, self.owner
+        for name, value in p.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ParamError(f"{owner}: parameter {name!r} = {value} is not finite")
+        for name in ("fx", "fy", "calibrationWidth", "calibrationHeight", "lineSigma", "pointSigma", "dThreshold"):
+            if not p[name] > 0:
+                raise ParamError(f"{owner}: parameter {name!r} = {p[name]} must be greater than 0")
+        if not p["minRange"] > 0:
+            raise ParamError(f"{owner}: parameter 'minRange' = {p['minRange']} must be greater than 0")
+        if not 0 <= p["minReliability"] <= 1:
+            raise ParamError(f"{owner}: parameter 'minReliability' = {p['minReliability']} is not in [0, 1]")
+        self.kinds: dict[str, str] = {}
+        for name, values in _entries(p["inputs"], "inputs", owner).items():
+            if len(values) != 1 or values[0] not in KINDS:
+                raise ParamError(f"{owner}: parameter 'inputs' for {name!r} must be 'line' or 'point', got {values}")
+            self.kinds[name] = values[0]
+        default = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
+        self.cameras = {name: default for name, kind in self.kinds.items() if kind == "line"}
+        for name, values in self._declared("cameras", "line").items():
+            fx, fy, cx, cy, width, height = _numbers(values, 6, "cameras", name, owner)
+            if min(fx, fy, width, height) <= 0 or width != int(width) or height != int(height):
+                raise ParamError(f"{owner}: parameter 'cameras' for {name!r} needs fx, fy > 0 and a whole size")
+            self.cameras[name] = Camera(fx, fy, cx, cy, int(width), int(height))
+        self.sigmas = {name: p[f"{kind}Sigma"] for name, kind in self.kinds.items()}
+        for name, values in self._declared("sigmas").items():
+            (sigma,) = _numbers(values, 1, "sigmas", name, owner)
+            if not sigma > 0:
+                raise ParamError(f"{owner}: parameter 'sigmas' for {name!r} = {sigma} must be greater than 0")
+            self.sigmas[name] = sigma
+        self.poses: dict[str, Pose] = {
+            name: Pose.from_xyzrpy(*_numbers(values, 6, "poses", name, owner))
+            for name, values in self._declared("poses").items()
+        }
+        """Sensor poses by input (missing: identity); the hook for live poses, see ``sensor_pose``."""
+        self.catalog: dict[str, tuple[str, str | None]] = {}
+        for name, values in _entries(p["objects"], "objects", owner).items():
+            if len(values) not in (1, 2):
+                raise ParamError(f"{owner}: parameter 'objects' for {name!r} needs a shape and maybe a texture")
+            self.catalog[name] = (values[0], values[1] if len(values) == 2 else None)
+        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        self.environment = base / p["environment"] if p["environment"] else None
+        self._loaded = self.environment is None
+
+    def _declared(self, param: str, kind: str | None = None) -> dict[str, list[str]]:
+        entries = _entries(self.params[param], param, self.owner)
+        for name in entries:
+            if name not in self.kinds or (kind is not None and self.kinds[name] != kind):
+                wanted = f"a {kind} input" if kind else "an input"
+                raise ParamError(f"{self.owner}: parameter {param!r} names {name!r}, not {wanted} of 'inputs'")
+        return entries
+
+    def setup(self) -> None:
+        """Read the environment's Objects (name → semantic tag as the shape, texture); Params win."""
+        if self.environment is None:
+            return
+        try:  # ckmconf reads safely, and reports a missing or unreadable file as a ConfigError too
+            document = read_document(self.environment)
+        except ConfigError as exc:
+            raise ValueError(f"{self.owner}: cannot use environment file: {exc}") from None
+        except ConfigErrors as exc:
+            raise ValueError(f"{self.owner}: cannot use environment file: {exc.errors[0]}") from None
+        if document.environment is None:
+            raise ValueError(f"{self.owner}: environment file {self.environment} has no Environment")
+        known = {o.name: (o.tag, o.texture) for o in document.environment.objects}
+        self.catalog = known | self.catalog
+        self._loaded = True
+
+    def sensor_pose(self, source: str) -> Pose:
+        """The pose of input ``source``'s sensor in the common frame (f' of eq. 6.34).
+
+        Static Params for now; live poses (a robot moving its camera) replace ``self.poses``
+        entries or override this method.
+        """
+        return self.poses.get(source, IDENTITY)
+
+    def process(self, data: Any, context: Context) -> dict[str, Any]:
+        if not self._loaded:
+            raise RuntimeError(f"{self.owner} is not set up")
+        if not isinstance(data, Mapping):
+            raise ValueError(f"{self.owner} expects a mapping of input name to result, got {type(data).__name__}")
+        observations: dict[str, list[Observation]] = {}
+        for source in sorted(data, key=str):
+            for obs in self._observations(source, data[source]):
+                observations.setdefault(obs.model, []).append(obs)
+        fused = [obj for model in sorted(observations) for obj in self._fuse(model, observations[model])]
+        fused.sort(key=lambda o: (-o["reliability"], o["name"]))
+        mean = sum(o["reliability"] for o in fused) / len(fused) if fused else 0.0
+        return {"objects": fused, "reliability": mean}
+
+    # ------------------------------------------------------------------ inputs → observations (eq. 6.31–6.34)
+
+    def _observations(self, source: Any, result: Any) -> Iterable[Observation]:
+        if result is None:
+            return []
+        if not isinstance(source, str) or source not in self.kinds:
+            raise ValueError(f"{self.owner}: input {source!r} is not declared in parameter 'inputs'")
+
+        def bad(where: str, why: str) -> ValueError:
+            return ValueError(f"{self.owner}: input {source!r} {where} {why}")
+
+        if not isinstance(result, Mapping) or not isinstance(result.get("objects"), (list, tuple)):
+            raise bad("field 'objects'", "is missing or not a list")
+        if len(result["objects"]) > MAX_OBJECTS:
+            raise bad("field 'objects'", f"has {len(result['objects'])} objects, more than {MAX_OBJECTS}")
+        kind = self.kinds[source]
+        camera = self.cameras.get(source)
+        size: tuple[float, float] = (camera.width, camera.height) if camera is not None else (1, 1)
+        if kind == "line" and ("width" in result or "height" in result):
+            size = (
+                _number(result.get("width"), bad, "field 'width'"),
+                _number(result.get("height"), bad, "field 'height'"),
+            )
+            if not all(v >= 1 and v == int(v) for v in size):
+                raise bad("fields 'width'/'height'", f"are not a whole image size: {size}")
+        pose, sigma, found = self.sensor_pose(source), self.sigmas[source], []
+        for index, item in enumerate(result["objects"]):
+            where = f"objects[{index}]"
+            if not isinstance(item, Mapping):
+                raise bad(where, "is not a mapping")
+            name = item.get("name")
+            if not isinstance(name, str) or not name:
+                raise bad(f"{where} field 'name'", "is not a non-empty string")
+            r = _number(item.get("reliability"), bad, f"{where} field 'reliability'")
+            if not 0 <= r <= 1:
+                raise bad(f"{where} field 'reliability'", f"= {r} is not in [0, 1]")
+            coords = [
+                _number(item.get(axis), bad, f"{where} field {axis!r}") for axis in "xyz"[: 2 + (kind == "point")]
+            ]
+            if name == UNKNOWN or r < self.params["minReliability"]:
+                continue
+            if kind == "point":
+                geometry: Geometry = Point(pose.point(np.array(coords)), sigma * sigma * np.eye(3))
+            else:
+                if not all(0 <= v <= 1 for v in coords):
+                    raise bad(f"{where} fields 'x'/'y'", f"= {coords} are not normalized image coordinates")
+                assert camera is not None
+                geometry = self._ray(camera, coords, size, pose, sigma)
+            shape, texture = self.catalog.get(name, (None, None))
+            knowledge = {"object": name} if kind == "line" else {"shape": name}
+            if shape is not None:
+                knowledge |= {"object": name, "shape": shape} | ({"texture": texture} if texture else {})
+            found.append(Observation(source, index, shape or name, r, geometry, MAGNITUDE[kind], knowledge))
+        return found
+
+    def _ray(self, camera: Camera, xy: list[float], size: tuple[float, float], pose: Pose, sigma: float) -> Ray:
+        """The projection line of a normalized image point (eq. 6.32–6.34 as a pinhole back-projection).
+
+        The recognizer's ``x = u / columns`` (u in pixels of the image it saw); the intrinsics,
+        given at the calibration size, are scaled to that image as the resize plugin samples it,
+        so the ray does not depend on the resolution profile.
+        """
+        cols, rows = int(size[0]), int(size[1])
+        fx, fy, cx, cy = camera.intrinsics(rows, cols)
+        direction = np.array([(xy[0] * cols - cx) / fx, (xy[1] * rows - cy) / fy, 1.0])
+        direction = pose.vector(direction / np.linalg.norm(direction))
+        return Ray(pose.translation.copy(), direction, sigma, self.params["minRange"])
+
+    # ------------------------------------------------------------------ Algorithm 4
+
+    def _fuse(self, model: str, collection: list[Observation]) -> list[dict[str, Any]]:
+        """The fused objects of C(θ): one per instance, repeating with C(θ') until it is empty."""
+        pending = sorted(collection, key=lambda o: (-o.reliability, o.source, o.index))
+        fused = []
+        while pending:
+            first, left = pending[0], []
+            members, theta, r_hat = [first], first.geometry, first.reliability
+            knowledge = dict(first.knowledge)
+            for obs in pending[1:]:
+                d = distance(theta, obs.geometry)  # eq. 6.38
+                if any(m.source == obs.source for m in members) or not d < self.params["dThreshold"]:
+                    left.append(obs)
+                    continue
+                if any(m.magnitude == obs.magnitude for m in members):  # eq. 6.41, first case
+                    d = distance(first.geometry, obs.geometry)
+                r_hat += 1.0 / (1.0 + d)
+                for key, value in obs.knowledge.items():  # eq. 6.40: new magnitudes' knowledge only
+                    knowledge.setdefault(key, value)
+                members.append(obs)
+                theta = estimate([m.geometry for m in members])  # θ̂' (eq. 6.36)
+            fused.append(_fused_object(model, knowledge, theta, r_hat, members))
+            pending = left
+        return fused
+
+
+def _number(value: Any, bad: Callable[[str, str], ValueError], where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise bad(where, f"is not a number: {value!r}")
+    if not math.isfinite(float(value)):
+        raise bad(where, f"is not finite: {value!r}")
+    return float(value)
+
+
+def _fused_object(
+    model: str, knowledge: dict[str, str], theta: Geometry, r_hat: float, members: list[Observation]
+) -> dict[str, Any]:
+    """f̂ and r̂ of eq. 6.39 as a msgpack-able dict."""
+    place: dict[str, Any] = dict.fromkeys(("x", "y", "z", "sigma", "origin", "direction"))
+    if isinstance(theta, Point):
+        x, y, z = (float(v) for v in theta.mean)
+        place |= {"x": x, "y": y, "z": z, "sigma": math.sqrt(float(np.trace(theta.cov)) / 3.0)}
+    else:
+        place |= {"origin": [float(v) for v in theta.origin], "direction": [float(v) for v in theta.direction]}
+    return {
+        "name": knowledge.get("object", model),
+        "shape": knowledge.get("shape"),
+        "texture": knowledge.get("texture"),
+        **place,
+        "reliability": min(1.0, r_hat),
+        "reinforcement": r_hat,
+        "sources": [m.source for m in members],
+        "observations": len(members),
+    }

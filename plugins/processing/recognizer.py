@@ -1,0 +1,43 @@
+"""``plugin.orb-recognition``: ORB keypoints and model matching in one plugin.
+
+For configurations that want recognition as one step of a profile (the SPT examples); the use
+case splits it into ``orb-keypoints`` → ``keypoint-matching`` so that the keypoints could feed
+other consumers. Its Params are the union of the two plugins' and are checked by them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from ckmconf.model.resources import Plugin
+from runtime.resources.spt import Context, ProcessingPlugin
+
+from .recognition import KeypointMatching, OrbKeypoints
+
+
+def _part(record: Plugin, cls: type[ProcessingPlugin]) -> Plugin:
+    return dataclasses.replace(record, params=tuple(p for p in record.params if p.name in cls.PARAMS))
+
+
+class OrbRecognition(ProcessingPlugin):
+    """An image in, the matching result out (see :class:`KeypointMatching` for its fields)."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {**OrbKeypoints.PARAMS, **KeypointMatching.PARAMS}
+
+    def __init__(self, record: Plugin) -> None:
+        super().__init__(record)  # rejects a Param neither part knows
+        self.keypoints = OrbKeypoints(_part(record, OrbKeypoints))
+        self.matching = KeypointMatching(_part(record, KeypointMatching))
+
+    def setup(self) -> None:
+        self.keypoints.setup()
+        self.matching.setup()
+
+    def process(self, data: Any, context: Context) -> dict[str, Any]:
+        return self.matching.process(self.keypoints.process(data, context), context)
+
+    def stop(self) -> None:
+        self.matching.stop()
+        self.keypoints.stop()
