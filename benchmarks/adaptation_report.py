@@ -3,7 +3,8 @@
 Table 7.3, per number of active clients (the phases of the schedule with that many clients,
 pooled over the TCM runs): the share of the clients' quality samples in each resolution
 (activation), the scenario changes (events) and raised alarms while that many clients were
-connected, the mean deadline (QoS) and CPU share (QoC) the clients were told, and the penalty —
+connected, the mean deadline (QoS; the median too, a shared machine's stalls skew the mean) and
+CPU share (QoC) the clients were told, and the penalty —
 the mean over those samples of the largest ξ of the client's scenarios.
 
 Table 7.4: variance, deviation, skewness and kurtosis (Pearson's, not excess: a uniform
@@ -97,6 +98,7 @@ def summarize(
                 "events": events,
                 "alarms": alarms,
                 "qos_deadline_s": float(np.mean(deadlines)) if deadlines else None,
+                "qos_deadline_median_s": float(np.median(deadlines)) if deadlines else None,
                 "qoc_cpu": float(np.mean(cpus)) if cpus else None,
                 "penalty": float(np.mean([max(m["penalties"].values()) for m in quality])) if quality else 0.0,
                 "samples": len(quality),

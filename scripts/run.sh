@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set everything up, then run the richest demo there is: validate and summarise the two-robot
-# use case of the thesis (§7) and every example, and show how a broken file is reported.
+# use case of the thesis (§7) and every example, show how a broken file is reported, run a
+# closed loop, and run a short version of the Smart Resource adaptation test of §7.2.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -9,3 +10,7 @@ bash scripts/setup.sh
 echo "all use-case and example files are valid"
 echo "--- a broken file, as ckm-validate reports it:"
 .venv/bin/ckm-validate configs/invalid/sensor_unknown_channel.xml || true
+echo "--- a closed loop on the loopback plant (run directory in runs/demo-closed-loop):"
+.venv/bin/ckm-run configs/examples/closed_loop.xml --duration 3 --log-dir runs/demo-closed-loop
+echo "--- §7.2: one to four clients on the RGB recognition service (figures in runs/demo-adaptation):"
+.venv/bin/ckm-bench adaptation --phase 5 --schedule 1,2,3,4 --out runs/demo-adaptation
