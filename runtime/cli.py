@@ -1,4 +1,4 @@
-"""ckm-run CONFIG [--node NAME [--partition PART]] [--duration S] [--log-dir DIR]: run a configuration.
+"""ckm-run CONFIG [--node NAME [--partition PART]] [--plan PLAN] [--duration S] [--log-dir DIR]: run a configuration.
 
 Without ``--node`` every node runs in this process (the embedded default); with it, just that
 node (one process per node, on any machine of the network). A node with partitions (§3.1.3.2)
@@ -7,6 +7,10 @@ runs its unpartitioned components and its monitor here and each partition as a c
 when several nodes run). SIGINT or SIGTERM stop the run cleanly: the partitions stop, the
 services stop, every actuator is driven to its safe value, the hardware closes. The run
 directory receives the log, the events and each task's statistics.
+
+With ``--plan`` the agents of that plan whose node runs here run their missions too (§5.3),
+recording them in the run directory (``ckm-mission report RUN_DIR``); the run then also ends when
+every local agent's mission has ended.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from ckmconf.model import Network, Node, Partition, System
 
 from .kernel.node import NodeRuntime
 from .kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor, enter_partition
+from .missions.agent import AgentRunner
 from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
@@ -42,6 +47,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--partition", help="with --node: run only this partition of the node (as its supervisor does)")
     parser.add_argument("--duration", type=float, help="stop after this many seconds (default: until a signal)")
     parser.add_argument("--log-dir", type=Path, help="run directory (default: runs/SYSTEM-TIMESTAMP)")
+    parser.add_argument("--plan", help="also run this plan's agents whose node runs here")
     return parser
 
 
@@ -70,6 +76,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{args.config}: no partition {args.partition!r} (partitions: {names})", file=sys.stderr)
             return 1
         enter_partition(partition)  # first: tie this process to its supervisor
+    if args.plan is not None and system.plan(args.plan) is None:
+        names = ", ".join(p.name for p in system.plans) or "none"
+        print(f"{args.config}: no plan {args.plan!r} (plans: {names})", file=sys.stderr)
+        return 1
     run_dir = args.log_dir or Path("runs") / f"{system.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(run_dir / "ckm.log")
@@ -78,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.getLogger().setLevel(logging.INFO)
     try:
         name = f"{args.node}.{args.partition}" if partition is not None else args.node or system.name
-        return _run(system, Path(args.config), nodes, args.duration, run_dir, name, partition)
+        return _run(system, Path(args.config), nodes, args.duration, run_dir, name, partition, args.plan)
     finally:
         logging.getLogger().removeHandler(handler)
         handler.close()
@@ -104,6 +114,7 @@ def _run(
     run_dir: Path,
     name: str,
     partition: Partition | None,
+    plan: str | None = None,
 ) -> int:
     network = system.network or Network()
     try:
@@ -149,7 +160,16 @@ def _run(
 
             memory = MemoryWatch(partition, over_budget)
         LOG.info("running %s (%d node(s)) for %s", system.name, len(runtimes), duration or "ever")
-        stop.wait(duration)
+        agents = _start_agents(system, plan, nodes, transport, run_dir) if plan and partition is None else []
+        deadline = None if duration is None else time.monotonic() + duration
+        while not stop.is_set() and not (agents and all(not t.is_alive() for _, t in agents)):
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
+                break
+            stop.wait(0.1 if remaining is None else min(0.1, remaining))
+        for runner, thread in agents:
+            runner.stop()
+            thread.join(5.0)
     except ConfigError as error:
         print(error, file=sys.stderr)
         return 1
@@ -164,6 +184,24 @@ def _run(
         extra = {"partition": partition.name, "memory": memory.statistics() if memory else None} if partition else {}
         _write_run(run_dir, config, system, runtimes, started, extra)
     return code
+
+
+def _start_agents(
+    system: System, plan: str, nodes: list[Node], transport: Transport, run_dir: Path
+) -> list[tuple[AgentRunner, threading.Thread]]:
+    """The plan's agents whose node runs here, each running its mission in a thread."""
+    record = system.plan(plan)
+    assert record is not None
+    here = {n.name for n in nodes}
+    started = []
+    for agent in record.agents:
+        if agent.node in here:
+            runner = AgentRunner(system, plan, agent.name, transport, run_dir)
+            thread = threading.Thread(target=runner.run, name=f"agent-{agent.name}", daemon=True)
+            thread.start()
+            started.append((runner, thread))
+            LOG.info("plan %s: agent %s runs mission %s", plan, agent.name, agent.mission)
+    return started
 
 
 def _write_run(

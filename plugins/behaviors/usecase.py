@@ -1,0 +1,292 @@
+"""The behaviors of the two-robot use case (Tables 7.5 and 7.7), written against services.
+
+None of them knows a robot: they configure Smart Resource services (their ``<Uses>``), read the
+services' outputs, and publish goals on their ``<Output>`` topics. The messages they exchange
+(what the simulated or real services implement):
+
+- ``/nav/status`` (Navigation.AMCL ``status``): ``{"goal": str, "state": "planning" | "active" |
+  "arrived" | "failed", "path_length": m, "remaining": m}``.
+- ``/base/move_goal`` (a behavior's ``move``): ``{"id": int, "frame": "robot", "x": m, "y": m,
+  "yaw": rad}``; ``/base/move_status`` (MobileBase.Displacement ``move_status``): ``{"id": int,
+  "state": "moving" | "done" | "failed", "remaining": m, "total": m}``.
+- ``/arm/goal`` (``arm_goal``): ``{"id": int, "group": "arm" | "gripper", "pose": name}``;
+  ``/arm/status`` (RoboticArm.MoveIt ``status``): ``{"id": int, "state": "moving" | "reached" |
+  "failed", "pose": name, "active": bool}``.
+- recognition results (Fusion, Pan-Tilt Recog.): ``{"objects": [{"name", "shape", "texture",
+  "x", "y", "z", "reliability", "sources"}], "reliability"}``.
+
+A goal is matched to its status by ``id`` (fresh per behavior run), so a status left over from an
+earlier state never ends this one.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from ckmconf.model.missions import Behavior as BehaviorRecord
+from runtime.kernel.interfaces import ParamError
+from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
+
+_ids = itertools.count(1)
+
+
+def _state(message: Any, goal_id: int | None = None) -> str | None:
+    """The ``state`` of a status message (for our goal id, when one is given)."""
+    if not isinstance(message, Mapping):
+        return None
+    if goal_id is not None and message.get("id") != goal_id:
+        return None
+    state = message.get("state")
+    return state if isinstance(state, str) else None
+
+
+def _share_done(message: Any) -> float:
+    """1 − remaining / total of a status message, 0 when unknown."""
+    if not isinstance(message, Mapping):
+        return 0.0
+    total, remaining = message.get("total", message.get("path_length")), message.get("remaining")
+    if not isinstance(total, int | float) or not isinstance(remaining, int | float) or total <= 0:
+        return 0.0
+    return max(0.0, min(1.0, 1.0 - remaining / total))
+
+
+def find_target(result: Any, shape: str, texture: str, min_sources: int = 1) -> dict[str, Any] | None:
+    """The most reliable recognised object of ``shape`` whose texture mentions ``texture``."""
+    if not isinstance(result, Mapping) or not isinstance(result.get("objects"), list):
+        return None
+    best: dict[str, Any] | None = None
+    for item in result["objects"]:
+        if not isinstance(item, Mapping):
+            continue
+        name = str(item.get("name", ""))
+        shapes = {str(item.get("shape", "")), name}
+        textures = f"{item.get('texture', '')} {name}"
+        sources = item.get("sources")
+        count = len(sources) if isinstance(sources, list) else 1
+        if shape and not any(shape in s for s in shapes):
+            continue
+        if texture and texture not in textures:
+            continue
+        if count < min_sources:
+            continue
+        if best is None or float(item.get("reliability", 0)) > float(best.get("reliability", 0)):
+            best = dict(item)
+    return best
+
+
+class Init(Behavior):
+    """INIT: records what the mission is after (target, home); no service."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"target": "", "targetTexture": "", "home": ""}
+
+    def step(self) -> BehaviorStatus:
+        return BehaviorStatus(progress=1.0, done=True, detail=f"target {self.params['target']}")
+
+
+class End(Behavior):
+    """END: closes the execution; its services were released by the previous states."""
+
+    def step(self) -> BehaviorStatus:
+        return BehaviorStatus(progress=1.0, done=True)
+
+
+class SetNavGoal(Behavior):
+    """NAV, NAV_HOME, NAV_COOP: sets AMCL's goal and waits until a path to it is established.
+
+    With an input (NAV_COOP's ``spotted`` signal) the goal is the object's position there, moved
+    ``approachDistance`` towards the robot; the behavior waits for it (untraceable).
+    """
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"approachDistance": 0.0}
+
+    def start(self) -> None:
+        super().start()
+        self.goal: str | None = None
+        if not self.record.inputs:
+            uses = next((u for u in self.record.uses if u.alias == "nav"), None)
+            self.goal = next((c.value for c in uses.configure if c.parameter == "goal"), None) if uses else None
+
+    def _goal_from_input(self) -> str | None:
+        spotted = self.read(self.record.inputs[0].name)
+        value = spotted.get("position", spotted) if isinstance(spotted, Mapping) else None
+        if not isinstance(value, Mapping) or not all(isinstance(value.get(k), int | float) for k in ("x", "y")):
+            return None
+        x, y = float(value["x"]), float(value["y"])
+        distance = math.hypot(x, y)
+        keep = max(0.0, distance - self.params["approachDistance"]) / distance if distance > 0 else 0.0
+        return f"{x * keep:.3f} {y * keep:.3f} {math.atan2(y, x):.3f}"
+
+    def step(self) -> BehaviorStatus:
+        if self.goal is None and self.record.inputs:
+            self.goal = self._goal_from_input()
+            if self.goal is None:
+                return BehaviorStatus(progress=0.0, detail="waiting for the goal")
+            self.service("nav").configure({"goal": self.goal}, ())
+        status = self.service("nav").output("status")
+        state = _state(status) if isinstance(status, Mapping) and status.get("goal") == self.goal else None
+        if state in ("active", "arrived"):
+            return BehaviorStatus(progress=1.0, done=True)
+        if state == "failed":
+            return BehaviorStatus(progress=0.5, failed=True, detail="no path to the goal")
+        return BehaviorStatus(progress=0.5)
+
+
+class WaitGoal(Behavior):
+    """WAIT: drives along AMCL's path; progress is the share of the path covered."""
+
+    def step(self) -> BehaviorStatus:
+        status = self.service("nav").output("status")
+        state = _state(status)
+        if state == "arrived":
+            return BehaviorStatus(progress=1.0, done=True)
+        if state == "failed":
+            return BehaviorStatus(progress=_share_done(status), failed=True, detail="navigation failed")
+        return BehaviorStatus(progress=_share_done(status))
+
+
+class SpotObjects(Behavior):
+    """SPOT, SPOT_COOP: waits until the fused recognition holds the target (untraceable), then
+    writes its position on the ``target`` output."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"target": "", "targetTexture": "", "minSources": 1}
+
+    def step(self) -> BehaviorStatus:
+        result = self.read("objects") if "objects" in self.context.inputs else self.service("fusion").output("objects")
+        p = self.params
+        found = find_target(result, p["target"], p["targetTexture"], p["minSources"])
+        if found is None:
+            return BehaviorStatus(progress=0.0)
+        self.write("target", found)
+        return BehaviorStatus(progress=1.0, done=True, detail=f"{found.get('name')} at {found.get('reliability')}")
+
+
+class _Goals(Behavior):
+    """Sends goals and follows their statuses by id."""
+
+    def _send(self, output: str, goal: dict[str, Any]) -> int:
+        goal_id = next(_ids)
+        self.write(output, {"id": goal_id, **goal})
+        return goal_id
+
+
+class Approach(_Goals):
+    """APPR: the arm to ``armPose`` and the base to ``standoff`` metres from the target."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"standoff": 0.2, "armPose": "pre_grasp"}
+
+    def start(self) -> None:
+        super().start()
+        self.move_id: int | None = None
+        self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]})
+
+    def step(self) -> BehaviorStatus:
+        if self.move_id is None:
+            target = self.read("target")
+            if not isinstance(target, Mapping) or not isinstance(target.get("x"), int | float):
+                return BehaviorStatus(progress=0.0, detail="no target")
+            x, y = float(target["x"]), float(target.get("y") or 0.0)
+            distance = math.hypot(x, y)
+            keep = max(0.0, distance - self.params["standoff"]) / distance if distance > 0 else 0.0
+            goal = {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)}
+            self.move_id = self._send("move", goal)
+        move = self.service("base").output("move_status")
+        arm = self.service("arm").output("status")
+        move_state, arm_state = _state(move, self.move_id), _state(arm, self.arm_id)
+        progress = 0.8 * (_share_done(move) if move_state else 0.0) + 0.2 * (arm_state == "reached")
+        if "failed" in (move_state, arm_state):
+            return BehaviorStatus(progress=progress, failed=True)
+        return BehaviorStatus(progress=1.0 if move_state == "done" and arm_state == "reached" else progress,
+                              done=move_state == "done" and arm_state == "reached")  # fmt: skip
+
+
+class ArmSequence(_Goals):
+    """PICK, PLACE: the ``sequence`` of ``group:pose`` goals, each after the previous is reached."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"sequence": ""}
+
+    def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
+        super().__init__(record, context)
+        self.steps = []
+        for item in str(self.params["sequence"]).split():
+            group, _, pose = item.partition(":")
+            if group not in ("arm", "gripper") or not pose:
+                raise ParamError(f"{self.owner}: sequence step {item!r} is not arm:POSE or gripper:POSE")
+            self.steps.append({"group": group, "pose": pose})
+        if not self.steps:
+            raise ParamError(f"{self.owner}: parameter 'sequence' is empty")
+
+    def start(self) -> None:
+        super().start()
+        self.index = 0
+        self.goal_id = self._send("arm_goal", self.steps[0])
+
+    def step(self) -> BehaviorStatus:
+        state = _state(self.service("arm").output("status"), self.goal_id)
+        if state == "failed":
+            return BehaviorStatus(progress=self.index / len(self.steps), failed=True)
+        if state == "reached":
+            self.index += 1
+            if self.index == len(self.steps):
+                return BehaviorStatus(progress=1.0, done=True)
+            self.goal_id = self._send("arm_goal", self.steps[self.index])
+        return BehaviorStatus(progress=self.index / len(self.steps))
+
+
+class BackOff(_Goals):
+    """BACK: moves ``distance`` metres backwards."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"distance": 0.3}
+
+    def start(self) -> None:
+        super().start()
+        self.move_id = self._send("move", {"frame": "robot", "x": -abs(self.params["distance"]), "y": 0.0, "yaw": 0.0})
+
+    def step(self) -> BehaviorStatus:
+        status = self.service("base").output("move_status")
+        state = _state(status, self.move_id)
+        return BehaviorStatus(progress=1.0 if state == "done" else _share_done(status) if state else 0.0,
+                              done=state == "done", failed=state == "failed")  # fmt: skip
+
+
+class TrackObject(Behavior):
+    """OBJ_TRACK: waits until the pan-tilt recognition sees the target and the head follows it."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"target": "", "targetTexture": ""}
+
+    def step(self) -> BehaviorStatus:
+        found = find_target(
+            self.service("recog").output("objects"), self.params["target"], self.params["targetTexture"]
+        )
+        moving = self.service("track").measures().get("moving")
+        if found is not None and moving:
+            return BehaviorStatus(progress=1.0, done=True)
+        return BehaviorStatus(progress=0.5 if found is not None else 0.0)
+
+
+class FixObject(Behavior):
+    """OBJ_FIX: holds the camera on the target until the recognition has been reliable for
+    ``holdTime`` seconds, then writes the target's position on its output (the plan signal)."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = {"holdTime": 2.0, "target": "", "targetTexture": "", "minReliability": 0.7}
+
+    def start(self) -> None:
+        super().start()
+        self.since: float | None = None
+
+    def step(self) -> BehaviorStatus:
+        p = self.params
+        found = find_target(self.service("recog").output("objects"), p["target"], p["targetTexture"])
+        now = self.context.now()
+        if found is None or float(found.get("reliability", 0.0)) < p["minReliability"]:
+            self.since = None
+            return BehaviorStatus(progress=0.0)
+        self.since = now if self.since is None else self.since
+        held = now - self.since
+        if held >= p["holdTime"]:
+            for port in self.record.outputs:
+                self.write(port.name, {"position": {k: found.get(k) for k in ("x", "y", "z")}, "object": found})
+            return BehaviorStatus(progress=1.0, done=True)
+        return BehaviorStatus(progress=held / p["holdTime"])

@@ -1,0 +1,150 @@
+"""ckm-mission validate SYSTEM.xml [--mission NAME] [--json] [--run-dir DIR] | ckm-mission report RUN_DIR.
+
+``validate`` is the off-line validation of §5.4 and Fig. 7.21, for the named mission or every
+top mission (those no other mission nests): (a) the static checks of the mission graph, (b) a run
+in simulated time against simulated services with the fake interaction forcing every transition
+— state and transition coverage, each episode's state sequence — and (c) SRFlowGen's trace of
+the quality requirements through the services (eq. 5.2–5.7). Findings are printed one per line,
+``FILE:LINE:COL: XPATH: [kind] message``; exit 0 when no mission has an error, 1 otherwise (a
+file that does not load is reported like ``ckm-validate`` and exits 1). ``--run-dir`` keeps the
+episodes' recordings (``ckm-mission report DIR/MISSION/episode-1`` draws Fig. 7.21).
+
+``report`` prints Table 7.9 for a recorded run and writes its Fig. 7.23-style plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ckmconf import ConfigError, load
+from ckmconf.model import System
+from ckmconf.model.missions import Validation
+
+from . import report
+from .fake import Coverage, explore, record_into
+from .validation.findings import Finding, finding, ordered
+
+
+def top_missions(system: System) -> list[str]:
+    """Missions no other mission nests: the ones an agent runs."""
+    nested = {s.mission for m in system.missions for s in m.states if s.mission}
+    return [m.name for m in system.missions if m.name not in nested]
+
+
+def _coverage_findings(system: System, mission: str, coverage: Coverage, required: float) -> list[Finding]:
+    found = []
+    for record, transition in coverage.uncovered():
+        found.append(
+            finding(
+                "uncovered-transition",
+                "error",
+                f"no simulated run could fire {transition.from_} -> {transition.to} (when {transition.when!r}): its "
+                "state is never reached or an earlier transition always holds first",
+                transition,
+                mission=record.name,
+                state=transition.from_,
+                transition=f"{transition.from_} -> {transition.to}",
+            )
+        )
+    for episode in coverage.episodes:
+        if episode.problem:
+            last = episode.states[-1] if episode.states else None
+            message = f"simulated run stopped at {last}: {episode.problem}"
+            found.append(finding("run-stuck", "error", message, system.mission(mission), mission=mission))
+    states, transitions = coverage.share()
+    if min(states, transitions) < required:
+        found.append(
+            finding(
+                "coverage",
+                "error",
+                f"coverage {states:.0%} of the states and {transitions:.0%} of the transitions is below "
+                f"the required {required:.0%}",
+                system.mission(mission),
+                mission=mission,
+            )
+        )
+    return found
+
+
+def validate_mission(system: System, mission: str, run_dir: Path | None = None) -> dict[str, Any]:
+    """Every check on one top mission: its findings, coverage, episodes and SRFlowGen report."""
+    from .validation.srflowgen import srflowgen
+    from .validation.static import check_mission
+
+    settings = system.validation or Validation()
+    findings = list(check_mission(system, mission))
+    recorder = record_into(run_dir / mission) if run_dir is not None else None
+    coverage = explore(system, mission, step=settings.step, horizon=settings.horizon, recorder=recorder)
+    findings += _coverage_findings(system, mission, coverage, settings.coverage)
+    flow_findings, flow = srflowgen(system, mission, settings)
+    findings += flow_findings
+    states, transitions = coverage.share()
+    return {
+        "mission": mission,
+        "ok": not any(f.severity == "error" for f in findings),
+        "findings": [f.to_json() for f in ordered(findings)],
+        "coverage": {"states": states, "transitions": transitions},
+        "episodes": [
+            {"outcome": e.outcome, "time": e.time, "states": e.states, "problem": e.problem} for e in coverage.episodes
+        ],
+        "flow": flow.to_json() if hasattr(flow, "to_json") else None,
+        "_findings": ordered(findings),
+    }
+
+
+def _validate(args: argparse.Namespace) -> int:
+    try:
+        system = load(args.system)
+    except ConfigError as error:
+        print(error, file=sys.stderr)
+        return 1
+    names = [args.mission] if args.mission else top_missions(system)
+    if args.mission and system.mission(args.mission) is None:
+        known = ", ".join(m.name for m in system.missions) or "none"
+        print(f"{args.system}: no mission {args.mission!r} (missions: {known})", file=sys.stderr)
+        return 1
+    if not names:
+        print(f"{args.system}: no mission to validate", file=sys.stderr)
+        return 1
+    results = [validate_mission(system, name, args.run_dir) for name in names]
+    for result in results:
+        for item in result.pop("_findings"):
+            print(item.format())
+        coverage = result["coverage"]
+        verdict = "coherent" if result["ok"] else "NOT coherent"
+        print(
+            f"{result['mission']}: {verdict}; coverage {coverage['states']:.0%} of states, "
+            f"{coverage['transitions']:.0%} of transitions in {len(result['episodes'])} simulated runs"
+        )
+    ok = all(r["ok"] for r in results)
+    if args.json:
+        print(json.dumps({"ok": ok, "missions": results}))
+    return 0 if ok else 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="ckm-mission", description="Validate missions off-line; report runs.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    validate = commands.add_parser("validate", help="off-line validation (§5.4, Fig. 7.21)")
+    validate.add_argument("system", help="System file")
+    validate.add_argument("--mission", help="only this mission (default: every top mission)")
+    validate.add_argument("--json", action="store_true", help="end with one line of JSON")
+    validate.add_argument("--run-dir", type=Path, help="keep the simulated runs' recordings here")
+    rep = commands.add_parser("report", help="on-line evaluation of a recorded run (Table 7.9, Fig. 7.23)")
+    rep.add_argument("run_dir", type=Path)
+    rep.add_argument("--out", type=Path, help="plots directory (default: RUN_DIR/report)")
+    rep.add_argument("--json", action="store_true", help="end with one line of JSON")
+    rep.add_argument("--depth", choices=("leaf", "top"), default="leaf", help="rows per behavior state or top state")
+    args = parser.parse_args(argv)
+    if args.command == "validate":
+        return _validate(args)
+    return report.main(args.run_dir, out=args.out, json=args.json, depth=args.depth)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,351 @@
+"""Missions as hierarchical finite state machines (thesis §5.2).
+
+A mission is built from its ``<Mission>`` record: one initial state; states run a behavior or a
+nested mission; one-way transitions fire on conditions (docs/decisions.md D9) over the state's
+behavior (``done()``, ``failed()``, ``progress``), time (``timeout()``, ``elapsed``), the nested
+mission's outcome (``outcome('x')``), plan signals (``signal('s')``) and the services the
+behavior uses (``alias.field``, ``performance``). The mission's output is its active state's.
+
+Every step, from the top down: a state's transitions are tried in document order, the first that
+holds fires (D14) — so an outer state's ``timeout()`` pre-empts whatever runs inside it — and
+only if none fires does the step go down into the nested mission, or step the behavior (whose
+fresh status is then tried against the state's transitions). A transition to a ``<Final>`` ends
+that mission with that outcome; the parent sees it as ``outcome('name')`` and ``done()``.
+
+Mission progress counts towards the first declared final (the success outcome by convention):
+with D(s) the fewest transitions from s to it, a mission at state s whose own progress is p has
+progress (D(initial) − D(s) + p) / D(initial), clamped to [0, 1] — a retry lowers it, as it
+should. A nested state's progress is its mission's.
+
+The engine is driven by ``step()`` on a clock it is given: real time in a live run, simulated
+time in the off-line validation (the same code runs both).
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from ckmconf.expressions import TRANSITION, Condition, Environment, evaluate, parse
+from ckmconf.model import System
+from ckmconf.model.missions import Mission, State
+
+from .behaviors import Behavior, BehaviorStatus
+from .composition import composed_performance, service_performance
+
+
+class Recorder(Protocol):
+    def write(self, kind: str, **fields: Any) -> None: ...
+
+
+BehaviorFactory = Callable[[str, str, Callable[[], float]], Behavior]
+"""(behavior name, state path, seconds-in-state clock) → the behavior to start for that state."""
+
+
+@dataclass
+class Signals:
+    """Plan signals received so far (latched: once received, ``signal()`` stays true)."""
+
+    values: dict[str, Any] = field(default_factory=dict)
+
+    def received(self, name: str) -> bool:
+        return name in self.values
+
+    def set(self, name: str, value: Any) -> None:
+        self.values[name] = value
+
+
+class MissionError(RuntimeError):
+    """A mission that cannot be built or run (unknown mission, behavior or state)."""
+
+
+def distances_to_success(mission: Mission) -> dict[str, int]:
+    """Fewest transitions from each state to the first declared final (absent: unreachable)."""
+    if not mission.finals:
+        return {}
+    incoming: dict[str, list[str]] = collections.defaultdict(list)
+    for t in mission.transitions:
+        incoming[t.to].append(t.from_)
+    goal = mission.finals[0].name
+    distance = {goal: 0}
+    queue = collections.deque([goal])
+    while queue:
+        node = queue.popleft()
+        for source in incoming[node]:
+            if source not in distance:
+                distance[source] = distance[node] + 1
+                queue.append(source)
+    return distance
+
+
+class MissionRun:
+    """One level of the HFSM: a mission record and its active state."""
+
+    def __init__(self, engine: MissionEngine, mission: Mission, path: str) -> None:
+        self.engine, self.mission, self.path = engine, mission, path
+        self.state: State | None = None
+        self.entered = 0.0
+        self.behavior: Behavior | None = None
+        self.status = BehaviorStatus()
+        self.child: MissionRun | None = None
+        self.outcome: str | None = None
+        self.finals = {f.name for f in mission.finals}
+        self.distance = distances_to_success(mission)
+        self.transitions = [
+            (t, engine.condition(t.when, f"{mission.name}: {t.from_} -> {t.to}")) for t in mission.transitions
+        ]
+
+    # ------------------------------------------------------------------ states
+
+    def state_path(self) -> str:
+        assert self.state is not None
+        return f"{self.path}/{self.state.name}"
+
+    def enter(self, name: str) -> None:
+        state = self.mission.state(name)
+        if state is None:
+            raise MissionError(f"mission {self.mission.name!r} has no state {name!r}")
+        engine = self.engine
+        self.state, self.entered, self.status, self.behavior, self.child = (
+            state,
+            engine.now(),
+            BehaviorStatus(),
+            None,
+            None,
+        )
+        path = self.state_path()
+        engine.record(
+            "enter", path=path, state=name, mission=self.mission.name, behavior=state.behavior, nested=state.mission
+        )
+        engine.emit(path, "entry")
+        if state.mission is not None:
+            nested = engine.system.mission(state.mission)
+            if nested is None:
+                raise MissionError(f"state {path} runs an unknown mission {state.mission!r}")
+            self.child = MissionRun(engine, nested, path)
+            self.child.enter(nested.initial)
+        elif state.behavior is not None:
+            entered = self.entered
+            self.behavior = engine.factory(state.behavior, path, lambda: engine.now() - entered)
+            self.behavior.start()
+
+    def exit(self, to: str | None, condition: str | None, reason: str) -> None:
+        if self.state is None:
+            return
+        if self.child is not None and self.child.outcome is None:
+            self.child.exit(None, None, "stopped")
+        if self.behavior is not None:
+            self.behavior.stop()
+        path = self.state_path()
+        if self.status.done or (self.child is not None and self.child.outcome is not None):
+            self.engine.emit(path, "done")
+        self.engine.emit(path, "exit")
+        self.engine.record("exit", path=path, state=self.state.name, mission=self.mission.name, to=to,
+                           condition=condition, reason=reason)  # fmt: skip
+        self.state, self.behavior, self.child = None, None, None
+
+    # ------------------------------------------------------------------ stepping
+
+    def step(self) -> None:
+        if self.outcome is not None or self.state is None:
+            return
+        if self._try_transitions():
+            return
+        if self.child is not None:
+            self.child.step()
+            if self.child.outcome is not None:
+                self._try_transitions()
+        elif self.behavior is not None:
+            self.status = self.behavior.step()
+            self._try_transitions()
+
+    def _try_transitions(self) -> bool:
+        assert self.state is not None
+        env = self.engine.environment(self)
+        if env is None:  # the engine holds this state (the off-line driver's dwell)
+            return False
+        for transition, condition in self.transitions:
+            if transition.from_ == self.state.name and evaluate(condition, env):
+                self.exit(transition.to, transition.when, "transition")
+                if transition.to in self.finals:
+                    self.outcome = transition.to
+                    self.engine.record("outcome", mission=self.mission.name, path=self.path, outcome=transition.to)
+                else:
+                    self.enter(transition.to)
+                return True
+        return False
+
+    # ------------------------------------------------------------------ measures
+
+    def own_progress(self) -> float:
+        if self.child is not None:
+            return self.child.progress()
+        return max(0.0, min(1.0, self.status.progress))
+
+    def progress(self) -> float:
+        if self.outcome is not None:
+            return 1.0 if self.mission.finals and self.outcome == self.mission.finals[0].name else 0.0
+        start = self.distance.get(self.mission.initial)
+        if not start or self.state is None:
+            return 0.0
+        here = self.distance.get(self.state.name, start)
+        return max(0.0, min(1.0, (start - here + self.own_progress()) / start))
+
+    def leaf(self) -> MissionRun:
+        return self.child.leaf() if self.child is not None and self.child.state is not None else self
+
+    def elapsed(self) -> float:
+        return self.engine.now() - self.entered
+
+    def timed_out(self) -> bool:
+        if self.state is None:
+            return False
+        limit = self.state.timeout
+        if limit is None and self.state.behavior is not None:
+            record = self.engine.system.behavior(self.state.behavior)
+            limit = record.timeout if record is not None else None
+        return limit is not None and self.elapsed() > limit
+
+    def performance(self) -> float | None:
+        """SPC (eq. 5.1) of the active behavior's services under this mission's matrix."""
+        if self.behavior is None:
+            return None
+        handles = self.behavior.context.services
+        matrix = self.engine.system.matrix(self.mission.composition) if self.mission.composition else None
+        refs, states = [], {}
+        for uses in self.behavior.record.uses:
+            handle = handles.get(uses.alias)
+            if handle is None:
+                continue
+            samples = {r.measure: handle.samples(r.measure) for r in uses.requires}
+            states[uses.service] = service_performance(handle.running(), uses.requires, samples)
+            refs.append(uses.service)
+        return composed_performance(matrix, refs, states)
+
+
+class MissionEngine:
+    """Runs one agent's top mission (see the module docstring)."""
+
+    def __init__(
+        self,
+        system: System,
+        mission: str,
+        *,
+        factory: BehaviorFactory,
+        clock: Callable[[], float],
+        agent: str = "agent",
+        recorder: Recorder | None = None,
+        signals: Signals | None = None,
+        emitters: Mapping[tuple[str, str], str] | None = None,
+        on_signal: Callable[[str, Any], None] | None = None,
+        progress_period: float = 0.5,
+        plan: str | None = None,
+    ) -> None:
+        record = system.mission(mission)
+        if record is None:
+            known = ", ".join(m.name for m in system.missions) or "none"
+            raise MissionError(f"no mission {mission!r} (missions: {known})")
+        self.system, self.record_mission, self.agent = system, record, agent
+        self.factory, self.clock, self.recorder = factory, clock, recorder
+        self.signals = signals or Signals()
+        self.emitters = dict(emitters or {})  # (state path below the top, "entry"|"done"|"exit") → signal
+        self.on_signal = on_signal
+        self.progress_period = progress_period
+        self.plan = plan
+        self._conditions: dict[str, Condition] = {}
+        self._start = 0.0
+        self._last_progress = -1e9
+        self.top = MissionRun(self, record, record.name)
+
+    # ------------------------------------------------------------------ services for MissionRun
+
+    def now(self) -> float:
+        return self.clock() - self._start
+
+    def record(self, kind: str, **fields: Any) -> None:
+        if self.recorder is not None:
+            self.recorder.write(kind, **fields)
+
+    def condition(self, text: str, where: str) -> Condition:
+        if text not in self._conditions:
+            try:
+                self._conditions[text] = parse(text, TRANSITION)
+            except ValueError as exc:
+                raise MissionError(f"{where}: {exc}") from None
+        return self._conditions[text]
+
+    def emit(self, path: str, when: str) -> None:
+        relative = path.split("/", 1)[1] if "/" in path else path
+        name = self.emitters.get((relative, when))
+        if name is not None:
+            value = {"agent": self.agent, "state": relative, "time": self.now()}
+            self.signals.set(name, value)
+            self.record("signal", name=name, direction="sent", value=value)
+            if self.on_signal is not None:
+                self.on_signal(name, value)
+
+    def environment(self, run: MissionRun) -> Environment | None:
+        """What ``run``'s transitions are evaluated against (None: try none this step)."""
+        child = run.child
+
+        def attribute(alias: str, name: str) -> Any:
+            if run.behavior is None:
+                return None
+            handle = run.behavior.context.services.get(alias)
+            if handle is None:
+                return None
+            value = handle.output(name)
+            return value if value is not None else handle.measures().get(name)
+
+        return Environment(
+            functions={
+                "done": lambda: run.status.done or (child is not None and child.outcome is not None),
+                "failed": lambda: run.status.failed,
+                "timeout": run.timed_out,
+                "outcome": lambda name: child is not None and child.outcome == name,
+                "signal": self.signals.received,
+            },
+            names={"progress": run.own_progress(), "elapsed": run.elapsed(), "performance": run.performance()},
+            attributes=attribute,
+        )
+
+    # ------------------------------------------------------------------ driving
+
+    def start(self) -> None:
+        self._start = self.clock()
+        self.record("start", mission=self.record_mission.name, plan=self.plan, wall=time.time())
+        self.top.enter(self.record_mission.initial)
+
+    @property
+    def outcome(self) -> str | None:
+        return self.top.outcome
+
+    def active_path(self) -> str | None:
+        leaf = self.top.leaf()
+        return leaf.state_path() if leaf.state is not None else None
+
+    def step(self) -> str | None:
+        """One mission period; the top mission's outcome once it has ended."""
+        if self.top.outcome is None:
+            self.top.step()
+            now = self.now()
+            if now - self._last_progress >= self.progress_period or self.top.outcome is not None:
+                self._last_progress = now
+                leaf = self.top.leaf()
+                if self.top.outcome is not None:  # the final point of the progress curve
+                    self.record("progress", path=self.top.path, progress=self.top.progress(), performance=None,
+                                mission_progress=self.top.progress())  # fmt: skip
+                elif leaf.state is not None:
+                    self.record("progress", path=leaf.state_path(), progress=leaf.own_progress(),
+                                performance=leaf.performance(), mission_progress=self.top.progress())  # fmt: skip
+            if self.top.outcome is not None:
+                self.record("end", outcome=self.top.outcome, wall=time.time())
+        return self.top.outcome
+
+    def stop(self, reason: str = "stopped") -> None:
+        if self.top.outcome is None and self.top.state is not None:
+            self.top.exit(None, None, reason)
+            self.record("end", outcome=reason, wall=time.time())

@@ -1,0 +1,175 @@
+"""The use-case behaviors (Tables 7.5, 7.7) against services simulated in memory: what they
+configure, what goals they send, how their progress follows the services, when they end."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import ckmconf
+from ckmconf.model import System
+from runtime.kernel.interfaces import ParamError
+from runtime.missions.behaviors import Behavior, BehaviorContext
+from runtime.registry import default_registry
+from runtime.resources.api import Bounds
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+class Service:
+    """A service handle whose outputs and measures the test sets."""
+
+    def __init__(self, ref: str) -> None:
+        self.ref = ref
+        self.outputs: dict[str, Any] = {}
+        self.values: dict[str, float] = {}
+        self.configured: list[tuple[dict[str, Any], tuple[Bounds, ...]]] = []
+
+    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
+        self.configured.append((dict(parameters), requirements))
+
+    def output(self, name: str) -> Any:
+        return self.outputs.get(name)
+
+    def measures(self) -> dict[str, float]:
+        return dict(self.values)
+
+    def samples(self, measure: str) -> list[float]:
+        return [self.values[measure]] if measure in self.values else []
+
+    def running(self) -> bool:
+        return True
+
+
+class Rig:
+    """One behavior of the use case with its services, inputs, outputs and a clock."""
+
+    def __init__(self, system: System, name: str, inputs: dict[str, Any] | None = None) -> None:
+        record = system.behavior(name)
+        assert record is not None
+        self.time = 0.0
+        self.services = {u.alias: Service(u.service) for u in record.uses}
+        self.inputs = inputs or {}
+        self.written: list[tuple[str, Any]] = []
+        context = BehaviorContext(
+            services=self.services,
+            inputs={p.name: functools.partial(self.inputs.get, p.name) for p in record.inputs},
+            outputs={p.name: functools.partial(self._write, p.name) for p in record.outputs},
+            now=lambda: self.time,
+        )
+        self.behavior: Behavior = default_registry().resolve("behavior", record.kind, record)(record, context)
+        self.behavior.start()
+
+    def _write(self, name: str, value: Any) -> None:
+        self.written.append((name, value))
+
+    def last(self, output: str) -> Any:
+        return next(v for n, v in reversed(self.written) if n == output)
+
+
+@pytest.fixture(scope="module")
+def lab() -> System:
+    return ckmconf.load(REPO / "configs" / "usecase" / "lab.xml")
+
+
+def test_nav_configures_amcl_and_ends_when_the_path_exists(lab: System) -> None:
+    rig = Rig(lab, "NAV")
+    ((parameters, requirements),) = rig.services["nav"].configured
+    assert parameters == {"goal": "WorkbenchArea"} and requirements[0].measure == "localization_dispersion"
+    assert not rig.behavior.step().done
+    rig.services["nav"].outputs["status"] = {"goal": "HomeArea", "state": "active"}  # someone else's goal
+    assert not rig.behavior.step().done
+    rig.services["nav"].outputs["status"] = {"goal": "WorkbenchArea", "state": "active"}
+    assert rig.behavior.step().done
+    rig.services["nav"].outputs["status"] = {"goal": "WorkbenchArea", "state": "failed"}
+    assert rig.behavior.step().failed
+
+
+def test_nav_coop_waits_for_the_signal_and_aims_short_of_the_object(lab: System) -> None:
+    rig = Rig(lab, "NAV_COOP")
+    assert rig.behavior.step().progress == 0.0  # untraceable until the Nao's position arrives
+    rig.inputs["spotted"] = {"position": {"x": 3.0, "y": 4.0, "z": 0.0}}
+    rig.behavior.step()
+    parameters, _ = rig.services["nav"].configured[-1]
+    x, y, _yaw = map(float, parameters["goal"].split())
+    assert (x, y) == pytest.approx((3.0 * 4.2 / 5, 4.0 * 4.2 / 5), abs=1e-3)  # 0.8 m short of 5 m
+    rig.services["nav"].outputs["status"] = {"goal": parameters["goal"], "state": "active"}
+    assert rig.behavior.step().done
+
+
+def test_wait_progress_is_the_share_of_the_path(lab: System) -> None:
+    rig = Rig(lab, "WAIT")
+    rig.services["nav"].outputs["status"] = {"state": "active", "path_length": 10.0, "remaining": 2.5}
+    assert rig.behavior.step().progress == pytest.approx(0.75)
+    rig.services["nav"].outputs["status"] = {"state": "arrived", "path_length": 10.0, "remaining": 0.0}
+    assert rig.behavior.step().done
+
+
+def test_spot_needs_the_target_from_enough_sources(lab: System) -> None:
+    rig = Rig(lab, "SPOT_COOP")  # minSources 3
+    seen = {"name": "cylinder_red_stripes", "shape": "cylinder", "texture": "red_stripes", "x": 1.0, "y": 0.2,
+            "z": 0.0, "reliability": 0.9, "sources": ["rgb", "depth"]}  # fmt: skip
+    rig.inputs["objects"] = {"objects": [seen], "reliability": 0.9}
+    assert not rig.behavior.step().done
+    rig.inputs["objects"] = {"objects": [{**seen, "sources": ["rgb", "depth", "pantilt"]}], "reliability": 0.9}
+    assert rig.behavior.step().done and rig.last("target")["x"] == 1.0
+
+
+def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -> None:
+    rig = Rig(lab, "APPR", {"target": {"x": 1.0, "y": 0.0}})
+    rig.behavior.step()
+    arm, move = rig.last("arm_goal"), rig.last("move")
+    assert arm["pose"] == "pre_grasp" and move["x"] == pytest.approx(1.0 - 0.22)
+    rig.services["base"].outputs["move_status"] = {"id": move["id"] + 100, "state": "done"}
+    assert not rig.behavior.step().done  # a stale status of another goal
+    rig.services["base"].outputs["move_status"] = {
+        "id": move["id"],
+        "state": "moving",
+        "total": 0.78,
+        "remaining": 0.39,
+    }
+    assert rig.behavior.step().progress == pytest.approx(0.4)
+    rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "done"}
+    rig.services["arm"].outputs["status"] = {"id": arm["id"], "state": "reached"}
+    assert rig.behavior.step().done
+
+
+def test_pick_runs_its_arm_sequence_step_by_step(lab: System) -> None:
+    rig = Rig(lab, "PICK")
+    poses = []
+    for _ in range(4):
+        goal = rig.last("arm_goal")
+        poses.append(f"{goal['group']}:{goal['pose']}")
+        rig.services["arm"].outputs["status"] = {"id": goal["id"], "state": "reached"}
+        status = rig.behavior.step()
+    assert poses == ["gripper:open", "arm:grasp", "gripper:closed", "arm:carry"] and status.done
+
+
+def test_fix_holds_a_reliable_recognition_then_signals_the_position(lab: System) -> None:
+    rig = Rig(lab, "OBJ_FIX")
+    rig.services["recog"].outputs["objects"] = {
+        "objects": [{"name": "cylinder_red_stripes", "x": 2.0, "y": 1.0, "z": 0.3, "reliability": 0.9}]
+    }
+    for t in (0.0, 1.0):
+        rig.time = t
+        assert not rig.behavior.step().done
+    rig.time = 2.0
+    assert rig.behavior.step().done
+    assert rig.last("spotted")["position"] == {"x": 2.0, "y": 1.0, "z": 0.3}
+
+
+def test_bad_params_are_refused_naming_the_behavior(lab: System) -> None:
+    import dataclasses
+
+    from ckmconf.model import Param
+
+    record = lab.behavior("PICK")
+    assert record is not None
+    broken = dataclasses.replace(record, params=(Param(name="sequence", value="elbow:up"),))
+    context = BehaviorContext(services={}, inputs={}, outputs={}, now=lambda: 0.0)
+    with pytest.raises(ParamError, match=r"behavior 'PICK' .*'elbow:up' is not arm:POSE"):
+        default_registry().resolve("behavior", "pick", broken)(broken, context)

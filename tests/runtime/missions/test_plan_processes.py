@@ -1,0 +1,87 @@
+"""A plan across two OS processes (§5.3, Fig. 5.6): each agent runs on its node's ``ckm-run``;
+the spotter's signal crosses the network and releases the fetcher; a vanished agent is reported."""
+
+from __future__ import annotations
+
+import json
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from runtime.missions.recording import read_run
+
+DATA = Path(__file__).resolve().parents[2] / "data" / "plans" / "two_agents.xml"
+
+
+def _config(tmp_path: Path) -> Path:
+    """The test plan with a private loopback network (its own multicast group and ports)."""
+    rng = random.Random()
+    base = rng.randrange(20000, 60000, 64)
+    network = (
+        f'<Network transport="multipeer" group="239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}" '
+        f'discoveryPort="{base + 63}" interface="127.0.0.1" basePort="{base}" portTries="40" heartbeat="0.05"/>'
+    )
+    text = DATA.read_text().replace('<Node name="spotter-pc"', network + '\n  <Node name="spotter-pc"', 1)
+    path = tmp_path / "plan.xml"
+    path.write_text(text)
+    return path
+
+
+def _ckm_run(config: Path, node: str, run_dir: Path, duration: float) -> subprocess.Popen[str]:
+    command = [sys.executable, "-m", "runtime.cli", str(config), "--node", node, "--plan", "together"]
+    command += ["--duration", str(duration), "--log-dir", str(run_dir)]
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_two_agents_in_two_processes_complete_the_plan_with_a_signal(tmp_path: Path) -> None:
+    config = _config(tmp_path)
+    fetcher = _ckm_run(config, "fetcher-pc", tmp_path / "run", 30)
+    spotter = _ckm_run(config, "spotter-pc", tmp_path / "run", 30)
+    try:
+        for process in (fetcher, spotter):
+            _, err = process.communicate(timeout=60)
+            assert process.returncode == 0, err
+    finally:
+        for process in (fetcher, spotter):
+            if process.poll() is None:
+                process.kill()
+                process.wait(10)
+    run = read_run(tmp_path / "run")
+    ends = {e.agent: e.fields["outcome"] for e in run.events if e.kind == "end"}
+    assert ends == {"spotter": "spotted", "fetcher": "done"}
+    sent = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "sent")
+    received = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "received")
+    assert sent.agent == "spotter" and received.agent == "fetcher"
+    left_nav = next(e for e in run.events if e.kind == "exit" and e.agent == "fetcher" and e.fields["state"] == "NAV")
+    assert left_nav.fields["to"] == "GO" and left_nav.t >= received.t
+    stats = json.loads((tmp_path / "run" / "stats.json").read_text())
+    assert stats["system"] == "two-agents"
+
+
+def test_an_agent_that_disappears_is_reported_lost(tmp_path: Path) -> None:
+    config = _config(tmp_path)
+    # The spotter never runs: the fetcher waits for its signal and reports it lost after lostAfter (2 s).
+    fetcher = _ckm_run(config, "fetcher-pc", tmp_path / "run", 4)
+    try:
+        _, err = fetcher.communicate(timeout=60)
+        assert fetcher.returncode == 0, err
+    finally:
+        if fetcher.poll() is None:
+            fetcher.kill()
+            fetcher.wait(10)
+    run = read_run(tmp_path / "run")
+    lost = [e for e in run.events if e.kind == "agent-lost"]
+    assert [e.fields["lost"] for e in lost] == ["spotter"]
+    assert any(e.kind == "end" and e.fields["outcome"] == "stopped" for e in run.events)
+
+
+@pytest.mark.parametrize("args", [["--plan", "nope"]])
+def test_an_unknown_plan_is_refused(tmp_path: Path, args: list[str]) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "runtime.cli", str(DATA), *args, "--log-dir", str(tmp_path)],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 1 and "no plan 'nope' (plans: together)" in result.stderr
