@@ -179,6 +179,13 @@ class AgentRunner:
                 self.lost.discard(other.name)
                 self.recorder.write("agent-found", found=other.name)
 
+    def _record_qualities(self) -> None:
+        """The qualities of the services the agent's behaviors use (the on-line evaluation's inputs)."""
+        for ref, handle in self.factory.handles.items():
+            measures = handle.measures()
+            if measures:
+                self.recorder.write("quality", service=ref, client="", measures=measures, scenario=handle.scenario)
+
     def run(self, duration: float | None = None) -> str | None:
         """Run until the mission ends, ``duration`` passes or :meth:`stop`; the outcome (None if cut short)."""
         self._started = time.monotonic()
@@ -191,6 +198,7 @@ class AgentRunner:
                 if now >= next_beat:
                     self._beat.publish({"agent": self.agent.name, "state": self.engine.active_path(), "t": now})
                     self._watch()
+                    self._record_qualities()
                     next_beat = now + self.heartbeat
                 if self.engine.step() is not None or (end is not None and now >= end):
                     break

@@ -39,6 +39,7 @@ class NetworkServiceHandle:
         self._measures: dict[str, float] = {}
         self._samples: dict[str, collections.deque[float]] = {}
         self._heard = -1e9
+        self.scenario: str | None = None
         self.acks: dict[int, dict[str, Any]] = {}
         self.errors: list[str] = []
         qos = topics(resource, service)
@@ -74,6 +75,8 @@ class NetworkServiceHandle:
                 if not message.get("accepted"):
                     self.errors.extend(str(e) for e in message.get("errors") or ())
             measures = message.get("measures")
+            if message.get("type") == "quality" and isinstance(message.get("scenario"), str):
+                self.scenario = message["scenario"]
             if message.get("type") == "quality" and isinstance(measures, dict):
                 for name, value in measures.items():
                     if isinstance(value, int | float) and not isinstance(value, bool):
