@@ -141,6 +141,19 @@ def check_parameter(parameter: Parameter, value: Any) -> tuple[Any, str | None]:
     return (int(number) if parameter.type == "int" else number), None
 
 
+def typed_default(parameter: Parameter) -> Any:
+    """A parameter's XML default in its type (None when it has none)."""
+    raw = parameter.default
+    if raw is None:
+        return None
+    if parameter.type == "bool":
+        return raw.strip().lower() in ("true", "1")
+    if parameter.type in ("int", "float"):
+        number = float(raw)
+        return int(number) if parameter.type == "int" else number
+    return raw
+
+
 def _bounds(item: Any, index: int, measures: set[str]) -> tuple[Bounds | None, list[str]]:
     where = f"requirements[{index}]"
     if not isinstance(item, Mapping):

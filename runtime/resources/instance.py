@@ -19,7 +19,7 @@ from ckmconf.model.resources import TCM, Service
 
 from ..network.api import Publisher, TopicQoS, Transport
 from . import codec
-from .api import Bounds, client_topic, preferred_scenario
+from .api import Bounds, client_topic, preferred_scenario, typed_default
 from .tcm import Alarm, Decision, ScenarioEvent, TaskConfiguringModule, ThresholdSelector
 
 KERNEL_MEASURES = ("deadline", "latency", "rate", "cpu", "memory")
@@ -61,7 +61,9 @@ class Instance:
             raise ValueError(f"service {resource}.{service.name} has no scenarios")
         self.resource, self.service, self.client = resource, service, client
         self.key = service.name if not client else f"{service.name}/{client}"
-        self.parameters = {p.name: p.default for p in service.parameters if p.default is not None}
+        self.parameters: dict[str, Any] = {
+            p.name: typed_default(p) for p in service.parameters if p.default is not None
+        }
         self.parameters.update(parameters or {})
         preferred = preferred_scenario(service, self.parameters)
         initial = initial or preferred

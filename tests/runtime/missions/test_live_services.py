@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 from ckmconf.loader import load
-from ckmconf.model.resources import Plugin
 from runtime.missions.agent import AgentRunner
 from runtime.missions.recording import read_run
 from runtime.network import open_transport
