@@ -147,13 +147,15 @@ class AgentRunner:
 
     def _received(self, name: str) -> Callable[[Sample], None]:
         def on(sample: Sample) -> None:
-            if sample.source == getattr(self.transport, "guid", None) or name in self.signals.values:
-                return  # our own emission, or already latched
+            if name in self.signals.values:
+                return  # latched already
             try:
                 value = codec.decode(sample.value)
             except ValueError:
                 LOG.warning("%s: malformed signal %s ignored", self.agent.name, name)
                 return
+            if isinstance(value, dict) and value.get("agent") == self.agent.name:
+                return  # our own emission (agents of one process share a transport)
             self.signals.set(name, value)
             self.recorder.write("signal", name=name, direction="received", value=value)
 

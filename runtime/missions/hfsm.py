@@ -241,7 +241,7 @@ class MissionEngine:
         signals: Signals | None = None,
         emitters: Mapping[tuple[str, str], str] | None = None,
         on_signal: Callable[[str, Any], None] | None = None,
-        progress_period: float = 0.5,
+        progress_period: float = 0.25,
         plan: str | None = None,
     ) -> None:
         record = system.mission(mission)

@@ -23,6 +23,8 @@ from ..resources import codec
 from ..resources.api import Bounds, check_parameter, topics
 
 WINDOW = 50
+RESEND_PERIOD = 0.25
+RESENDS = 40  # 10 s of resending, then the request is given up and reported in ``errors``
 
 
 class NetworkServiceHandle:
@@ -41,6 +43,9 @@ class NetworkServiceHandle:
         self._heard = -1e9
         self.scenario: str | None = None
         self.acks: dict[int, dict[str, Any]] = {}
+        self._pending: tuple[dict[str, Any], int] | None = None
+        self._wake, self._closed = threading.Event(), threading.Event()
+        threading.Thread(target=self._resend, name=f"resend-{self.ref}", daemon=True).start()
         self.errors: list[str] = []
         qos = topics(resource, service)
         self._config = transport.publisher(qos["config"])
@@ -107,7 +112,30 @@ class NetworkServiceHandle:
             "parameters": typed,
             "requirements": [b.to_message() for b in requirements],
         }
+        with self._lock:
+            self._pending = (message, RESENDS)
         self._config.publish(message)
+        self._wake.set()
+
+    def _resend(self) -> None:
+        """Resend the newest request until it is acknowledged (the service applies a repeated id once):
+        a request sent before the service's config topic was linked would otherwise be lost."""
+        while not self._closed.is_set():
+            self._wake.wait(RESEND_PERIOD)
+            self._wake.clear()
+            if self._closed.wait(RESEND_PERIOD):
+                return
+            with self._lock:
+                if self._pending is None:
+                    continue
+                message, left = self._pending
+                if message["id"] in self.acks or left <= 0:
+                    if left <= 0:
+                        self.errors.append(f"{self.ref}: no answer to configure #{message['id']}")
+                    self._pending = None
+                    continue
+                self._pending = (message, left - 1)
+            self._config.publish(message)
 
     def output(self, name: str) -> Any:
         with self._lock:
@@ -126,5 +154,7 @@ class NetworkServiceHandle:
             return time.monotonic() - self._heard < self.stale
 
     def close(self) -> None:
+        self._closed.set()
+        self._wake.set()
         for subscription in self._subscriptions:
             subscription.close()

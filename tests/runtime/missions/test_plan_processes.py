@@ -18,13 +18,19 @@ DATA = Path(__file__).resolve().parents[2] / "data" / "plans" / "two_agents.xml"
 
 def _config(tmp_path: Path) -> Path:
     """The test plan with a private loopback network (its own multicast group and ports)."""
+    return _config_from(DATA.read_text(), tmp_path)
+
+
+def _config_from(text: str, tmp_path: Path) -> Path:
+    """``text`` with a private loopback network inserted before its first Node."""
     rng = random.Random()
     base = rng.randrange(20000, 60000, 64)
     network = (
         f'<Network transport="multipeer" group="239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}" '
         f'discoveryPort="{base + 63}" interface="127.0.0.1" basePort="{base}" portTries="40" heartbeat="0.05"/>'
     )
-    text = DATA.read_text().replace('<Node name="spotter-pc"', network + '\n  <Node name="spotter-pc"', 1)
+    start = text.index(">", text.index("<System")) + 1  # Network comes first in a System
+    text = text[:start] + "\n  " + network + text[start:]
     path = tmp_path / "plan.xml"
     path.write_text(text)
     return path
@@ -85,3 +91,25 @@ def test_an_unknown_plan_is_refused(tmp_path: Path, args: list[str]) -> None:
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert result.returncode == 1 and "no plan 'nope' (plans: together)" in result.stderr
+
+
+def test_both_agents_in_one_embedded_run_still_signal_each_other(tmp_path: Path) -> None:
+    example = Path(__file__).resolve().parents[3] / "configs" / "examples" / "plan_two_agents.xml"
+    text = example.read_text()
+    config = _config_from(text, tmp_path)
+    result = subprocess.run(
+        [sys.executable, "-m", "runtime.cli", str(config), "--plan", "fetch-together", "--duration", "30",
+         "--log-dir", str(tmp_path / "run")],
+        capture_output=True, text=True, timeout=90,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    ends = {e.agent: e.fields["outcome"] for e in read_run(tmp_path / "run").events if e.kind == "end"}
+    assert ends == {"walker": "over", "carrier": "done"}
+    report = subprocess.run(
+        [sys.executable, "-m", "runtime.missions.cli", "report", str(tmp_path / "run"), "--json"],
+        capture_output=True, text=True, timeout=90,
+    )  # fmt: skip
+    assert report.returncode == 0, report.stderr
+    table = json.loads(report.stdout.strip().splitlines()[-1])
+    assert table
+    assert (tmp_path / "run" / "report" / "plan.png").read_bytes()[:4] == b"\x89PNG"
