@@ -14,3 +14,8 @@ echo "--- a closed loop on the loopback plant (run directory in runs/demo-closed
 .venv/bin/ckm-run configs/examples/closed_loop.xml --duration 3 --log-dir runs/demo-closed-loop
 echo "--- §7.2: one to four clients on the RGB recognition service (figures in runs/demo-adaptation):"
 .venv/bin/ckm-bench adaptation --phase 5 --schedule 1,2,3,4 --out runs/demo-adaptation
+echo "--- §5.4: off-line validation of the use-case missions:"
+.venv/bin/ckm-mission validate configs/usecase/lab.xml
+echo "--- §5.3: a two-agent plan with a cross-agent signal, and its report (runs/demo-plan):"
+.venv/bin/ckm-run configs/examples/plan_two_agents.xml --plan fetch-together --duration 30 --log-dir runs/demo-plan
+.venv/bin/ckm-mission report runs/demo-plan
