@@ -17,5 +17,6 @@ echo "--- §7.2: one to four clients on the RGB recognition service (figures in 
 echo "--- §5.4: off-line validation of the use-case missions:"
 .venv/bin/ckm-mission validate configs/usecase/lab.xml
 echo "--- §5.3: a two-agent plan with a cross-agent signal, and its report (runs/demo-plan):"
+rm -rf runs/demo-plan  # a run directory holds one run
 .venv/bin/ckm-run configs/examples/plan_two_agents.xml --plan fetch-together --duration 30 --log-dir runs/demo-plan
 .venv/bin/ckm-mission report runs/demo-plan
