@@ -181,12 +181,19 @@ class Run:
     peak_rss_mib: float
 
 
+# The child's own peak: VmHWM belongs to the process image exec() created, while ru_maxrss also
+# counts the RSS the child had as a fork of this (by then large) pytest process.
 _MEASURED = """\
-import resource, sys
+import re, resource, sys
 from ckmconf.cli import main
 code = main(sys.argv[1:])
 sys.stdout.flush()
-print(f"peak-rss-kib={resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}", file=sys.stderr)
+try:
+    with open("/proc/self/status") as status:
+        peak = int(re.search(r"^VmHWM:\\s+(\\d+) kB", status.read(), re.M).group(1))
+except (OSError, AttributeError):
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(f"peak-rss-kib={peak}", file=sys.stderr)
 sys.exit(code)
 """
 
