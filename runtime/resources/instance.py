@@ -25,6 +25,9 @@ from .tcm import Alarm, Decision, ScenarioEvent, TaskConfiguringModule, Threshol
 KERNEL_MEASURES = ("deadline", "latency", "rate", "cpu", "memory")
 """Measures the runtime takes itself (a QualityMeasure's ``source``); any other source is a result field."""
 
+ALARM_AFTER = 3
+"""TCM evaluations with no scenario holding before a service raises an alarm (docs/decisions.md D55)."""
+
 Send = Callable[[str, dict[str, Any]], None]
 """Publishes a message on the service's ``quality`` or ``alarms`` topic."""
 
@@ -71,7 +74,12 @@ class Instance:
         settings = tcm if initial is None else dataclasses.replace(tcm, initial=initial)
         selector = ThresholdSelector if baseline else TaskConfiguringModule
         self.tcm: TaskConfiguringModule | ThresholdSelector = selector(
-            service.scenarios, settings, requirements=requirements, on_event=self._event, on_alarm=self._alarm
+            service.scenarios,
+            settings,
+            requirements=requirements,
+            on_event=self._event,
+            on_alarm=self._alarm,
+            alarm_after=ALARM_AFTER,
         )
         if preferred is not None:
             self.tcm.set_ceiling(preferred)

@@ -43,6 +43,12 @@ Switching (the thesis: "active scenario will remain selected while the quality r
    known and holding, its policies even on bounds narrowed by ``band`` · scale — a Schmitt
    trigger around each bound) and its state beats the active one's by ``margin``. No penalty.
 
+Alarms: raised when no scenario holds (every one has a known failing condition), cleared when
+one holds again. With ``alarm_after`` > 1 an alarm from the measures waits until that many
+consecutive evaluations found none holding — a load change is first judged on samples of the
+profile that caused it, and the switch it triggers needs a window to show its effect; an alarm
+from requirements no scenario can promise is raised at once.
+
 Penalty decay: at each evaluation where a scenario is *satisfied* (every condition known and
 holding on the current windows) its ``ξ`` decreases by ``penalty_step / decay_evaluations``
 (linear, floor 0): one neglect is forgiven after ``decay_evaluations`` satisfied evaluations.
@@ -206,9 +212,12 @@ class TaskConfiguringModule:
         horizon: int = 10,
         on_event: Callable[[ScenarioEvent], None] | None = None,
         on_alarm: Callable[[Alarm], None] | None = None,
+        alarm_after: int = 1,
     ) -> None:
         if not scenarios:
             raise ValueError("a TCM needs at least one scenario")
+        self.alarm_after = max(1, alarm_after)
+        self._unheld = 0
         self.settings = settings if settings is not None else TCM()
         self.combined = {name: tuple(parts) for name, parts in (combined or {}).items()}
         self.resolution, self.band, self.margin, self.dwell = resolution, band, margin, max(1, dwell)
@@ -455,7 +464,7 @@ class TaskConfiguringModule:
             if e.satisfied and name not in penalized:
                 scenario = self._scenarios[name]
                 scenario.penalty = max(0.0, scenario.penalty - self.decay)
-        return self._finish(time, evaluations, events)
+        return self._finish(time, evaluations, events, debounce=True)
 
     def _switch(
         self, target: ScenarioEvaluation, reason: Reason, time: float, detail: str, penalize: bool
@@ -478,7 +487,13 @@ class TaskConfiguringModule:
             self.on_event(event)
         return event
 
-    def _finish(self, time: float, evaluations: dict[str, ScenarioEvaluation], events: list[ScenarioEvent]) -> Decision:
+    def _finish(
+        self,
+        time: float,
+        evaluations: dict[str, ScenarioEvaluation],
+        events: list[ScenarioEvent],
+        debounce: bool = False,
+    ) -> Decision:
         active = self._scenarios[self._active]
         if active.learner is not None:
             features = evaluations[self._active].features
@@ -489,7 +504,9 @@ class TaskConfiguringModule:
                 active.pending = None
         alarms: list[Alarm] = []
         any_holds = any(e.holds for e in evaluations.values())
-        if any_holds == self._alarm:  # raised when none holds, cleared when one does again
+        self._unheld = 0 if any_holds else self._unheld + 1
+        persistent = not debounce or self._unheld >= self.alarm_after
+        if any_holds == self._alarm and (any_holds or persistent):  # raised when none holds, cleared when one does
             self._alarm = not any_holds
             unmet = tuple(c.describe() for c in evaluations[self._active].failing)
             alarm = Alarm(time, self._alarm, self._active, unmet)

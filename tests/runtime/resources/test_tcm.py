@@ -405,3 +405,20 @@ def test_threshold_selector_runs_the_baseline_behind_the_tcm_interface() -> None
     assert selector.evaluate(2.0).active == "VGA" and [a.raised for a in alarms] == [True, False]
     assert selector.penalties == {"VGA": 0.0, "QVGA": 0.0, "QQVGA": 0.0}
     assert selector.prefer("QVGA").active == "QVGA"
+
+
+def test_alarm_after_waits_for_persistent_failure() -> None:
+    immediate = tcm("VGA")
+    patient = tcm("VGA", alarm_after=3)
+    for module in (immediate, patient):
+        feed(module, [0.008] * 60)
+    spike = [0.05] * 3 + [0.008] * 200  # a short burst: every scenario fails for a few evaluations
+    assert any(d.alarms for d in feed(immediate, spike))
+    assert not any(d.alarms for d in feed(patient, spike[:2]))  # two evaluations: not yet
+    sustained = feed(patient, [0.05] * 200)
+    raised = [a for d in sustained for a in d.alarms if a.raised]
+    assert len(raised) == 1
+    # An alarm from requirements nobody can promise does not wait.
+    module = tcm("VGA", alarm_after=5)
+    feed(module, [0.008] * 60)
+    assert [a.raised for a in module.set_requirements([Require(measure="deadline", upper=0.001)]).alarms] == [True]
