@@ -151,6 +151,20 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
     return lines
 
 
+def _clip_outliers(ax: Any, run: dict[str, Any], service: Any, measure: str) -> None:
+    """Keep the bounds readable: a machine stall (one sample of a second) would flatten the plot."""
+    bounds = [p.upper for s in service.scenarios for p in s.policies if p.measure == measure and p.upper is not None]
+    values = [m["measures"].get(measure) for r in run["clients"].values() for m in r["quality"]]
+    values = [v for v in values if isinstance(v, int | float)]
+    if not bounds or not values:
+        return
+    top = 3 * max(bounds)
+    above = [v for v in values if v > top]
+    if above:
+        ax.set_ylim(0, top)
+        ax.annotate(f"{len(above)} above, up to {max(above):.3g}", (0.01, 0.92), xycoords="axes fraction", fontsize=7)
+
+
 def figures(run: dict[str, Any], baseline: dict[str, Any], resource: SmartResource, out: Path) -> list[Path]:
     """Fig. 7.8 (clients and alarms), Fig. 7.9 (result graph), Fig. 7.10 (scatter) as PNG files."""
     import matplotlib
@@ -193,6 +207,7 @@ def figures(run: dict[str, Any], baseline: dict[str, Any], resource: SmartResour
                     axes[0][col].axhline(policy.upper, ls="--", lw=0.6, color="grey")
                     axes[0][col].annotate(scenario.name, (0, policy.upper), fontsize=6, color="grey")
         axes[0][col].set_title(f"{measure} (bounds dashed)")
+        _clip_outliers(axes[0][col], run, service, measure)
     axes[1][0].set_yticks(list(levels.values()), list(levels))
     axes[1][0].set_title("active resolution (TCM)")
     for name, record in sorted(baseline["clients"].items()):
