@@ -1,0 +1,298 @@
+"""ckm-editor [FILE] [--screenshot PNG [--view VIEW]]: the configuration editor's main window.
+
+A system tree on the left, the selected element's form, its mission canvas, the topic graph and
+the plan view in the middle, the problems at the bottom. Every edit is an undoable command;
+File offers new, open, save, save as and recent files, and closing with unsaved changes asks.
+With ``--screenshot`` the window is rendered offscreen to PNG and the program exits 0 (``--view``
+picks the tab: ``tree``, ``mission:NAME``, ``topics``, ``plan``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from PySide6.QtCore import QSettings, Qt
+from PySide6.QtGui import QAction, QCloseEvent, QKeySequence
+from PySide6.QtWidgets import (
+    QApplication,
+    QDockWidget,
+    QFileDialog,
+    QMainWindow,
+    QMessageBox,
+    QScrollArea,
+    QTabWidget,
+    QWidget,
+)
+
+from .document import Element, local
+from .model.schema import SchemaModel
+from .views.form import AttributeForm
+from .views.graphs import PlanView, TopicGraph
+from .views.mission import MissionCanvas
+from .views.problems import ProblemsPanel
+from .views.tree import SystemTree
+from .workspace import Workspace
+
+MAX_RECENT = 8
+Ask = Callable[[QWidget, str], QMessageBox.StandardButton]
+
+
+def _ask_save(parent: QWidget, name: str) -> QMessageBox.StandardButton:
+    buttons = QMessageBox.StandardButton.Save | QMessageBox.StandardButton.Discard | QMessageBox.StandardButton.Cancel
+    return QMessageBox.question(parent, "Unsaved changes", f"Save the changes to {name}?", buttons)
+
+
+class MainWindow(QMainWindow):
+    """The editor (see the module docstring). ``settings`` and ``ask`` are injectable for tests."""
+
+    def __init__(self, path: Path | None = None, *, settings: QSettings | None = None, ask: Ask = _ask_save) -> None:
+        super().__init__()
+        self.settings = settings if settings is not None else QSettings("CKM", "ckm-editor")
+        self.ask = ask
+        self.schema = SchemaModel.load()
+        self.resize(1400, 860)
+        self.document = Workspace(path, parent=self)
+        self._build()
+        self._menus()
+        self._open_document(self.document)
+
+    # ------------------------------------------------------------------ layout
+
+    def _build(self) -> None:
+        self.tabs = QTabWidget()
+        self.setCentralWidget(self.tabs)
+        self.tree_dock = QDockWidget("System", self)
+        self.tree_dock.setObjectName("system")
+        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.tree_dock)
+        self.problems_dock = QDockWidget("Problems", self)
+        self.problems_dock.setObjectName("problems")
+        self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.problems_dock)
+
+    def _open_document(self, document: Workspace) -> None:
+        if document is not self.document:
+            self.document.modified_changed.disconnect()
+            self.document.deleteLater()
+        self.document = document
+        self.tree = SystemTree(document, self.schema)
+        self.tree_dock.setWidget(self.tree)
+        self.form = AttributeForm(document, self.schema)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setWidget(self.form)
+        self.canvas = MissionCanvas(document)
+        self.topics = TopicGraph()
+        self.plan = PlanView()
+        self.tabs.clear()
+        self.tabs.addTab(scroll, "Properties")
+        self.tabs.addTab(self.canvas, "Mission")
+        self.tabs.addTab(self.topics, "Topics")
+        self.tabs.addTab(self.plan, "Plan")
+        self.problems = ProblemsPanel(document)
+        self.problems_dock.setWidget(self.problems)
+        self.tree.selected.connect(self._selected)
+        self.canvas.selected.connect(self.tree.select)
+        self.canvas.open_mission.connect(self.open_mission)
+        self.problems.chosen.connect(self.tree.select)
+        document.problems_changed.connect(self._refresh_graphs)
+        document.modified_changed.connect(self._title)
+        document.main.path_changed.connect(self._title)
+        self.undo_action.setEnabled(True)
+        self._rebind_undo()
+        document.validate()
+        self.tree.select(document.main.root)
+        self._selected(document.main.root)
+        self._title()
+
+    def _rebind_undo(self) -> None:
+        stack = self.document.undo
+        self.undo_action.triggered.disconnect()
+        self.redo_action.triggered.disconnect()
+        self.undo_action.triggered.connect(stack.undo)
+        self.redo_action.triggered.connect(stack.redo)
+
+    def _menus(self) -> None:
+        file = self.menuBar().addMenu("&File")
+        for text, key, slot in (
+            ("&New", QKeySequence.StandardKey.New, self.new),
+            ("&Open…", QKeySequence.StandardKey.Open, self.open_dialog),
+            ("&Save", QKeySequence.StandardKey.Save, self.save),
+            ("Save &As…", QKeySequence.StandardKey.SaveAs, self.save_as_dialog),
+        ):
+            action = file.addAction(text)
+            action.setShortcut(key)
+            action.triggered.connect(slot)
+        self.recent_menu = file.addMenu("Open &Recent")
+        self._fill_recent()
+        file.addSeparator()
+        quit_action = file.addAction("&Quit")
+        quit_action.setShortcut(QKeySequence.StandardKey.Quit)
+        quit_action.triggered.connect(self.close)
+        edit = self.menuBar().addMenu("&Edit")
+        self.undo_action = QAction("&Undo", self)
+        self.undo_action.setShortcut(QKeySequence.StandardKey.Undo)
+        self.redo_action = QAction("&Redo", self)
+        self.redo_action.setShortcut(QKeySequence.StandardKey.Redo)
+        self.undo_action.triggered.connect(lambda: None)
+        self.redo_action.triggered.connect(lambda: None)
+        remove = QAction("&Remove element", self)
+        remove.setShortcut(QKeySequence.StandardKey.Delete)
+        remove.triggered.connect(lambda: self.tree.remove_current())
+        for action in (self.undo_action, self.redo_action, remove):
+            edit.addAction(action)
+
+    def _title(self) -> None:
+        name = self.document.main.path.name if self.document.main.path else "untitled"
+        self.setWindowTitle(f"{name}{' *' if self.document.modified else ''} — CKM editor")
+
+    # ------------------------------------------------------------------ selection
+
+    def _selected(self, element: Element) -> None:
+        self.form.show_element(element)
+        mission: Element | None = element
+        while mission is not None and local(mission) != "Mission":
+            mission = mission.getparent()
+        if mission is not None and mission is not self.canvas.mission:
+            self.canvas.show_mission(mission)
+
+    def open_mission(self, name: str) -> None:
+        element = self.document.mission(name)
+        if element is not None:
+            self.tree.select(element)
+            self.canvas.show_mission(element)
+            self.tabs.setCurrentWidget(self.canvas)
+
+    def _refresh_graphs(self) -> None:
+        self.topics.show_system(self.document.system)
+        self.plan.show_system(self.document.system)
+
+    # ------------------------------------------------------------------ files
+
+    def _may_discard(self) -> bool:
+        if not self.document.modified:
+            return True
+        name = self.document.main.path.name if self.document.main.path else "untitled"
+        answer = self.ask(self, name)
+        if answer == QMessageBox.StandardButton.Save:
+            return self.save()
+        return answer == QMessageBox.StandardButton.Discard
+
+    def new(self) -> None:
+        if self._may_discard():
+            self._open_document(Workspace(None, parent=self))
+
+    def open_path(self, path: Path) -> bool:
+        if not self._may_discard():
+            return False
+        try:
+            document = Workspace(path, parent=self)
+        except (OSError, ValueError) as exc:  # lxml's XMLSyntaxError is a ValueError
+            QMessageBox.warning(self, "Cannot open", f"{path}: {exc}")
+            return False
+        self._open_document(document)
+        self._remember(path)
+        return True
+
+    def open_dialog(self) -> None:
+        chosen, _ = QFileDialog.getOpenFileName(self, "Open configuration", "", "CKM configurations (*.xml)")
+        if chosen:
+            self.open_path(Path(chosen))
+
+    def save(self) -> bool:
+        """Save every modified file of the configuration (the main one always)."""
+        if self.document.main.path is None:
+            return self.save_as_dialog()
+        self.document.save_all()
+        self._remember(self.document.main.path)
+        return True
+
+    def save_as(self, path: Path) -> None:
+        """The main file under a new name; included files are saved where they are (their hrefs stay valid
+        when the new name is in the same folder)."""
+        self.document.main.save(path.resolve())
+        self.document.save_all()
+        self._remember(path)
+
+    def save_as_dialog(self) -> bool:
+        chosen, _ = QFileDialog.getSaveFileName(self, "Save configuration", "", "CKM configurations (*.xml)")
+        if not chosen:
+            return False
+        self.save_as(Path(chosen))
+        return True
+
+    def recent(self) -> list[str]:
+        value = self.settings.value("recent", [])
+        items = [value] if isinstance(value, str) else list(value) if isinstance(value, list | tuple) else []
+        return [str(v) for v in items]
+
+    def _remember(self, path: Path) -> None:
+        entries = [str(path.resolve())] + [p for p in self.recent() if p != str(path.resolve())]
+        self.settings.setValue("recent", entries[:MAX_RECENT])
+        self._fill_recent()
+
+    def _fill_recent(self) -> None:
+        self.recent_menu.clear()
+        for entry in self.recent():
+            action = self.recent_menu.addAction(entry)
+            action.triggered.connect(lambda _=False, p=entry: self.open_path(Path(p)))
+        self.recent_menu.setEnabled(bool(self.recent_menu.actions()))
+
+    def closeEvent(self, event: QCloseEvent) -> None:
+        if self._may_discard():
+            event.accept()
+        else:
+            event.ignore()
+
+    # ------------------------------------------------------------------ screenshots
+
+    def show_view(self, view: str) -> None:
+        """Bring ``view`` forward: tree, topics, plan, or mission:NAME."""
+        if view.startswith("mission:"):
+            self.open_mission(view.split(":", 1)[1])
+        elif view == "topics":
+            self.tabs.setCurrentWidget(self.topics)
+        elif view == "plan":
+            self.tabs.setCurrentWidget(self.plan)
+        else:
+            self.tabs.setCurrentIndex(0)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="ckm-editor", description="Edit, validate and distribute CKM configurations.")
+    parser.add_argument("file", nargs="?", type=Path, help="configuration to open")
+    parser.add_argument("--screenshot", type=Path, help="render the window offscreen to this PNG and exit")
+    parser.add_argument("--view", default="tree", help="with --screenshot: tree, topics, plan or mission:NAME")
+    args = parser.parse_args(argv)
+    if args.screenshot is not None:
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    if args.file is not None and not args.file.is_file():
+        print(f"ckm-editor: {args.file}: no such file", file=sys.stderr)
+        return 1
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    settings = None
+    if args.screenshot is not None:  # a screenshot leaves the user's recent files alone
+        scratch = Path(os.environ.get("TMPDIR", "/tmp")) / "ckm-editor-screenshot.ini"
+        settings = QSettings(str(scratch), QSettings.Format.IniFormat)
+    window = MainWindow(args.file, settings=settings)
+    window.show()
+    if args.screenshot is not None:
+        window.show_view(args.view)
+        for _ in range(3):
+            app.processEvents()
+        if args.view.startswith("mission:"):
+            window.canvas.fit()
+        elif args.view in ("topics", "plan"):
+            getattr(window, args.view).fit()
+        app.processEvents()
+        if not window.grab().save(str(args.screenshot)):
+            print(f"ckm-editor: cannot write {args.screenshot}", file=sys.stderr)
+            return 1
+        return 0
+    return app.exec()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The editor's views: system tree, attribute form, problems, mission canvas, topic graph, plan."""
