@@ -4,7 +4,7 @@ A system tree on the left, the selected element's form, its mission canvas, the 
 the plan view in the middle, the problems at the bottom. Every edit is an undoable command;
 File offers new, open, save, save as and recent files, and closing with unsaved changes asks.
 With ``--screenshot`` the window is rendered offscreen to PNG and the program exits 0 (``--view``
-picks the tab: ``tree``, ``mission:NAME``, ``topics``, ``plan``).
+picks what is shown: ``tree``, ``element:NAME``, ``mission:NAME``, ``topics``, ``plan``).
 """
 
 from __future__ import annotations
@@ -71,6 +71,8 @@ class MainWindow(QMainWindow):
         self.problems_dock = QDockWidget("Problems", self)
         self.problems_dock.setObjectName("problems")
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.problems_dock)
+        self.resizeDocks([self.tree_dock], [360], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.problems_dock], [150], Qt.Orientation.Vertical)
 
     def _open_document(self, document: Workspace) -> None:
         if document is not self.document:
@@ -249,9 +251,14 @@ class MainWindow(QMainWindow):
     # ------------------------------------------------------------------ screenshots
 
     def show_view(self, view: str) -> None:
-        """Bring ``view`` forward: tree, topics, plan, or mission:NAME."""
+        """Bring ``view`` forward: tree, topics, plan, mission:NAME or element:NAME."""
         if view.startswith("mission:"):
             self.open_mission(view.split(":", 1)[1])
+        elif view.startswith("element:"):  # the first element of that name, its form in front
+            name = view.split(":", 1)[1]
+            found = next((e for d in self.document.all() for e in d.root.iter() if e.get("name") == name), None)
+            self.tree.select(found)
+            self.tabs.setCurrentIndex(0)
         elif view == "topics":
             self.tabs.setCurrentWidget(self.topics)
         elif view == "plan":
@@ -264,7 +271,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ckm-editor", description="Edit, validate and distribute CKM configurations.")
     parser.add_argument("file", nargs="?", type=Path, help="configuration to open")
     parser.add_argument("--screenshot", type=Path, help="render the window offscreen to this PNG and exit")
-    parser.add_argument("--view", default="tree", help="with --screenshot: tree, topics, plan or mission:NAME")
+    parser.add_argument(
+        "--view", default="tree", help="with --screenshot: tree, element:NAME, mission:NAME, topics or plan"
+    )
     args = parser.parse_args(argv)
     if args.screenshot is not None:
         os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
