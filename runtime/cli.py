@@ -11,18 +11,24 @@ directory receives the log, the events and each task's statistics.
 With ``--plan`` the agents of that plan whose node runs here run their missions too (§5.3),
 recording them in the run directory (``ckm-mission report RUN_DIR``); the run then also ends when
 every local agent's mission has ended.
+
+``ckm-run --await-config [NETWORK.xml] --name AGENT`` runs no configuration: it joins the network
+of NETWORK.xml (a System or Part holding a <Network>; the default Network without it), announces
+itself and runs whatever node the editor pushes it (runtime.distribution).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import signal
+import socket
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -42,17 +48,28 @@ LOG = logging.getLogger("ckm.run")
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ckm-run", description="Run the CKM nodes of a configuration.")
-    parser.add_argument("config", help="System file")
+    parser.add_argument("config", nargs="?", help="System file (with --await-config: the bootstrap network file)")
     parser.add_argument("--node", help="run only this node (default: every node, in this process)")
     parser.add_argument("--partition", help="with --node: run only this partition of the node (as its supervisor does)")
     parser.add_argument("--duration", type=float, help="stop after this many seconds (default: until a signal)")
     parser.add_argument("--log-dir", type=Path, help="run directory (default: runs/SYSTEM-TIMESTAMP)")
     parser.add_argument("--plan", help="also run this plan's agents whose node runs here")
+    parser.add_argument(
+        "--await-config", action="store_true", help="run no configuration: announce an agent and wait for pushes"
+    )
+    parser.add_argument("--name", help="with --await-config: the agent's name (default: the host name)")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.await_config:
+        return _await_config(parser, args)
+    if args.config is None:
+        parser.error("the following arguments are required: config")
+    if args.name is not None:
+        parser.error("--name goes with --await-config")
     try:
         system = load(args.config)
     except ConfigError as error:
@@ -81,17 +98,39 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{args.config}: no plan {args.plan!r} (plans: {names})", file=sys.stderr)
         return 1
     run_dir = args.log_dir or Path("runs") / f"{system.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    with _logging_to(run_dir):
+        name = f"{args.node}.{args.partition}" if partition is not None else args.node or system.name
+        return _run(system, Path(args.config), nodes, args.duration, run_dir, name, partition, args.plan)
+
+
+@contextlib.contextmanager
+def _logging_to(run_dir: Path) -> Iterator[None]:
+    """Log to RUN_DIR/ckm.log while the run lasts."""
     run_dir.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(run_dir / "ckm.log")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     logging.getLogger().addHandler(handler)
     logging.getLogger().setLevel(logging.INFO)
     try:
-        name = f"{args.node}.{args.partition}" if partition is not None else args.node or system.name
-        return _run(system, Path(args.config), nodes, args.duration, run_dir, name, partition, args.plan)
+        yield
     finally:
         logging.getLogger().removeHandler(handler)
         handler.close()
+
+
+def _await_config(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """ckm-run --await-config: a node agent waiting for the editor's configurations."""
+    from .distribution import NAME, run_agent  # imports this module: loaded only when needed
+
+    for option in ("node", "partition", "plan"):
+        if getattr(args, option) is not None:
+            parser.error(f"--{option} cannot go with --await-config (the editor chooses the node)")
+    name = args.name or socket.gethostname().split(".")[0]
+    if not NAME.fullmatch(name):
+        parser.error(f"agent name {name!r}: use 1-64 letters, digits, '_', '.' or '-'")
+    run_dir = args.log_dir or Path("runs") / f"agent-{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    with _logging_to(run_dir):
+        return run_agent(Path(args.config) if args.config else None, name, run_dir, args.duration)
 
 
 def _runtime(

@@ -1,0 +1,500 @@
+"""Configuration distribution, the node side (§3.1.5.2): ``ckm-run --await-config``.
+
+An agent joins a bootstrap network with no system yet, announces itself and waits. The editor
+pushes it a configuration bundle (the main file and every file it includes) and the node to
+run; the agent writes the bundle into a fresh directory, loads it strictly, builds and sets up
+the node, and only then replaces the node it ran (stopped with its actuators safe). On any
+error it refuses with the errors and keeps the old node running.
+
+Protocol (msgpack maps over the transport; AGENT is the agent's name):
+
+- ``/ckm/agents`` (agent → all, every ``ANNOUNCE_PERIOD`` s and on each change):
+  ``{type: "agent", name, host, pid, guid, status, config_hash, node, system, errors, last_id}``
+  with status ``waiting`` (nothing pushed yet), ``running``, ``refused`` (the last push was
+  refused and nothing runs), ``failed`` (a push was accepted but its node failed to start) or
+  ``stopped`` (the agent is leaving).
+- ``/ckm/agents/AGENT/config`` (editor → agent): ``{id, node, files: {path: xml}, main}``.
+- ``/ckm/agents/AGENT/ack`` (agent → editor): ``{type: "ack", agent, id, accepted, hash,
+  node, errors}``. A push resent with the same id is answered again, never applied twice.
+
+``bundle_hash`` is the sha256 of the bundle both sides compute to confirm what runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import os
+import queue
+import re
+import shutil
+import signal
+import socket
+import sys
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from types import FrameType
+from typing import Any
+
+from ckmconf import ConfigError, load
+from ckmconf.model import Network, System
+
+from .cli import _write_run
+from .kernel.node import NodeRuntime
+from .network import open_transport, read_group_key
+from .network.api import GroupKeyError, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
+from .network.multipeer import NetworkError
+from .registry import Registry
+
+LOG = logging.getLogger("ckm.distribution")
+
+AGENTS_TOPIC = "/ckm/agents"
+ANNOUNCE_PERIOD = 0.5
+MAX_BUNDLE = 8 * 1024 * 1024  # bytes of paths and texts together
+MAX_FILES = 256
+NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+_COMPONENT = re.compile(r"[A-Za-z0-9_.+-]{1,128}")
+
+
+def config_topic(agent: str) -> str:
+    return f"{AGENTS_TOPIC}/{agent}/config"
+
+
+def ack_topic(agent: str) -> str:
+    return f"{AGENTS_TOPIC}/{agent}/ack"
+
+
+def bundle_hash(files: Mapping[str, str]) -> str:
+    """sha256 over the (path, text) pairs sorted by path, each length-prefixed (UTF-8)."""
+    digest = hashlib.sha256()
+    for path in sorted(files):
+        for part in (path.encode(), files[path].encode()):
+            digest.update(len(part).to_bytes(8, "big"))
+            digest.update(part)
+    return digest.hexdigest()
+
+
+def bundle_size(files: Mapping[str, str]) -> int:
+    return sum(len(p.encode()) + len(t.encode()) for p, t in files.items())
+
+
+class Refused(Exception):
+    """A push the agent will not apply; ``errors`` say why."""
+
+    def __init__(self, *errors: str) -> None:
+        super().__init__("; ".join(errors))
+        self.errors = list(errors)
+
+
+@dataclass(frozen=True)
+class Push:
+    id: str | int
+    node: str
+    files: dict[str, str]
+    main: str
+    hash: str
+
+
+def check_path(path: str) -> None:
+    """A bundle path must be relative, plain and stay inside the bundle (hostile input)."""
+    parts = PurePosixPath(path).parts
+    if not parts or path.startswith("/") or "\\" in path or len(parts) > 16:
+        raise Refused(f"bad path {path!r}: paths are relative, '/'-separated, at most 16 deep")
+    for part in parts:
+        if part in (".", "..") or not _COMPONENT.fullmatch(part):
+            raise Refused(f"bad path {path!r}: {part!r} is not a plain file or folder name")
+    if not path.endswith(".xml"):
+        raise Refused(f"bad path {path!r}: only .xml files are distributed")
+
+
+def parse_push(message: Any, max_bundle: int = MAX_BUNDLE) -> Push:
+    """Check a push message field by field; Refused names the first problem."""
+    if not isinstance(message, dict):
+        raise Refused(f"a push is a map with id, node, files and main, not {type(message).__name__}")
+    ident = message.get("id")
+    if isinstance(ident, bool) or not isinstance(ident, (str, int)) or len(str(ident)) > 128:
+        raise Refused("the push has no valid id (a string or integer)")
+    node, files, main = message.get("node"), message.get("files"), message.get("main")
+    if not isinstance(node, str) or not NAME.fullmatch(node):
+        raise Refused("the push names no valid node")
+    if not isinstance(files, dict) or not files:
+        raise Refused("the push has no files (a map of relative path → XML text)")
+    if len(files) > MAX_FILES:
+        raise Refused(f"the bundle has {len(files)} files; at most {MAX_FILES} are accepted")
+    if not all(isinstance(p, str) and isinstance(t, str) for p, t in files.items()):
+        raise Refused("the bundle's paths and contents must all be text")
+    size = bundle_size(files)
+    if size > max_bundle:
+        raise Refused(f"the bundle is {size} bytes; at most {max_bundle} are accepted")
+    for path in files:
+        check_path(path)
+    if not isinstance(main, str) or main not in files:
+        raise Refused(f"the main file {main!r} is not in the bundle")
+    return Push(ident, node, dict(files), main, bundle_hash(files))
+
+
+class ScopedTransport(Transport):
+    """One runtime's view of the agent's transport: its subscriptions stay muted until the
+    runtime takes over (a runtime set up beside the running one must not drive anything) and
+    are all closed when it goes."""
+
+    def __init__(self, transport: Transport) -> None:
+        self.inner = transport
+        self.open = threading.Event()
+        self._subscriptions: list[Subscription] = []
+
+    @property
+    def guid(self) -> int:  # type: ignore[override]
+        return self.inner.guid
+
+    def setup(self) -> None: ...  # the agent owns the real transport's lifecycle
+
+    def start(self) -> None:
+        self.open.set()
+
+    def stop(self) -> None:
+        self.open.clear()
+        for subscription in self._subscriptions:
+            subscription.close()
+        self._subscriptions.clear()
+
+    def publisher(self, qos: TopicQoS) -> Publisher:
+        return self.inner.publisher(qos)
+
+    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        gated = None
+        if callback is not None:
+
+            def gated(sample: Sample, callback: Callable[[Sample], None] = callback) -> None:
+                if self.open.is_set():
+                    callback(sample)
+
+        subscription = self.inner.subscribe(qos, gated)
+        self._subscriptions.append(subscription)
+        return subscription
+
+    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        self.inner.on_event(callback)
+
+    def peers(self) -> list[int]:
+        return self.inner.peers()
+
+    def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        return self.inner.wait_for_subscribers(topic, count, timeout)
+
+
+@dataclass
+class _Running:
+    runtime: NodeRuntime
+    scoped: ScopedTransport
+    system: System
+    push: Push
+    directory: Path
+    started: float
+
+
+class ConfigAgent:
+    """Waits for configurations on ``transport`` and runs the node of the last accepted one."""
+
+    def __init__(
+        self,
+        name: str,
+        transport: Transport,
+        run_dir: Path,
+        *,
+        announce_period: float = ANNOUNCE_PERIOD,
+        max_bundle: int = MAX_BUNDLE,
+        registry: Registry | None = None,
+    ) -> None:
+        if not NAME.fullmatch(name):
+            raise ValueError(f"agent name {name!r}: use 1-64 letters, digits, '_', '.' or '-'")
+        self.name = name
+        self.transport = transport
+        self.run_dir = Path(run_dir)
+        self.announce_period = announce_period
+        self.max_bundle = max_bundle
+        self.registry = registry
+        self.current: _Running | None = None
+        self.status = "waiting"
+        self.errors: list[str] = []
+        self.last_id: str | int | None = None
+        self._pushes = 0
+        self._acks: OrderedDict[str | int, dict[str, Any]] = OrderedDict()  # the last answers, by id
+        self._inbox: queue.Queue[Any] = queue.Queue(maxsize=4)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._changed = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._announcer = transport.publisher(TopicQoS(AGENTS_TOPIC, "agent", "best-effort"))
+        self._acker = transport.publisher(TopicQoS(ack_topic(name), "ack"))
+        self._subscription: Subscription | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def start(self) -> None:
+        self._subscription = self.transport.subscribe(TopicQoS(config_topic(self.name), "config"), self._receive)
+        for target, label in ((self._announce_loop, "announce"), (self._work_loop, "apply")):
+            thread = threading.Thread(target=target, name=f"ckm-agent-{label}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        LOG.info("agent %s waiting for a configuration on %s", self.name, config_topic(self.name))
+
+    def stop(self) -> None:
+        """Stop taking pushes, stop the running node (actuators safe), say goodbye."""
+        if self._subscription is not None:
+            self._subscription.close()
+        self._stop.set()
+        self._changed.set()
+        for thread in self._threads:
+            thread.join(30.0)
+        with self._lock:
+            current, self.current = self.current, None
+            self.status = "stopped"
+        if current is not None:
+            self._retire(current)
+        self._announcer.publish(self.announcement())
+
+    def announcement(self) -> dict[str, Any]:
+        with self._lock:
+            push = self.current.push if self.current is not None else None
+            return {
+                "type": "agent",
+                "name": self.name,
+                "host": socket.gethostname(),
+                "pid": os.getpid(),
+                "guid": self.transport.guid,
+                "status": self.status,
+                "config_hash": push.hash if push else None,
+                "node": push.node if push else None,
+                "system": self.current.system.name if self.current is not None else None,
+                "errors": list(self.errors),
+                "last_id": self.last_id,
+            }
+
+    # ------------------------------------------------------------------ threads
+
+    def _receive(self, sample: Sample) -> None:
+        try:  # network thread: never block it with a setup
+            self._inbox.put_nowait(sample.value)
+        except queue.Full:
+            LOG.warning("agent %s: busy, a push was dropped (the editor resends)", self.name)
+
+    def _announce_loop(self) -> None:
+        while not self._stop.is_set():
+            self._announcer.publish(self.announcement())
+            self._changed.wait(self.announce_period)
+            self._changed.clear()
+
+    def _work_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                message = self._inbox.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            try:
+                ack = self.handle(message)
+            except Exception as exc:  # a bug must not end the agent: answer and go on
+                LOG.exception("agent %s: a push failed", self.name)
+                ident = message.get("id") if isinstance(message, dict) else None
+                ack = self._answer(ident, False, "", None, [f"agent error: {_describe(exc, self.run_dir)}"])
+            self._acker.publish(ack)
+
+    # ------------------------------------------------------------------ applying a push
+
+    def handle(self, message: Any) -> dict[str, Any]:
+        """Apply one push (or refuse it) and return the acknowledgement."""
+        ident = message.get("id") if isinstance(message, dict) else None
+        if isinstance(ident, (str, int)) and not isinstance(ident, bool) and ident in self._acks:
+            return self._acks[ident]  # a resend: answer again, apply once
+        hashed = ""
+        try:
+            push = parse_push(message, self.max_bundle)
+            hashed = push.hash
+            ack = self._install(push)
+        except Refused as refused:
+            if isinstance(message, dict) and isinstance(message.get("files"), dict):
+                files = message["files"]
+                if all(isinstance(p, str) and isinstance(t, str) for p, t in files.items()):
+                    hashed = hashed or bundle_hash(files)
+            node = message.get("node") if isinstance(message, dict) else None
+            ack = self._answer(ident, False, hashed, node if isinstance(node, str) else None, refused.errors)
+            with self._lock:
+                if self.current is None:
+                    self.status = "refused"
+                self.errors = refused.errors
+            LOG.warning("agent %s refused push %r: %s", self.name, ident, refused)
+        if isinstance(ack["id"], (str, int)):
+            self._acks[ack["id"]] = ack
+            while len(self._acks) > 32:
+                self._acks.popitem(last=False)
+        with self._lock:
+            self.last_id = ack["id"]
+        self._changed.set()
+        return ack
+
+    def _answer(self, ident: Any, accepted: bool, hashed: str, node: str | None, errors: list[str]) -> dict[str, Any]:
+        ident = ident if isinstance(ident, (str, int)) and not isinstance(ident, bool) else None
+        return {
+            "type": "ack",
+            "agent": self.name,
+            "id": ident,
+            "accepted": accepted,
+            "hash": hashed,
+            "node": node,
+            "errors": errors,
+        }
+
+    def _install(self, push: Push) -> dict[str, Any]:
+        directory = self._write(push)
+        try:
+            runtime, scoped, system = self._build(push, directory)
+        except Refused:
+            shutil.rmtree(directory, ignore_errors=True)  # the errors are in the answer and the log
+            raise
+        with self._lock:
+            old, self.current = self.current, None
+        if old is not None:
+            self._retire(old)  # the old node stops, its actuators safe, before the new one acts
+        scoped.start()
+        try:
+            runtime.start()
+        except Exception as exc:
+            runtime.stop()
+            scoped.stop()
+            errors = [f"{push.node} failed to start: {_describe(exc, directory)}"]
+            with self._lock:
+                self.status, self.errors = "failed", errors
+            LOG.exception("agent %s: node %s failed to start", self.name, push.node)
+            return self._answer(push.id, False, push.hash, push.node, errors)
+        with self._lock:
+            self.current = _Running(runtime, scoped, system, push, directory, time.time())
+            self.status, self.errors = "running", []
+        LOG.info("agent %s runs node %s of %s (%s)", self.name, push.node, system.name, push.hash[:12])
+        return self._answer(push.id, True, push.hash, push.node, [])
+
+    def _write(self, push: Push) -> Path:
+        try:
+            while True:  # a fresh directory, even in a run directory used before
+                self._pushes += 1
+                directory = self.run_dir / "configs" / f"{self._pushes:03d}-{push.hash[:12]}"
+                with contextlib.suppress(FileExistsError):
+                    directory.mkdir(parents=True)
+                    break
+            for path, text in push.files.items():
+                target = directory / path
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with target.open("x", encoding="utf-8") as out:
+                    out.write(text)
+        except (OSError, UnicodeError) as exc:
+            raise Refused(f"cannot store the bundle: {exc}") from None
+        return directory
+
+    def _build(self, push: Push, directory: Path) -> tuple[NodeRuntime, ScopedTransport, System]:
+        result = load(directory / push.main, strict=False)
+        root = directory.resolve()
+        outside = [f for f in result.files if not Path(f).resolve().is_relative_to(root)]
+        if outside:  # an include reached out of the bundle: say so, show nothing of it
+            raise Refused("an include leads out of the bundle; send every included file in it")
+        if result.errors or result.system is None:
+            raise Refused(*(_describe(e, directory) for e in result.errors))
+        system = result.system
+        node = next((n for n in system.nodes if n.name == push.node), None)
+        if node is None:
+            names = ", ".join(n.name for n in system.nodes) or "none"
+            raise Refused(f"{push.main}: no node {push.node!r} (nodes: {names})")
+        if node.partitions:
+            raise Refused(f"node {push.node!r} has partitions: run it with ckm-run --node, not through an agent")
+        scoped = ScopedTransport(self.transport)
+        runtime: NodeRuntime | None = None
+        try:
+            runtime = NodeRuntime(node, system, scoped, registry=self.registry)
+            runtime.setup()
+        except Exception as exc:  # any error, a plugin's included: the old node keeps running
+            if runtime is not None:
+                _discard(runtime)
+            scoped.stop()
+            raise Refused(_describe(exc, directory)) from None
+        return runtime, scoped, system
+
+    def _retire(self, running: _Running) -> None:
+        """Stop a running node, actuators safe, and record its run in its directory; never raises."""
+        running.scoped.open.clear()
+        try:
+            running.runtime.stop()
+        except Exception:
+            LOG.exception("agent %s: node %s did not stop cleanly", self.name, running.push.node)
+        running.scoped.stop()
+        main = running.directory / running.push.main
+        extra = {"agent": self.name, "hash": running.push.hash}
+        try:
+            _write_run(running.directory, main, running.system, [running.runtime], running.started, extra)
+        except OSError:
+            LOG.exception("agent %s: cannot record the run of %s", self.name, running.push.node)
+        LOG.info("agent %s stopped node %s (%s)", self.name, running.push.node, running.push.hash[:12])
+
+
+def _discard(runtime: NodeRuntime) -> None:
+    """Undo a setup that never ran: close what it opened without driving any actuator."""
+    for resource in runtime.resources.values():
+        try:
+            resource.stop()
+        except Exception:
+            LOG.exception("could not stop Smart Resource %s", resource.resource.name)
+    for backend in runtime.backends.values():
+        try:
+            backend.stop()
+        except Exception:
+            LOG.exception("could not close a backend of %s", runtime.node.name)
+
+
+def _describe(error: BaseException, directory: Path) -> str:
+    """One line per problem, file paths relative to the bundle."""
+    if isinstance(error, ConfigError):
+        name = os.path.relpath(error.file, directory) if os.path.isabs(error.file) else error.file
+        return f"{Path(name).as_posix()}:{error.line}:{error.column}: {error.xpath}: {error.message}"
+    text = str(error) or type(error).__name__
+    return text if isinstance(error, (ValueError, OSError)) else f"{type(error).__name__}: {text}"
+
+
+def run_agent(network_file: Path | None, name: str, run_dir: Path, duration: float | None = None) -> int:
+    """``ckm-run --await-config [NETWORK.xml] --name NAME``: join, announce, apply pushes until a
+    signal (or ``duration``); exit 0 on a clean stop, 1 for a bad network file, 2 if the network
+    cannot be joined."""
+    network, key = Network(), None
+    try:
+        if network_file is not None:
+            network = load(network_file).network or Network()
+            key = read_group_key(network, network_file.parent)
+        transport = open_transport(network, name=name, key=key)
+        transport.setup()
+    except ConfigError as error:
+        print(error, file=sys.stderr)
+        return 1
+    except (GroupKeyError, NetworkError, OSError, ValueError) as exc:
+        print(f"{network_file or 'default network'}: cannot join the network: {exc}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        LOG.info("signal %s: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    agent = ConfigAgent(name, transport, run_dir)
+    try:
+        transport.start()
+        agent.start()
+        deadline = None if duration is None else time.monotonic() + duration
+        while not stop.is_set() and (deadline is None or time.monotonic() < deadline):
+            stop.wait(0.1)
+    finally:
+        agent.stop()
+        transport.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0
