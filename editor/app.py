@@ -28,10 +28,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from runtime.network import Transport
+
 from .document import Element, local
 from .model.schema import SchemaModel
 from .views.form import AttributeForm
 from .views.graphs import PlanView, TopicGraph
+from .views.live import AgentsPanel, MonitorPanel, open_network
 from .views.mission import MissionCanvas
 from .views.problems import ProblemsPanel
 from .views.tree import SystemTree
@@ -53,6 +56,7 @@ class MainWindow(QMainWindow):
         super().__init__()
         self.settings = settings if settings is not None else QSettings("CKM", "ckm-editor")
         self.ask = ask
+        self._transport: Transport | None = None
         self.schema = SchemaModel.load()
         self.resize(1400, 860)
         self.document = Workspace(path, parent=self)
@@ -93,6 +97,12 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(self.canvas, "Mission")
         self.tabs.addTab(self.topics, "Topics")
         self.tabs.addTab(self.plan, "Plan")
+        self.agents = AgentsPanel(self.network)
+        self.monitor = MonitorPanel(self.network)
+        self.monitor.on_state = self._live_state
+        self.tabs.addTab(self.agents, "Agents")
+        self.tabs.addTab(self.monitor, "Monitor")
+        self.tabs.currentChanged.connect(self._tab_shown)
         self.problems = ProblemsPanel(document)
         self.problems_dock.setWidget(self.problems)
         self.tree.selected.connect(self._selected)
@@ -170,6 +180,34 @@ class MainWindow(QMainWindow):
     def _refresh_graphs(self) -> None:
         self.topics.show_system(self.document.system)
         self.plan.show_system(self.document.system)
+        self.agents.show_system(self.document.system, self.document.main.path)
+
+    # ------------------------------------------------------------------ the live system
+
+    def network(self) -> Transport:
+        """The transport to the edited system's network, opened the first time it is needed."""
+        if self._transport is None:
+            base = self.document.main.path.parent if self.document.main.path else Path.cwd()
+            self._transport = open_network(self.document.last_system, base)
+        return self._transport
+
+    def _tab_shown(self, index: int) -> None:
+        widget = self.tabs.widget(index)
+        try:
+            if widget is self.agents:
+                self.agents.start()
+            elif widget is self.monitor:
+                self.monitor.start(self.document.last_system)
+        except (OSError, ValueError) as exc:  # no network, a bad group key file
+            QMessageBox.warning(self, "Network", f"cannot join the system's network: {exc}")
+
+    def _live_state(self, agent: str, path: str | None) -> None:
+        """Highlight an agent's active state when the canvas shows its mission."""
+        if not path:
+            return
+        parts = path.split("/")
+        if parts[-1] in self.canvas.nodes and self.canvas.active != parts[-1]:
+            self.canvas.highlight(parts[-1])
 
     # ------------------------------------------------------------------ files
 
@@ -244,6 +282,11 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event: QCloseEvent) -> None:
         if self._may_discard():
+            self.agents.timer.stop()
+            self.monitor.timer.stop()
+            if self._transport is not None:
+                self._transport.stop()
+                self._transport = None
             event.accept()
         else:
             event.ignore()

@@ -35,7 +35,8 @@ class Workspace(QObject):
         self.main = self._adopt(Document(path.resolve() if path else None, parent=self, undo=self.undo))
         self.documents: dict[Path, Document] = {}
         self.problems: list[Problem] = []
-        self.system: System | None = None
+        self.system: System | None = None  # as the files are now (None while they do not load)
+        self.last_system: System | None = None  # the last that loaded (what is probably running)
         self._follow_includes(self.main)
         self._timer = QTimer(self)
         self._timer.setSingleShot(True)
@@ -148,6 +149,7 @@ class Workspace(QObject):
 
             problems = [Problem(real(e.file), e.line, e.column, e.xpath, e.message) for e in result.errors]
             self.system = result.system
+            self.last_system = result.system or self.last_system
             if result.system is not None and not result.errors:
                 problems += [
                     Problem(real(p.file), p.line, p.column, p.xpath, p.message, p.severity, p.source)
