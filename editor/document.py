@@ -178,13 +178,15 @@ def _after_comments(data: bytes, start: int) -> int:
 
 def _mission_problems(system: object) -> list[Problem]:
     from runtime.missions.cli import top_missions
+    from runtime.missions.validation.srflowgen import srflowgen
     from runtime.missions.validation.static import check_mission
 
     found: list[Problem] = []
     for mission in top_missions(system):  # type: ignore[arg-type]
-        for f in check_mission(system, mission):  # type: ignore[arg-type]
+        findings = [*check_mission(system, mission), *srflowgen(system, mission, system.validation)[0]]  # type: ignore[arg-type, attr-defined]
+        for f in findings:
             found.append(Problem(f.file, f.line, f.column, f.xpath, f"[{f.kind}] {f.message}", f.severity, "mission"))
-    return found
+    return list(dict.fromkeys(found))
 
 
 _STEP = re.compile(r"^(?P<tag>[A-Za-z_][\w.-]*)(?:\[(?:@(?P<attr>[\w.-]+)='(?P<value>[^']*)'|(?P<index>\d+))\])?$")

@@ -171,7 +171,7 @@ class MonitorPanel(QWidget):
         self.system: System | None = None
         self.topics_table = _table(["topic", "messages/s", "total"])
         self.services_table = _table(["service", "scenario", "measures", "alarm"])
-        self.agents_table = _table(["agent", "active state"])
+        self.agents_table = _table(["agent", "active state", "mission progress"])
         layout = QVBoxLayout(self)
         for title, table in (("Topics", self.topics_table), ("Services", self.services_table),
                              ("Mission states", self.agents_table)):  # fmt: skip
@@ -182,6 +182,7 @@ class MonitorPanel(QWidget):
         self.totals: dict[str, int] = collections.Counter()
         self.services: dict[str, dict[str, Any]] = {}
         self.states: dict[str, str | None] = {}
+        self.progress: dict[str, float] = {}
         self.on_state: Callable[[str, str | None], None] | None = None
         self._subscribed: set[str] = set()
         self.timer = QTimer(self)
@@ -245,6 +246,8 @@ class MonitorPanel(QWidget):
         if isinstance(beat, dict) and isinstance(beat.get("agent"), str):
             with self._lock:
                 self.states[beat["agent"]] = beat.get("state")
+                if isinstance(beat.get("progress"), int | float):
+                    self.progress[beat["agent"]] = float(beat["progress"])
 
     def refresh(self) -> None:
         now = time.monotonic()
@@ -256,9 +259,10 @@ class MonitorPanel(QWidget):
                 for k, v in sorted(self.services.items())
             ]
             states = dict(self.states)
+            progress = dict(self.progress)
         _fill(self.topics_table, topics)
         _fill(self.services_table, services)
-        _fill(self.agents_table, [[a, s or "—"] for a, s in sorted(states.items())])
+        _fill(self.agents_table, [[a, s or "—", f"{progress.get(a, 0.0):.0%}"] for a, s in sorted(states.items())])
         if self.on_state is not None:
             for agent, state in states.items():
                 self.on_state(agent, state)

@@ -198,7 +198,8 @@ class AgentRunner:
             while not self._stop.is_set():
                 now = time.monotonic()
                 if now >= next_beat:
-                    self._beat.publish({"agent": self.agent.name, "state": self.engine.active_path(), "t": now})
+                    beat = {"agent": self.agent.name, "state": self.engine.active_path(), "t": now}
+                    self._beat.publish({**beat, "progress": self.engine.top.progress()})
                     self._watch()
                     self._record_qualities()
                     next_beat = now + self.heartbeat
