@@ -13,6 +13,7 @@ moment after the last edit (debounced), which keeps typing responsive on the use
 
 from __future__ import annotations
 
+import abc
 import copy
 import re
 from collections.abc import Callable
@@ -253,11 +254,13 @@ class _Command(QUndoCommand):
         self.revert()
         self.document.count(-1)
 
+    @abc.abstractmethod
     def apply(self) -> None:
-        raise NotImplementedError
+        """Make the edit (redo)."""
 
+    @abc.abstractmethod
     def revert(self) -> None:
-        raise NotImplementedError
+        """Take it back (undo)."""
 
 
 class SetAttribute(_Command):
