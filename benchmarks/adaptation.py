@@ -36,6 +36,7 @@ from ckmconf.loader import load
 from ckmconf.model import Network
 from ckmconf.model.resources import Policy, Scenario, Service, SmartResource
 from runtime.network import open_transport
+from runtime.network.ports import private_base
 from runtime.resources.client import ServiceClient, ServiceDirectory
 from runtime.resources.quality import probability_within
 from runtime.resources.resource import SmartResourceRuntime
@@ -125,7 +126,7 @@ def scaled(resource: SmartResource, factors: dict[str, float]) -> SmartResource:
 
 def _network() -> Network:
     rng = random.Random()
-    base = rng.randrange(30000, 60000, 64)
+    base = private_base(rng)  # below the ephemeral port range: no EADDRINUSE from other sockets
     return Network(
         transport="multipeer",
         group=f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",

@@ -11,6 +11,7 @@ import time
 from typing import Any
 
 from runtime.network import open_transport
+from runtime.network.ports import private_base
 
 from .networker import TOPIC, network_from
 
@@ -20,7 +21,7 @@ PERIOD = 0.001
 
 def private_settings(transport: str) -> dict[str, Any]:
     rng = random.Random()
-    base = rng.randrange(30000, 60000, 64)
+    base = private_base(rng)  # below the ephemeral port range: no EADDRINUSE from other sockets
     settings: dict[str, Any] = {
         "transport": transport,
         "group": f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",

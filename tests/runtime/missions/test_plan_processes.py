@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from runtime.missions.recording import read_run
+from runtime.network.ports import private_base
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "plans" / "two_agents.xml"
 
@@ -24,7 +25,7 @@ def _config(tmp_path: Path) -> Path:
 def _config_from(text: str, tmp_path: Path) -> Path:
     """``text`` with a private loopback network inserted before its first Node."""
     rng = random.Random()
-    base = rng.randrange(20000, 60000, 64)
+    base = private_base(rng)  # below the ephemeral port range: no EADDRINUSE from other sockets
     network = (
         f'<Network transport="multipeer" group="239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}" '
         f'discoveryPort="{base + 63}" interface="127.0.0.1" basePort="{base}" portTries="40" heartbeat="0.05"/>'

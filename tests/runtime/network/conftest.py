@@ -9,6 +9,7 @@ import pytest
 
 from ckmconf.model import Network
 from runtime.network import Transport, open_transport
+from runtime.network.ports import private_base
 
 TRANSPORTS = ["multipeer", "zenoh"]
 
@@ -16,7 +17,7 @@ TRANSPORTS = ["multipeer", "zenoh"]
 def private_network(transport: str = "multipeer", **overrides: object) -> Network:
     """A Network on loopback with its own multicast group and ports, so tests never hear each other."""
     rng = random.Random()
-    base = rng.randrange(20000, 60000, 64)
+    base = private_base(rng)  # below the ephemeral port range: no EADDRINUSE from other sockets
     settings: dict[str, object] = {
         "transport": transport,
         "group": f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
