@@ -33,16 +33,16 @@ from typing import Any
 import numpy as np
 
 from ckmconf.loader import load
-from ckmconf.model import Network
 from ckmconf.model.resources import Policy, Scenario, Service, SmartResource
 from runtime.network import open_transport
-from runtime.network.ports import private_base
 from runtime.resources.client import ServiceClient, ServiceDirectory
 from runtime.resources.quality import probability_within
 from runtime.resources.resource import SmartResourceRuntime
 from runtime.resources.spt import Topology
 
 from .adaptation_report import describe, figures, summarize
+from .netbench import private_settings
+from .networker import network_from
 
 REPO = Path(__file__).resolve().parents[1]
 SCHEDULE = (1, 2, 3, 4, 3, 2, 1)
@@ -124,22 +124,6 @@ def scaled(resource: SmartResource, factors: dict[str, float]) -> SmartResource:
     return dataclasses.replace(resource, services=tuple(service(s) for s in resource.services))
 
 
-def _network() -> Network:
-    rng = random.Random()
-    base = private_base(rng)  # below the ephemeral port range: no EADDRINUSE from other sockets
-    return Network(
-        transport="multipeer",
-        group=f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-        discovery_port=base + 63,
-        interface="127.0.0.1",
-        base_port=base,
-        port_tries=40,
-        heartbeat=0.05,
-        reconnect_min=0.01,
-        reconnect_max=0.1,
-    )
-
-
 def experiment(
     resource: SmartResource,
     frames: Sequence[Any],
@@ -149,7 +133,7 @@ def experiment(
     parameters: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """One run of the schedule; every client's quality messages, events and alarms, timestamped."""
-    network = _network()
+    network = network_from(private_settings("multipeer"))  # private loopback group and ports
     counter = iter(range(10**12))
 
     def source() -> Any:
