@@ -1,8 +1,14 @@
-"""ckm-bench NAME [--json]: run a benchmark, print a table; with --json the last line is one JSON object."""
+"""ckm-bench NAME [--json] [OPTIONS]: run a benchmark, print a table; with --json the last line is one JSON object.
+
+Each benchmark is a module imported only when named (pybullet or Qt are not loaded for a network
+benchmark). A module either takes options (``run(argv)``, listed in ``TAKES_OPTIONS``; its
+``--help`` lists them) or none (``run()``); ``describe(result)`` gives the table's rows.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -11,19 +17,27 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from . import adaptation, config, jitter, netbench, rates
-
-Runner = Callable[[], dict[str, Any]]
+Runner = Callable[..., dict[str, Any]]
 Describer = Callable[[dict[str, Any]], list[tuple[str, str]]]
-BENCHMARKS: dict[str, tuple[Runner, Describer]] = {
-    "adaptation": (adaptation.run, adaptation.describe),
-    "config": (config.run, config.describe),
-    "pubsub": (netbench.run_pubsub, netbench.describe_pubsub),
-    "discovery": (netbench.run_discovery, netbench.describe_discovery),
-    "jitter": (jitter.run, jitter.describe),
-    "rates": (rates.run, rates.describe),
+# name → (module, run function, describe function)
+BENCHMARKS: dict[str, tuple[str, str, str]] = {
+    "adaptation": ("benchmarks.adaptation", "run", "describe"),
+    "config": ("benchmarks.config", "run", "describe"),
+    "pubsub": ("benchmarks.netbench", "run_pubsub", "describe_pubsub"),
+    "discovery": ("benchmarks.netbench", "run_discovery", "describe_discovery"),
+    "jitter": ("benchmarks.jitter", "run", "describe"),
+    "rates": ("benchmarks.rates", "run", "describe"),
 }
-TAKES_OPTIONS = {"adaptation"}  # ckm-bench adaptation --help lists them
+TAKES_OPTIONS = {"adaptation"}  # these take their own options: ckm-bench NAME --help lists them
+
+
+def resolve(name: str) -> tuple[Runner, Describer]:
+    """The run and describe functions of benchmark ``name``."""
+    module_name, run_name, describe_name = BENCHMARKS[name]
+    module = importlib.import_module(module_name)
+    run: Runner = getattr(module, run_name)
+    describe: Describer = getattr(module, describe_name)
+    return run, describe
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -31,10 +45,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("name", choices=sorted(BENCHMARKS), help="which benchmark")
     parser.add_argument("--json", action="store_true", help="end with one line of JSON")
     args, extra = parser.parse_known_args(argv)
-    run, describe = BENCHMARKS[args.name]
     if extra and args.name not in TAKES_OPTIONS:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    result = adaptation.run(extra) if args.name == "adaptation" else run()
+    run, describe = resolve(args.name)
+    result = run(extra) if args.name in TAKES_OPTIONS else run()
     table = Table(title=f"ckm-bench {args.name}")
     table.add_column("measure")
     table.add_column("value", justify="right")
