@@ -2,56 +2,30 @@
 
 Each is built from its configuration record with no I/O in ``__init__``; hardware opens in
 ``setup()`` and closes in ``stop()``. Values are floats (or tuples of floats for channels whose
-``size`` is more than one).
+``size`` is more than one). Each class declares its Params and ports once, at the class
+(``PARAMS``, ``PORTS``: see :mod:`runtime.verification.manifest`); ``read_params`` converts the
+``<Param>`` elements against that declaration, and ``verify`` checks configurations against it.
 """
 
 from __future__ import annotations
 
 import abc
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
-from ckmconf.model import HWChannel, Param, params_dict
+from ckmconf.model import HWChannel
 from ckmconf.model.kernel import Controller as ControllerRecord
+
+from ..verification.manifest import NUMBER, NUMBERS, ParamError, Params, Ports, read_params
 
 Value = float | tuple[float, ...]
 
 
-class ParamError(ValueError):
-    """A Param a plugin cannot use: unknown, missing or of the wrong type (reported with its line)."""
-
-
-def read_params(params: Sequence[Param], spec: Mapping[str, Any], *, owner: str) -> dict[str, Any]:
-    """Typed parameter values: ``spec`` maps each accepted name to its default (whose type converts).
-
-    Unknown names and unconvertible values raise ParamError naming the owner.
-    """
-    given = params_dict(tuple(params))
-    unknown = sorted(set(given) - set(spec))
-    if unknown:
-        raise ParamError(f"{owner} takes no parameter {unknown[0]!r} (accepted: {', '.join(sorted(spec))})")
-    values: dict[str, Any] = {}
-    for name, default in spec.items():
-        if name not in given:
-            values[name] = default
-            continue
-        text = given[name]
-        try:
-            if isinstance(default, bool):
-                if text not in ("true", "false", "1", "0"):
-                    raise ValueError(text)
-                values[name] = text in ("true", "1")
-            elif isinstance(default, (int, float)) and not isinstance(default, bool):
-                values[name] = type(default)(float(text)) if isinstance(default, float) else int(text)
-            else:
-                values[name] = text
-        except ValueError:
-            raise ParamError(f"{owner}: parameter {name!r} = {text!r} is not a {type(default).__name__}") from None
-    return values
-
-
 class Backend(abc.ABC):
     """The hardware behind one HWChannel (loopback plant, pybullet joint or camera, a real bus…)."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = Params()
+    PORTS: ClassVar[Ports] = Ports(outputs={"*": NUMBERS})
 
     def __init__(self, channel: HWChannel) -> None:
         self.channel = channel
@@ -76,6 +50,8 @@ class Backend(abc.ABC):
 class AdaptationFunction(abc.ABC):
     """One step of an adaptation chain: raw → engineering units (sensors) or back (actuators)."""
 
+    PARAMS: ClassVar[Mapping[str, Any]] = Params()
+
     @abc.abstractmethod
     def __call__(self, value: float, now: float) -> float:
         """Transform one value; ``now`` (seconds, monotonic) lets filters account for time."""
@@ -91,6 +67,9 @@ class AdaptationFunction(abc.ABC):
 
 class Controller(abc.ABC):
     """A control law (§3.1.2.2). ``step`` gives the action; ``future`` the stored next actions."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = Params()
+    PORTS: ClassVar[Ports] = Ports(inputs={"*": NUMBER}, outputs={"*": NUMBER})
 
     def __init__(self, record: ControllerRecord) -> None:
         self.record = record
@@ -114,3 +93,13 @@ class Controller(abc.ABC):
     def restore(self, state: Mapping[str, Any]) -> None:
         """Continue from a state produced by ``state()`` on another node."""
         return None  # optional hook
+
+
+__all__ = [
+    "AdaptationFunction",
+    "Backend",
+    "Controller",
+    "ParamError",
+    "Value",
+    "read_params",
+]

@@ -1,0 +1,274 @@
+"""The manifest of a kind: its parameters and the values it exchanges (BehaviorTree.CPP's manifests).
+
+Every registered class declares, once, at the class:
+
+- ``PARAMS``: a :class:`Params` of :class:`P` entries — name, type, default (or required), unit,
+  range, accepted values and a one-line doc. The same object converts the ``<Param>`` elements
+  when the kind is built (:func:`read_params`) and is what ``verify`` checks a configuration
+  against before anything is built, so the two can never disagree.
+- ``PORTS`` (optional): a :class:`Ports` naming the value types of its inputs and outputs
+  (controllers by role, behaviors by port name, ``"*"`` for any) and, for hardware backends, the
+  channel sizes it serves. Value types are the names of ``schemas/kernel.xsd`` (built-in types
+  such as ``float64`` or ``string``, or a ``MessageType``) or the shapes :data:`NUMBER`,
+  :data:`NUMBERS` (a vector of numbers, one per channel element) and :data:`ANY`.
+
+A plain ``{name: default}`` mapping is still accepted as ``PARAMS`` (third-party plugins written
+before manifests): each entry then reads as an undocumented optional parameter of its default's type.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from ckmconf.model import Param, params_dict
+
+NUMBER = "number"
+"""One number (a float): what sensors of size-1 channels and controllers write, actuators take."""
+NUMBERS = "numbers"
+"""A tuple of numbers: what a sensor of a channel of size > 1 writes."""
+ANY = "any"
+"""Not declared: any value (nothing to check)."""
+
+ParamType = type[bool] | type[int] | type[float] | type[str]
+_TYPE_NAMES: dict[type, str] = {bool: "bool", int: "int", float: "float", str: "string"}
+
+
+class ParamError(ValueError):
+    """A Param a kind cannot use: unknown, missing, of the wrong type or out of range."""
+
+
+class _Required:
+    def __repr__(self) -> str:
+        return "REQUIRED"
+
+
+REQUIRED: Any = _Required()
+"""The default of a parameter that must be given."""
+
+
+def _number(value: float) -> str:
+    return f"{value:g}" if math.isfinite(value) else ("inf" if value > 0 else "-inf")
+
+
+@dataclass(frozen=True)
+class P:
+    """One declared parameter. ``default`` is :data:`REQUIRED` for a parameter that must be given,
+    or None for one whose default the kind computes from its element (say so in ``doc``).
+
+    ``min``/``max`` bound the value inclusively, ``above``/``below`` strictly; ``choices`` lists
+    the accepted values. The type is the default's unless ``type`` is given.
+    """
+
+    name: str
+    default: Any
+    doc: str = ""
+    type: ParamType | None = None
+    unit: str = ""
+    min: float | None = None
+    max: float | None = None
+    above: float | None = None
+    below: float | None = None
+    choices: tuple[Any, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.type is None:
+            if self.default is REQUIRED or self.default is None:
+                raise TypeError(f"parameter {self.name!r}: give its type when it has no default")
+            object.__setattr__(self, "type", type(self.default) if type(self.default) in _TYPE_NAMES else str)
+
+    @property
+    def required(self) -> bool:
+        return self.default is REQUIRED
+
+    @property
+    def type_name(self) -> str:
+        assert self.type is not None
+        return _TYPE_NAMES[self.type]
+
+    def range_text(self) -> str:
+        """The accepted values in words ("" when any value of the type is)."""
+        if self.choices:
+            return "one of " + ", ".join(str(c) for c in self.choices)
+        low = high = ""
+        if self.min is not None or self.above is not None:
+            low = f"[{_number(self.min)}" if self.min is not None else f"({_number(self.above or 0.0)}"
+        if self.max is not None or self.below is not None:
+            high = f"{_number(self.max)}]" if self.max is not None else f"{_number(self.below or 0.0)})"
+        if not low and not high:
+            return ""
+        return f"{low or '(-inf'}, {high or 'inf)'}"
+
+    def default_text(self) -> str:
+        if self.required:
+            return "required"
+        if self.default is None:
+            return "computed"
+        if isinstance(self.default, bool):
+            return "true" if self.default else "false"
+        if isinstance(self.default, float):
+            return _number(self.default)
+        return repr(self.default) if isinstance(self.default, str) else str(self.default)
+
+    def convert(self, text: str) -> Any:
+        """The typed value of ``text``; ParamError saying why it is not acceptable."""
+        try:
+            if self.type is bool:
+                if text not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                value: Any = text in ("true", "1")
+            elif self.type is int:
+                value = int(text)
+            elif self.type is float:
+                value = float(text)
+            else:
+                value = text
+        except ValueError:
+            assert self.type is not None
+            raise ParamError(f"parameter {self.name!r} = {text!r} is not a {self.type.__name__}") from None
+        problem = self.out_of_range(value)
+        if problem:
+            raise ParamError(f"parameter {self.name!r} = {value} {problem}")
+        return value
+
+    def out_of_range(self, value: Any) -> str:
+        """Why ``value`` is outside the declared range, as the end of a sentence ("" when inside)."""
+        if self.choices and value not in self.choices:
+            return "must be one of " + ", ".join(str(c) for c in self.choices)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return ""
+        if self.min is not None and value < self.min:
+            return "must not be negative" if self.min == 0 else f"must be at least {_number(self.min)}"
+        if self.above is not None and not value > self.above:
+            return f"must be greater than {_number(self.above)}"
+        if self.max is not None and value > self.max:
+            return f"must be at most {_number(self.max)}"
+        if self.below is not None and not value < self.below:
+            return f"must be less than {_number(self.below)}"
+        return ""
+
+
+class Params(Mapping[str, Any]):
+    """The parameters of a kind, in declaration order; as a mapping, name → default."""
+
+    def __init__(self, *specs: P) -> None:
+        self.specs: dict[str, P] = {}
+        for spec in specs:
+            if spec.name in self.specs:
+                raise TypeError(f"parameter {spec.name!r} is declared twice")
+            self.specs[spec.name] = spec
+
+    def __getitem__(self, name: str) -> Any:
+        return self.specs[name].default
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.specs)
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+    def __or__(self, other: Mapping[str, Any]) -> Params:
+        """Both sets of parameters (``other`` wins on a name both declare)."""
+        merged = dict(self.specs)
+        merged.update(as_params(other).specs)
+        return Params(*merged.values())
+
+    def __repr__(self) -> str:
+        return f"Params({', '.join(self.specs)})"
+
+
+def as_params(declared: Mapping[str, Any]) -> Params:
+    """``declared`` as a Params (a plain mapping reads as undocumented optional parameters)."""
+    if isinstance(declared, Params):
+        return declared
+    return Params(*(P(name, default) for name, default in declared.items()))
+
+
+@dataclass(frozen=True)
+class Ports:
+    """The value types a kind reads and writes, and the channel sizes a backend serves.
+
+    ``inputs``/``outputs`` map a role (controllers) or port name (behaviors) to a value type;
+    the key ``"*"`` covers every other one. ``sizes``: the channel sizes a hardware backend
+    accepts (empty: any).
+    """
+
+    inputs: Mapping[str, str] = field(default_factory=lambda: {"*": ANY})
+    outputs: Mapping[str, str] = field(default_factory=lambda: {"*": ANY})
+    sizes: tuple[int, ...] = ()
+
+    def input(self, name: str) -> str:
+        return self.inputs.get(name, self.inputs.get("*", ANY))
+
+    def output(self, name: str) -> str:
+        return self.outputs.get(name, self.outputs.get("*", ANY))
+
+
+def params_of(cls: type) -> Params:
+    """The declared parameters of a registered class (none declared: none accepted)."""
+    return as_params(getattr(cls, "PARAMS", Params()))
+
+
+def ports_of(cls: type) -> Ports:
+    """The declared ports of a registered class (none declared: anything goes)."""
+    ports = getattr(cls, "PORTS", None)
+    return ports if isinstance(ports, Ports) else Ports()
+
+
+def read_params(
+    params: Sequence[Param],
+    spec: Mapping[str, Any],
+    *,
+    owner: str,
+    defaults: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Typed parameter values from the ``<Param>`` elements, checked against the declaration.
+
+    Args:
+        params: the element's Params.
+        spec: the kind's ``PARAMS`` (a :class:`Params`, or a plain name → default mapping).
+        owner: how messages name the element ("controller 'left_pid' (pid)").
+        defaults: values for parameters whose default the kind computes (declared default None).
+
+    Returns:
+        Every declared parameter by name, given or defaulted.
+
+    Raises:
+        ParamError: an unknown or missing parameter, or a value of the wrong type or out of range.
+    """
+    declared = as_params(spec)
+    given = params_dict(tuple(params))
+    unknown = sorted(set(given) - set(declared))
+    if unknown:
+        accepted = ", ".join(sorted(declared)) or "none"
+        raise ParamError(f"{owner} takes no parameter {unknown[0]!r} (accepted: {accepted})")
+    values: dict[str, Any] = {}
+    for name, entry in declared.specs.items():
+        if name in given:
+            try:
+                values[name] = entry.convert(given[name])
+            except ParamError as exc:
+                raise ParamError(f"{owner}: {exc}") from None
+        elif entry.required:
+            raise ParamError(f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})")
+        else:
+            values[name] = (defaults or {}).get(name, entry.default)
+    return values
+
+
+__all__ = [
+    "ANY",
+    "NUMBER",
+    "NUMBERS",
+    "REQUIRED",
+    "P",
+    "ParamError",
+    "Params",
+    "Ports",
+    "as_params",
+    "params_of",
+    "ports_of",
+    "read_params",
+]
