@@ -23,12 +23,18 @@ from dataclasses import dataclass
 from typing import Any
 
 from runtime.kernel.interfaces import ParamError
+from runtime.verification.manifest import P, Params
 
 Vector = tuple[float, ...]
 Matrix = tuple[Vector, ...]
 
 #: The model Params and their defaults (``order`` is given by the user of the model).
-MODEL_SPEC: dict[str, Any] = {"gain": 1.0, "timeConstant": 1.0, "naturalFrequency": 1.0, "damping": 0.7}
+MODEL_SPEC = Params(
+    P("gain", 1.0, "Static gain of the plant model (output per unit input)."),
+    P("timeConstant", 1.0, "Time constant T of a first-order model.", unit="s", above=0.0),
+    P("naturalFrequency", 1.0, "Natural frequency ω of a second-order model.", unit="rad/s", above=0.0),
+    P("damping", 0.7, "Damping ratio ζ of a second-order model.", min=0.0),
+)
 _ORDER_PARAMS = {0: set[str](), 1: {"timeConstant"}, 2: {"naturalFrequency", "damping"}}
 
 

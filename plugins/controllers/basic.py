@@ -13,15 +13,18 @@ from typing import Any
 
 from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import Controller, ParamError, read_params
+from runtime.verification.manifest import P, Params
 
 
 class Constant(Controller):
     """Outputs a fixed value."""
 
+    PARAMS = Params(P("value", 0.0, "The output, whatever the inputs."))
+
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)
         self.value = float(
-            read_params(record.params, {"value": 0.0}, owner=f"controller {record.name!r} (constant)")["value"]
+            read_params(record.params, self.PARAMS, owner=f"controller {record.name!r} (constant)")["value"]
         )
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
@@ -34,10 +37,12 @@ class Constant(Controller):
 class Relay(Controller):
     """Passes its one input through, as ``gain · input + offset``."""
 
+    PARAMS = Params(P("gain", 1.0, "Factor applied to the input."), P("offset", 0.0, "Added after the gain."))
+
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)
         owner = f"controller {record.name!r} (relay)"
-        values = read_params(record.params, {"gain": 1.0, "offset": 0.0}, owner=owner)
+        values = read_params(record.params, self.PARAMS, owner=owner)
         if len(record.inputs) != 1:
             raise ParamError(f"{owner} relays exactly one input, not {len(record.inputs)}")
         self.gain, self.offset = float(values["gain"]), float(values["offset"])

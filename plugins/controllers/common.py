@@ -7,9 +7,14 @@ from collections.abc import Mapping
 from typing import Any
 
 from runtime.kernel.interfaces import ParamError
+from runtime.verification.manifest import P, Params
 
 #: Output-limit Params: ``outputMin``/``outputMax``, or ``outputLimit`` for the symmetric ±limit.
-LIMIT_SPEC: dict[str, Any] = {"outputMin": -math.inf, "outputMax": math.inf, "outputLimit": math.inf}
+LIMIT_SPEC = Params(
+    P("outputMin", -math.inf, "Lowest output (with outputMax; not with outputLimit)."),
+    P("outputMax", math.inf, "Highest output (with outputMin; not with outputLimit)."),
+    P("outputLimit", math.inf, "Symmetric output limit ±outputLimit (instead of outputMin/outputMax).", above=0.0),
+)
 
 
 def output_limits(values: Mapping[str, Any], given: Mapping[str, str], *, owner: str) -> tuple[float, float]:

@@ -35,6 +35,7 @@ from ckmconf.model import params_dict
 from ckmconf.model.kernel import Controller as ControllerRecord
 from plugins.lti import MODEL_SPEC, model_from_params
 from runtime.kernel.interfaces import Controller, ParamError, read_params
+from runtime.verification.manifest import P, Params
 
 from .common import LIMIT_SPEC, check_state, clamp, finite, measure_and_setpoint, output_limits
 
@@ -42,11 +43,22 @@ from .common import LIMIT_SPEC, check_state, clamp, finite, measure_and_setpoint
 class GPC(Controller):
     """A GPC control law (see the module docstring)."""
 
+    PARAMS = (
+        Params(P("order", 1, "Order of the plant model.", choices=(1, 2)))
+        | MODEL_SPEC
+        | Params(
+            P("predictionHorizon", None, "Prediction horizon N (default: the controller's horizon).", type=int, min=1),
+            P("controlHorizon", None, "Control horizon Nu, from 1 to N (default: N).", type=int, min=1),
+            P("lambda", 0.1, "Weight λ of the control increments in the cost.", min=0.0),
+        )
+        | LIMIT_SPEC
+    )
+
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)
         self.owner = f"controller {record.name!r} (gpc)"
-        spec = {"order": 1, **MODEL_SPEC, "predictionHorizon": record.horizon, "controlHorizon": 0, "lambda": 0.1}
-        values = read_params(record.params, {**spec, **LIMIT_SPEC}, owner=self.owner)
+        horizon = {"predictionHorizon": record.horizon}
+        values = read_params(record.params, self.PARAMS, owner=self.owner, defaults=horizon)
         given = params_dict(record.params)
         self.model = model_from_params(
             {k: values[k] for k in given if k in MODEL_SPEC or k == "order"},

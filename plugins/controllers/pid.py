@@ -24,6 +24,7 @@ from typing import Any
 from ckmconf.model import params_dict
 from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import Controller, ParamError, read_params
+from runtime.verification.manifest import P, Params
 
 from .common import LIMIT_SPEC, check_state, clamp, finite, measure_and_setpoint, output_limits
 
@@ -33,11 +34,20 @@ _STATE_KEYS = ("integral", "previous", "derivative", "error", "output", "target"
 class PID(Controller):
     """A PID control law (see the module docstring)."""
 
+    PARAMS = (
+        Params(
+            P("kp", 1.0, "Proportional gain."),
+            P("ki", 0.0, "Integral gain.", unit="1/s"),
+            P("kd", 0.0, "Derivative gain (on the measure).", unit="s"),
+            P("tau", 0.0, "Time constant of the derivative's low-pass filter (0: unfiltered).", unit="s", min=0.0),
+        )
+        | LIMIT_SPEC
+    )
+
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)
         self.owner = f"controller {record.name!r} (pid)"
-        spec = {"kp": 1.0, "ki": 0.0, "kd": 0.0, "tau": 0.0, **LIMIT_SPEC}
-        values = read_params(record.params, spec, owner=self.owner)
+        values = read_params(record.params, self.PARAMS, owner=self.owner)
         finite(values, ("kp", "ki", "kd", "tau"), owner=self.owner)
         if values["tau"] < 0.0:
             raise ParamError(f"{self.owner}: parameter 'tau' = {values['tau']} must not be negative")

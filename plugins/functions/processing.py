@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from ckmconf.model import Param
 from runtime.kernel.adaptation import Identity, Step
 from runtime.kernel.interfaces import AdaptationFunction, ParamError, read_params
+from runtime.verification.manifest import P, Params
 
 
 class WrapAngle(Step):
@@ -25,8 +26,13 @@ class WrapAngle(Step):
     −π…π). Wrapping is an idempotent projection, so in an inverse chain it acts as itself.
     """
 
+    PARAMS = Params(
+        P("period", 2.0 * math.pi, "One turn (2π for radians, 360 for degrees).", above=0.0),
+        P("center", 0.0, "Centre of the output interval."),
+    )
+
     def __init__(self, params: Sequence[Param] = ()) -> None:
-        values = read_params(params, {"period": 2.0 * math.pi, "center": 0.0}, owner="function 'wrap-angle'")
+        values = read_params(params, self.PARAMS, owner="function 'wrap-angle'")
         if not values["period"] > 0.0:
             raise ParamError(f"function 'wrap-angle': parameter 'period' = {values['period']} must be greater than 0")
         self.period: float = values["period"]
@@ -49,9 +55,15 @@ class OutlierReject(Step):
     and the window restarts from it. In an inverse chain it passes values through.
     """
 
+    PARAMS = Params(
+        P("sigma", 3.0, "Rejection threshold in standard deviations of the window.", above=0.0),
+        P("window", 10, "Accepted samples kept (rejection starts once 3 are kept).", above=2),
+        P("maxRejects", 3, "Rejections in a row after which the sample is accepted.", above=0),
+    )
+
     def __init__(self, params: Sequence[Param] = ()) -> None:
         owner = "function 'outlier-reject'"
-        values = read_params(params, {"sigma": 3.0, "window": 10, "maxRejects": 3}, owner=owner)
+        values = read_params(params, self.PARAMS, owner=owner)
         for name, low in (("sigma", 0.0), ("window", 2), ("maxRejects", 0)):
             if not values[name] > low:
                 raise ParamError(f"{owner}: parameter {name!r} = {values[name]} must be greater than {low}")

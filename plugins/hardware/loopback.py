@@ -31,6 +31,7 @@ from typing import Any
 from ckmconf.model import HWChannel, params_dict
 from plugins.lti import MODEL_SPEC, PlantModel, Vector, model_from_params
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
+from runtime.verification.manifest import NUMBER, P, Params, Ports
 
 from .simulation import Clock, ManualClock, PlantScope, SimulationHook, plant_scope, scope_for
 
@@ -45,7 +46,18 @@ __all__ = [
     "scope_for",
 ]
 
-_SPEC: dict[str, Any] = {"plant": "", "order": 0, **MODEL_SPEC, "noise": 0.0, "seed": 0, "delay": 0.0}
+_SPEC = (
+    Params(
+        P("plant", "", "Name of the simulated plant the channel belongs to (default: the channel's name)."),
+        P("order", 0, "Order of the plant (default: what the other Params imply).", choices=(0, 1, 2)),
+    )
+    | MODEL_SPEC
+    | Params(
+        P("noise", 0.0, "Standard deviation of the noise added to each read.", min=0.0),
+        P("seed", 0, "Seed of the noise generator."),
+        P("delay", 0.0, "Dead time of the plant input.", unit="s", min=0.0),
+    )
+)
 _plants: weakref.WeakValueDictionary[tuple[PlantScope, str], LoopbackPlant] = weakref.WeakValueDictionary()
 _table_lock = threading.Lock()
 
@@ -149,6 +161,9 @@ class LoopbackPlant(SimulationHook):
 
 class LoopbackBackend(Backend):
     """A channel served by a :class:`LoopbackPlant` (see the module docstring)."""
+
+    PARAMS = _SPEC
+    PORTS = Ports(outputs={"*": NUMBER}, sizes=(1,))
 
     def __init__(self, channel: HWChannel, *, scope: PlantScope | None = None) -> None:
         super().__init__(channel)

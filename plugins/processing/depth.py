@@ -50,6 +50,7 @@ from plugins.processing.shapes import (
 )
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import P, Params
 
 Depth = npt.NDArray[np.float32]
 Points = npt.NDArray[np.float32]
@@ -136,7 +137,10 @@ class DepthAcquisition(ProcessingPlugin):
     ValueError naming the plugin and the problem.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"topic": "", "scale": 0.001}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("topic", "", "The raw topic the frames come from (informational)."),
+        P("scale", 0.001, "Metres per raw unit of unsigned depth images (0.001: millimetres).", unit="m", above=0.0),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
@@ -280,20 +284,20 @@ class EuclideanClustering(ProcessingPlugin):
     ``calibrationHeight`` image (the Xtion's at VGA) and scaled to the image received.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {
-        "tolerance": 0.02,
-        "minPoints": 100,
-        "maxRange": 3.5,
-        "plane": True,
-        "planeDistance": 0.015,
-        "planeAngle": 45.0,
-        "fx": 525.0,
-        "fy": 525.0,
-        "cx": 319.5,
-        "cy": 239.5,
-        "calibrationWidth": 640,
-        "calibrationHeight": 480,
-    }
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("tolerance", 0.02, "Points closer than this are linked into one cluster.", unit="m", above=0.0),
+        P("minPoints", 100, "Fewest points of a kept cluster.", min=1),
+        P("maxRange", 3.5, "Pixels further than this are dropped.", unit="m", above=0.0),
+        P("plane", True, "Remove the dominant near-horizontal plane (floor, table) first."),
+        P("planeDistance", 0.015, "Points must stand this far above the plane.", unit="m", above=0.0),
+        P("planeAngle", 45.0, "Largest tilt of the plane from the image's up, in (0, 90].", unit="deg"),
+        P("fx", 525.0, "Focal length x at the calibration size.", unit="px", above=0.0),
+        P("fy", 525.0, "Focal length y at the calibration size.", unit="px", above=0.0),
+        P("cx", 319.5, "Principal point x at the calibration size.", unit="px"),
+        P("cy", 239.5, "Principal point y at the calibration size.", unit="px"),
+        P("calibrationWidth", 640, "Image width the intrinsics are given for.", unit="px", above=0),
+        P("calibrationHeight", 480, "Image height the intrinsics are given for.", unit="px", above=0),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
@@ -340,7 +344,12 @@ class KdTreeShapeClassifier(ProcessingPlugin):
     measure) is the mean over recognized objects, 0 when none: furniture in view does not drag it.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"model": "", "k": 5, "threshold": 0.75, "spread": 1.0}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("model", "", "ASCII PCD file of labelled descriptors, relative to the configuration file (required)."),
+        P("k", 5, "Nearest training descriptors that vote.", min=1),
+        P("threshold", 0.75, "Reliability below which an object is named 'unknown', in [0, 1]."),
+        P("spread", 1.0, "Distance scale of the vote weights, in descriptor units.", above=0.0),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)

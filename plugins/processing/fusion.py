@@ -42,6 +42,7 @@ from ckmconf import ConfigError, ConfigErrors, read_document
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import P, Params
 
 from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
 from .shapes import Camera
@@ -110,25 +111,25 @@ class FeatureFusion(ProcessingPlugin):
     ``reliability`` is the mean fused reliability, 0 with no object.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {
-        "inputs": "rgb: line; depth: point; pantilt: line",
-        "poses": "",
-        "cameras": "",
-        "fx": 525.0,
-        "fy": 525.0,
-        "cx": 319.5,
-        "cy": 239.5,
-        "calibrationWidth": 640,
-        "calibrationHeight": 480,
-        "lineSigma": 0.01,
-        "pointSigma": 0.03,
-        "sigmas": "",
-        "dThreshold": 3.0,
-        "minReliability": 0.0,
-        "minRange": 0.3,
-        "objects": "",
-        "environment": "",
-    }
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind: 'name: line|point; …'."),
+        P("poses", "", "Sensor frames in the common frame: 'name: x y z roll pitch yaw; …' (default identity)."),
+        P("cameras", "", "Intrinsics of line inputs: 'name: fx fy cx cy width height; …'."),
+        P("fx", 525.0, "Default focal length x of line inputs.", unit="px"),
+        P("fy", 525.0, "Default focal length y of line inputs.", unit="px"),
+        P("cx", 319.5, "Default principal point x.", unit="px"),
+        P("cy", 239.5, "Default principal point y.", unit="px"),
+        P("calibrationWidth", 640, "Image width the default intrinsics are given for.", unit="px"),
+        P("calibrationHeight", 480, "Image height the default intrinsics are given for.", unit="px"),
+        P("lineSigma", 0.01, "Angular uncertainty of a line (2D) observation.", unit="rad"),
+        P("pointSigma", 0.03, "Positional uncertainty of a point (3D) observation.", unit="m"),
+        P("sigmas", "", "Per-input uncertainties: 'name: σ; …'."),
+        P("dThreshold", 3.0, "Association distance threshold of eq. 6.38."),
+        P("minReliability", 0.0, "Observations below this reliability (r_th of eq. 6.31) are ignored."),
+        P("minRange", 0.3, "Nearest feature along a ray.", unit="m"),
+        P("objects", "", "Known objects: 'name: shape [texture]; …' (win over the environment's)."),
+        P("environment", "", "Environment XML file, relative to the configuration file, read in setup()."),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)

@@ -15,6 +15,7 @@ import numpy.typing as npt
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import P, Params
 
 Image = npt.NDArray[Any]
 
@@ -59,7 +60,12 @@ class Resize(ProcessingPlugin):
     factors) or ``nearest``. The resolution profiles of the recognition services use it.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"scale": 1.0, "width": 0, "height": 0, "interpolation": "area"}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("scale", 1.0, "Scale factor when neither width nor height is set.", above=0.0),
+        P("width", 0, "Output width (0: unset; one of width/height alone keeps the aspect ratio).", unit="px", min=0),
+        P("height", 0, "Output height (0: unset).", unit="px", min=0),
+        P("interpolation", "area", "'area' (block average) or 'nearest'."),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
@@ -96,7 +102,7 @@ class Grayscale(ProcessingPlugin):
     through; a fourth (alpha) channel is ignored.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"order": "rgb"}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(P("order", "rgb", "Channel order of the input: 'rgb' or 'bgr'."))
     WEIGHTS = (0.299, 0.587, 0.114)
 
     def __init__(self, record: Plugin) -> None:
@@ -125,9 +131,17 @@ class Undistort(ProcessingPlugin):
     once per image size and reused, so a frame costs one ``cv2.remap``.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {
-        "fx": 0.0, "fy": 0.0, "cx": 0.0, "cy": 0.0, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "k3": 0.0,
-    }  # fmt: skip
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("fx", 0.0, "Focal length along x at the input's resolution (0: the image width).", unit="px", min=0.0),
+        P("fy", 0.0, "Focal length along y (0: the image width).", unit="px", min=0.0),
+        P("cx", 0.0, "Principal point x (0: the image centre).", unit="px"),
+        P("cy", 0.0, "Principal point y (0: the image centre).", unit="px"),
+        P("k1", 0.0, "Radial distortion coefficient k1."),
+        P("k2", 0.0, "Radial distortion coefficient k2."),
+        P("p1", 0.0, "Tangential distortion coefficient p1."),
+        P("p2", 0.0, "Tangential distortion coefficient p2."),
+        P("k3", 0.0, "Radial distortion coefficient k3."),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)

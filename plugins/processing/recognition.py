@@ -26,6 +26,7 @@ import numpy.typing as npt
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import P, Params
 
 from .textures import Image, Model, Points, build_model
 
@@ -47,7 +48,10 @@ class CameraAcquisition(ProcessingPlugin):
     colour order. ``topic`` names the raw topic (the service subscribes to it; informational here).
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"topic": "", "encoding": "rgb8"}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("topic", "", "The raw topic the frames come from (informational)."),
+        P("encoding", "rgb8", "Encoding of array frames and of messages without one: rgb8, bgr8 or mono8."),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
@@ -130,7 +134,12 @@ class OrbKeypoints(ProcessingPlugin):
     (pyramid levels, ≥ 1), ``threads`` (OpenCV threads, see the module doc).
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"features": 500, "scaleFactor": 1.2, "levels": 8, "threads": 1}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("features", 500, "Most keypoints kept.", above=0),
+        P("scaleFactor", 1.2, "Scale step of the image pyramid.", above=1.0),
+        P("levels", 8, "Pyramid levels.", min=1),
+        P("threads", 1, "OpenCV threads (0: OpenCV's default).", min=0),
+    )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
@@ -183,14 +192,14 @@ class KeypointMatching(ProcessingPlugin):
     objects, 0 when none is seen.
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {
-        "model": "",
-        "ratio": 0.75,
-        "minMatches": 10,
-        "reprojection": 4.0,
-        "support": 20.0,
-        "threads": 1,
-    }
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("model", "", "Texture model file, relative to the configuration file (required)."),
+        P("ratio", 0.75, "Lowe's ratio test threshold, in (0, 1]."),
+        P("minMatches", 10, "Kept matches needed to detect an object (at least 4)."),
+        P("reprojection", 4.0, "RANSAC reprojection threshold at 640 columns.", unit="px", above=0.0),
+        P("support", 20.0, "Inliers at which an object's reliability is 0.5.", above=0.0),
+        P("threads", 1, "OpenCV threads (0: OpenCV's default).", min=0),
+    )
     SAME_POINT = 0.04
     """Model points closer than this share of the texture's size are one point (ratio test)."""
 

@@ -13,6 +13,7 @@ from typing import Any, ClassVar
 
 from ckmconf.model.resources import Plugin
 from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import as_params
 
 from .recognition import KeypointMatching, OrbKeypoints
 
@@ -24,7 +25,7 @@ def _part(record: Plugin, cls: type[ProcessingPlugin]) -> Plugin:
 class OrbRecognition(ProcessingPlugin):
     """An image in, the matching result out (see :class:`KeypointMatching` for its fields)."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {**OrbKeypoints.PARAMS, **KeypointMatching.PARAMS}
+    PARAMS: ClassVar[Mapping[str, Any]] = as_params(OrbKeypoints.PARAMS) | KeypointMatching.PARAMS
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)  # rejects a Param neither part knows
