@@ -13,12 +13,13 @@ from typing import Any, ClassVar
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
+from runtime.verification.manifest import P, Params, Ports
 
 
 class Timer(Behavior):
     """``behavior.timer``: done after ``duration`` seconds; progress is the share elapsed."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"duration": 1.0}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(P("duration", 1.0, "Time until done.", unit="s", above=0.0))
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)
@@ -33,7 +34,8 @@ class Timer(Behavior):
 class Emit(Behavior):
     """``behavior.emit``: publishes ``value`` (a string Param) on every output once, then is done."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"value": ""}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(P("value", "", "The string published on every output."))
+    PORTS = Ports(outputs={"*": "string"})
 
     def start(self) -> None:
         super().start()
@@ -47,7 +49,7 @@ class Emit(Behavior):
 class WaitInput(Behavior):
     """``behavior.wait-input``: done as soon as every input has a value (``input`` Param: just that one)."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"input": ""}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(P("input", "", "Wait for this input only (default: every input)."))
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)

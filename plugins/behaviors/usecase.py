@@ -29,6 +29,12 @@ from typing import Any, ClassVar
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
+from runtime.verification.manifest import MAPPING, P, Params, Ports
+
+_TARGET = (
+    P("target", "", "Shape (or name) of the object looked for."),
+    P("targetTexture", "", "Texture of the object looked for."),
+)
 
 _ids = itertools.count(1)
 
@@ -80,7 +86,7 @@ def find_target(result: Any, shape: str, texture: str, min_sources: int = 1) -> 
 class Init(Behavior):
     """INIT: records what the mission is after (target, home); no service."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"target": "", "targetTexture": "", "home": ""}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(*_TARGET, P("home", "", "Name of the home area."))
 
     def step(self) -> BehaviorStatus:
         return BehaviorStatus(progress=1.0, done=True, detail=f"target {self.params['target']}")
@@ -100,7 +106,10 @@ class SetNavGoal(Behavior):
     ``approachDistance`` towards the robot; the behavior waits for it (untraceable).
     """
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"approachDistance": 0.0}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("approachDistance", 0.0, "Stop this far short of a position received on the input.", unit="m")
+    )
+    PORTS = Ports(inputs={"*": MAPPING})
 
     def start(self) -> None:
         super().start()
@@ -151,7 +160,10 @@ class SpotObjects(Behavior):
     """SPOT, SPOT_COOP: waits until the fused recognition holds the target (untraceable), then
     writes its position on the ``target`` output."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"target": "", "targetTexture": "", "minSources": 1}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        *_TARGET, P("minSources", 1, "Fewest recognition sources that must have seen the object.")
+    )
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
     def step(self) -> BehaviorStatus:
         result = self.read("objects") if "objects" in self.context.inputs else self.service("fusion").output("objects")
@@ -175,7 +187,11 @@ class _Goals(Behavior):
 class Approach(_Goals):
     """APPR: the arm to ``armPose`` and the base to ``standoff`` metres from the target."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"standoff": 0.2, "armPose": "pre_grasp"}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("standoff", 0.2, "Distance kept from the target.", unit="m"),
+        P("armPose", "pre_grasp", "Predefined arm pose reached on the way."),
+    )
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
     def start(self) -> None:
         super().start()
@@ -205,7 +221,10 @@ class Approach(_Goals):
 class ArmSequence(_Goals):
     """PICK, PLACE: the ``sequence`` of ``group:pose`` goals, each after the previous is reached."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"sequence": ""}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("sequence", "", "Space-separated goals 'arm:POSE' or 'gripper:POSE', reached in order (required).")
+    )
+    PORTS = Ports(outputs={"*": MAPPING})
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)
@@ -238,7 +257,8 @@ class ArmSequence(_Goals):
 class BackOff(_Goals):
     """BACK: moves ``distance`` metres backwards."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"distance": 0.3}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(P("distance", 0.3, "How far to move backwards.", unit="m"))
+    PORTS = Ports(outputs={"*": MAPPING})
 
     def start(self) -> None:
         super().start()
@@ -254,7 +274,7 @@ class BackOff(_Goals):
 class TrackObject(Behavior):
     """OBJ_TRACK: waits until the pan-tilt recognition sees the target and the head follows it."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"target": "", "targetTexture": ""}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(*_TARGET)
 
     def step(self) -> BehaviorStatus:
         found = find_target(
@@ -270,7 +290,12 @@ class FixObject(Behavior):
     """OBJ_FIX: holds the camera on the target until the recognition has been reliable for
     ``holdTime`` seconds, then writes the target's position on its output (the plan signal)."""
 
-    PARAMS: ClassVar[Mapping[str, Any]] = {"holdTime": 2.0, "target": "", "targetTexture": "", "minReliability": 0.7}
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("holdTime", 2.0, "How long the recognition must stay reliable.", unit="s"),
+        *_TARGET,
+        P("minReliability", 0.7, "Reliability the recognition must keep."),
+    )
+    PORTS = Ports(outputs={"*": MAPPING})
 
     def start(self) -> None:
         super().start()

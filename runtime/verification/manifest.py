@@ -10,7 +10,8 @@ Every registered class declares, once, at the class:
   (controllers by role, behaviors by port name, ``"*"`` for any) and, for hardware backends, the
   channel sizes it serves. Value types are the names of ``schemas/kernel.xsd`` (built-in types
   such as ``float64`` or ``string``, or a ``MessageType``) or the shapes :data:`NUMBER`,
-  :data:`NUMBERS` (a vector of numbers, one per channel element) and :data:`ANY`.
+  :data:`NUMBERS` (a vector of numbers, one per channel element), :data:`MAPPING` (a dict of
+  fields) and :data:`ANY`.
 
 A plain ``{name: default}`` mapping is still accepted as ``PARAMS`` (third-party plugins written
 before manifests): each entry then reads as an undocumented optional parameter of its default's type.
@@ -29,6 +30,8 @@ NUMBER = "number"
 """One number (a float): what sensors of size-1 channels and controllers write, actuators take."""
 NUMBERS = "numbers"
 """A tuple of numbers: what a sensor of a channel of size > 1 writes."""
+MAPPING = "mapping"
+"""A dict of fields: fits a topic of any MessageType (the fields are not checked), no built-in type."""
 ANY = "any"
 """Not declared: any value (nothing to check)."""
 
@@ -260,6 +263,7 @@ def read_params(
 
 __all__ = [
     "ANY",
+    "MAPPING",
     "NUMBER",
     "NUMBERS",
     "REQUIRED",
