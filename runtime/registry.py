@@ -48,6 +48,29 @@ class Registry:
     def kinds(self, category: str) -> list[str]:
         return sorted(kind for cat, kind in self._targets if cat == category)
 
+    def names(self) -> list[tuple[str, str]]:
+        """Every registered (category, kind), sorted."""
+        return sorted(self._targets)
+
+    def target(self, category: str, kind: str) -> str:
+        """Where a kind comes from: ``module:Class`` (for listings; nothing is imported)."""
+        target = self._targets[(category, kind)]
+        return target if isinstance(target, str) else f"{target.__module__}:{target.__qualname__}"
+
+    def find(self, category: str, kind: str) -> type[Any] | None:
+        """The class registered for ``kind`` (imported, never instantiated), or None if there is none.
+
+        Raises:
+            RegistryError: the entry point names a module or class that cannot be imported.
+        """
+        if (category, kind) not in self._targets:
+            return None
+        try:
+            return self.resolve(category, kind)
+        except (ImportError, AttributeError) as exc:
+            where = self.target(category, kind)
+            raise RegistryError(f"{category} {kind!r} ({where}) cannot be imported: {exc}") from exc
+
     def resolve(self, category: str, kind: str, record: Record | None = None, attr: str = "kind") -> type[Any]:
         """The class registered for ``kind``, or a ConfigError located at ``record``."""
         target = self._targets.get((category, kind))

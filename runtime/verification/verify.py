@@ -1,0 +1,291 @@
+"""Verify before build: a whole system checked against the kinds' manifests, nothing instantiated.
+
+BehaviorTree.CPP's ``verifyXML`` checks a tree against the factory's manifests before it builds a
+single node; ``verify`` does the same for a loaded System:
+
+- every kind exists in the registry: hardware backends (``HWChannel/@backend``), adaptation
+  functions (``Function/@plugin``), controllers and their optional parts, processing plugins and
+  behaviors (``@kind``);
+- every ``<Param>`` is declared by its kind, converts to the declared type and lies in the declared
+  range; every required Param is given;
+- the value types of producers, topics and consumers agree: what a sensor writes (one number, or a
+  vector of ``size`` numbers) and what controllers, actuators and behaviors read and write, against
+  the ``type`` of the topic or plan signal (:mod:`runtime.verification.types`);
+- channel sizes are ones the backend serves (a loopback plant has one output);
+- what the runtime would silently not run is refused: Smart Resources on a ROS kernel (no ROS
+  kernel runs here) and services without scenarios (only SPT scenarios are executed).
+
+Classes are imported to read their manifests; none is instantiated, no file or device is opened.
+Every problem is a ConfigError at its element (attribute when there is one), ``FILE:LINE:COL``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from ckmconf.binding import Record, walk
+from ckmconf.checks.report import Reporter, missing
+from ckmconf.errors import ConfigError
+from ckmconf.model import (
+    Actuator,
+    Behavior,
+    Controller,
+    Function,
+    HWChannel,
+    MessageType,
+    Node,
+    Param,
+    Sensor,
+    SmartResource,
+    System,
+    Topic,
+)
+from ckmconf.source import Limits, SourceFile, read_source
+
+from ..registry import Registry, RegistryError, default_registry
+from .manifest import NUMBER, NUMBERS, ParamError, params_of, ports_of
+from .types import describe, fits
+
+
+def verify(system: System, registry: Registry | None = None) -> list[ConfigError]:
+    """Every problem ``system`` would meet when built, sorted by file and position.
+
+    Args:
+        system: a loaded, schema-valid system (``ckmconf.load``).
+        registry: the kinds to check against (default: the installed entry points).
+    """
+    checker = _Verifier(system, registry or default_registry())
+    checker.run()
+    return sorted(set(checker.report.errors), key=ConfigError.sort_key)
+
+
+def _sources(system: System) -> dict[str, SourceFile]:
+    """The files the system was read from, for attribute locations (unreadable ones are skipped)."""
+    found: dict[str, SourceFile] = {}
+    for record in walk(system):
+        if record.loc is not None and record.loc.file not in found:
+            try:
+                found[record.loc.file] = read_source(record.loc.file, Limits())
+            except ConfigError:
+                continue
+    return found
+
+
+class _Verifier:
+    """One pass over a system; problems collect in ``report``."""
+
+    def __init__(self, system: System, registry: Registry) -> None:
+        self.system = system
+        self.registry = registry
+        self.report = Reporter(_sources(system))
+        self.types: dict[str, MessageType] = {m.name: m for m in system.message_types}
+        self.external: dict[str, Topic] = {t.name: t for t in system.topics}
+        for node in system.nodes:
+            for topic in node.topics:
+                if topic.scope == "external":
+                    self.external.setdefault(topic.name, topic)
+
+    def run(self) -> None:
+        for node in self.system.nodes:
+            self._node(node)
+        for resource in self.system.resources:
+            self._resource(resource)
+        for behavior in self.system.behaviors:
+            self._behavior(behavior)
+
+    # ------------------------------------------------------------------ kinds and Params
+
+    def _kind(self, record: Record, category: str, kind: str, attr: str) -> type[Any] | None:
+        """The class of ``kind``, or None after reporting why there is none."""
+        try:
+            cls = self.registry.find(category, kind)
+        except RegistryError as exc:
+            self.report.error(record, str(exc), attr)
+            return None
+        if cls is None:
+            self.report.error(
+                record, missing(f"{category} plugin", kind, "the registry", self.registry.kinds(category)), attr
+            )
+        return cls
+
+    def _params(self, record: Record, cls: type[Any], params: Iterable[Param], owner: str) -> None:
+        """Each Param against the kind's declaration; missing required ones at ``record``."""
+        declared = params_of(cls)
+        given: set[str] = set()
+        for param in params:
+            given.add(param.name)
+            entry = declared.specs.get(param.name)
+            if entry is None:
+                accepted = ", ".join(sorted(declared)) or "none"
+                self.report.error(param, f"{owner} takes no parameter {param.name!r} (accepted: {accepted})", "name")
+                continue
+            try:
+                entry.convert(param.value)
+            except ParamError as exc:
+                self.report.error(param, f"{owner}: {exc}", "value")
+        for name, entry in declared.specs.items():
+            if entry.required and name not in given:
+                self.report.error(record, f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})")
+
+    def _checked(
+        self, record: Record, category: str, kind: str, params: Iterable[Param], attr: str = "kind"
+    ) -> type[Any] | None:
+        cls = self._kind(record, category, kind, attr)
+        if cls is not None:
+            self._params(record, cls, params, f"{category} {kind!r}")
+        return cls
+
+    # ------------------------------------------------------------------ topics and types
+
+    def _topic_type(self, name: str, node: Node | None) -> str | None:
+        """The type a topic carries as ``node`` sees it (its own topics first), None if unknown."""
+        if node is not None:
+            own = next((t for t in node.topics if t.name == name), None)
+            if own is not None:
+                return own.type
+        found = self.external.get(name)
+        return found.type if found is not None else None
+
+    def _signal_types(self, name: str) -> list[str]:
+        """The declared types of the plan signals called ``name``."""
+        return [s.type for plan in self.system.plans for s in plan.signals if s.name == name and s.type]
+
+    def _flow(self, record: Record, attr: str, value: str, carried: str | None, sentence: str, size: int = 1) -> None:
+        """Report when ``value`` does not fit a topic of type ``carried``; ``sentence`` holds a {} for it."""
+        if carried is not None and not fits(value, carried, self.types):
+            self.report.error(record, sentence.format(describe(value, size)) + f" of type {carried}", attr)
+
+    # ------------------------------------------------------------------ nodes
+
+    def _node(self, node: Node) -> None:
+        channels: dict[str, tuple[HWChannel, str | None]] = {}
+        for channel in node.channels:
+            channels[channel.name] = (channel, self._channel(channel))
+        for sensor in node.sensors:
+            self._sensor(node, sensor, channels.get(sensor.channel))
+        for controller in node.controllers:
+            self._controller(node, controller)
+        for actuator in node.actuators:
+            self._actuator(node, actuator)
+
+    def _channel(self, channel: HWChannel) -> str | None:
+        """Checks one channel; returns what its sensor reads (None when the backend is unknown)."""
+        cls = self._checked(channel, "hardware", channel.backend, channel.params, "backend")
+        if cls is None:
+            return None
+        ports = ports_of(cls)
+        if ports.sizes and channel.size not in ports.sizes:
+            sizes = ", ".join(map(str, ports.sizes))
+            self.report.error(
+                channel, f"hardware {channel.backend!r} serves channels of size {sizes}, not {channel.size}", "size"
+            )
+        read = ports.output("*")
+        if read == NUMBERS:
+            return NUMBER if channel.size == 1 else NUMBERS
+        return read
+
+    def _functions(self, steps: Iterable[Record]) -> None:
+        for step in steps:
+            if isinstance(step, Function):
+                self._checked(step, "function", step.plugin, step.params, "plugin")
+
+    def _sensor(self, node: Node, sensor: Sensor, channel: tuple[HWChannel, str | None] | None) -> None:
+        if sensor.adaptation is not None:
+            self._functions(sensor.adaptation.steps)
+        if channel is None:
+            return
+        record, value = channel
+        if value is None:
+            return
+        self._flow(
+            sensor,
+            "topic",
+            value,
+            self._topic_type(sensor.topic, node),
+            f"sensor {sensor.name!r} writes {{}} (channel {record.name!r}, size {record.size}) "
+            f"onto topic {sensor.topic!r}",
+            record.size,
+        )
+
+    def _controller(self, node: Node, controller: Controller) -> None:
+        cls = self._checked(controller, "controller", controller.kind, controller.params)
+        if controller.optional is not None:
+            part = controller.optional
+            self._checked(part, "controller", part.kind, part.params)
+        if cls is None:
+            return
+        ports = ports_of(cls)
+        owner = f"controller {controller.name!r} ({controller.kind})"
+        for port in controller.inputs:
+            role = port.role or port.topic
+            self._flow(
+                port,
+                "topic",
+                ports.input(role),
+                self._topic_type(port.topic, node),
+                f"{owner} reads {{}} as {role!r}, but topic {port.topic!r} is",
+            )
+        for index, out in enumerate(controller.outputs):
+            self._flow(
+                out,
+                "topic",
+                ports.output(out.role or str(index)),
+                self._topic_type(out.topic, node),
+                f"{owner} writes {{}} onto topic {out.topic!r}",
+            )
+
+    def _actuator(self, node: Node, actuator: Actuator) -> None:
+        if actuator.adaptation is not None:
+            self._functions(actuator.adaptation.steps)
+        self._flow(
+            actuator,
+            "topic",
+            NUMBER,
+            self._topic_type(actuator.topic, node),
+            f"actuator {actuator.name!r} takes {{}}, but topic {actuator.topic!r} is",
+        )
+
+    # ------------------------------------------------------------------ resources and behaviors
+
+    def _resource(self, resource: SmartResource) -> None:
+        if resource.kernel == "ros":
+            self.report.error(
+                resource,
+                f"Smart Resource {resource.name!r} runs on a ROS kernel, which this runtime does not provide: "
+                "nothing would run its services (not runnable)",
+                "kernel",
+            )
+            return
+        for plugin in resource.plugins:
+            self._checked(plugin, "plugin", plugin.kind, plugin.params)
+        for service in resource.services:
+            if not service.scenarios:
+                self.report.error(
+                    service,
+                    f"service '{resource.name}.{service.name}' has no Scenario: the runtime executes services "
+                    "through their scenarios' SPT profiles, so nothing would produce its outputs (not runnable)",
+                )
+
+    def _behavior(self, behavior: Behavior) -> None:
+        cls = self._checked(behavior, "behavior", behavior.kind, behavior.params)
+        if cls is None:
+            return
+        ports = ports_of(cls)
+        owner = f"behavior {behavior.name!r} ({behavior.kind})"
+        for port in behavior.outputs:
+            value = ports.output(port.name)
+            for carried, where, attr in self._port_types(port.topic, port.signal):
+                self._flow(port, attr, value, carried, f"{owner} writes {{}} onto {where}")
+        for source in behavior.inputs:
+            value = ports.input(source.name)
+            for carried, where, attr in self._port_types(source.topic, source.signal):
+                self._flow(source, attr, value, carried, f"{owner} reads {{}} from {where}, which is")
+
+    def _port_types(self, topic: str | None, signal: str | None) -> list[tuple[str | None, str, str]]:
+        """(type, words, attribute) of what a behavior port is bound to."""
+        if topic is not None:
+            return [(self._topic_type(topic, None), f"topic {topic!r}", "topic")]
+        if signal is not None:
+            return [(t, f"signal {signal!r}", "signal") for t in dict.fromkeys(self._signal_types(signal))]
+        return []
