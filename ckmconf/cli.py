@@ -1,18 +1,27 @@
-"""ckm-validate: check configuration files; one line per problem, FILE:LINE:COL: XPATH: message."""
+"""ckm-validate: check configuration files; one line per problem, FILE:LINE:COL: XPATH: message.
+
+This module is the schema-and-references check (``ckmconf`` alone). The installed ``ckm-validate``
+(``runtime.validate_cli``) adds the verification of kinds, Params and message types through
+``run(…, check=…)``; ``python -m ckmconf.cli`` is the bare check, as ``ckm-validate --schema-only``.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from .errors import ConfigError, errors_to_json
 from .loader import LoadResult, load
 from .model import System
 from .source import Limits
 
+Check = Callable[[System], list[ConfigError]]
+"""A further check of a loaded, valid system (``runtime``'s verify), run after loading."""
 
-def _parser() -> argparse.ArgumentParser:
+
+def parser() -> argparse.ArgumentParser:
+    """The ckm-validate options (callers may add their own before parsing)."""
     parser = argparse.ArgumentParser(
         prog="ckm-validate",
         description="Validate CKM configuration files against the XSD model and check their cross-references.",
@@ -27,7 +36,15 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    return run(parser().parse_args(argv))
+
+
+def run(args: argparse.Namespace, check: Check | None = None) -> int:
+    """Load every file of ``args``, apply ``check`` to each system that loaded cleanly, report.
+
+    Returns:
+        0 when no file has a problem, else 1 (DESIGN.md's ckm-validate contract).
+    """
     limits = Limits(max_bytes=args.max_bytes)
     errors: list[ConfigError] = []
     results: list[tuple[str, LoadResult]] = []
@@ -36,6 +53,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             result = load(path, strict=False, limits=limits)
         except RecursionError:  # pathological nesting that slipped past the parser limits
             result = LoadResult(None, [ConfigError(path, 1, 1, "/", "elements are nested too deeply")])
+        if check is not None and result.system is not None and not result.errors:
+            result = LoadResult(result.system, check(result.system), result.files)
         errors.extend(result.errors)
         results.append((path, result))
     if args.json:
@@ -45,7 +64,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(error)
         if args.summary:
             for path, result in results:
-                if result.system is not None:
+                if result.system is not None and not result.errors:
                     _print_summary(path, result.system, len(result.files))
     return 1 if errors else 0
 

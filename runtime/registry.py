@@ -29,10 +29,12 @@ class Registry:
 
     def __init__(self, *, load_entry_points: bool = True) -> None:
         self._targets: dict[tuple[str, str], str | type[Any]] = {}
+        self._origins: dict[tuple[str, str], str] = {}
         if load_entry_points:
             for point in entry_points(group=GROUP):
                 category, _, kind = point.name.partition(".")
                 self._add(category, kind, point.value)
+                self._origins[(category, kind)] = point.dist.name if point.dist is not None else ""
 
     def register(self, category: str, kind: str, cls: type[Any]) -> None:
         self._add(category, kind, cls)
@@ -56,6 +58,10 @@ class Registry:
         """Where a kind comes from: ``module:Class`` (for listings; nothing is imported)."""
         target = self._targets[(category, kind)]
         return target if isinstance(target, str) else f"{target.__module__}:{target.__qualname__}"
+
+    def origin(self, category: str, kind: str) -> str:
+        """The distribution whose entry point registered a kind ("" for ``register()`` in code)."""
+        return self._origins.get((category, kind), "")
 
     def find(self, category: str, kind: str) -> type[Any] | None:
         """The class registered for ``kind`` (imported, never instantiated), or None if there is none.

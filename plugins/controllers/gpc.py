@@ -41,7 +41,7 @@ from .common import LIMIT_SPEC, check_state, clamp, finite, measure_and_setpoint
 
 
 class GPC(Controller):
-    """A GPC control law (see the module docstring)."""
+    """Generalized Predictive Control with a first- or second-order plant model (see the module docstring)."""
 
     PARAMS = (
         Params(P("order", 1, "Order of the plant model.", choices=(1, 2)))

@@ -32,7 +32,7 @@ _STATE_KEYS = ("integral", "previous", "derivative", "error", "output", "target"
 
 
 class PID(Controller):
-    """A PID control law (see the module docstring)."""
+    """A PID with anti-windup, derivative on measurement and bumpless transfer (see the module docstring)."""
 
     PARAMS = (
         Params(

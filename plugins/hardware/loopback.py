@@ -160,7 +160,7 @@ class LoopbackPlant(SimulationHook):
 
 
 class LoopbackBackend(Backend):
-    """A channel served by a :class:`LoopbackPlant` (see the module docstring)."""
+    """A channel served by a simulated linear plant (a :class:`LoopbackPlant`, see the module docstring)."""
 
     PARAMS = _SPEC
     PORTS = Ports(outputs={"*": NUMBER}, sizes=(1,))

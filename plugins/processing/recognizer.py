@@ -23,7 +23,8 @@ def _part(record: Plugin, cls: type[ProcessingPlugin]) -> Plugin:
 
 
 class OrbRecognition(ProcessingPlugin):
-    """An image in, the matching result out (see :class:`KeypointMatching` for its fields)."""
+    """ORB keypoints and texture matching in one step: an image in, the matching result out (see
+    :class:`KeypointMatching` for its fields)."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = as_params(OrbKeypoints.PARAMS) | KeypointMatching.PARAMS
 

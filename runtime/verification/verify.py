@@ -21,6 +21,7 @@ Every problem is a ConfigError at its element (attribute when there is one), ``F
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterable
 from typing import Any
 
@@ -289,3 +290,31 @@ class _Verifier:
         if signal is not None:
             return [(t, f"signal {signal!r}", "signal") for t in dict.fromkeys(self._signal_types(signal))]
         return []
+
+
+def verify_safely(system: System, registry: Registry | None = None) -> list[ConfigError]:
+    """``verify``, with an unexpected failure of the verifier itself turned into one located problem.
+
+    A broken third-party manifest must not make ``ckm-validate`` print a traceback.
+    """
+    try:
+        return verify(system, registry)
+    except Exception as exc:  # the contract: never a traceback for any input
+        loc = system.loc
+        where = (loc.file, loc.line, loc.column, loc.xpath) if loc else ("<memory>", 1, 1, "/")
+        return [ConfigError(*where, f"verification failed: {type(exc).__name__}: {exc}")]
+
+
+def verify_or_report(system: System, path: str, registry: Registry | None = None) -> int | None:
+    """For ``ckm-run``: verify before anything starts; print each problem on stderr.
+
+    Returns:
+        None when the system verifies, else 1 (the exit code of a configuration problem).
+    """
+    errors = verify_safely(system, registry)
+    for error in errors:
+        print(error, file=sys.stderr)
+    if errors:
+        print(f"{path}: {len(errors)} problem(s) found before start; nothing was started", file=sys.stderr)
+        return 1
+    return None
