@@ -9,6 +9,7 @@ asked for it, listing what is registered. Classes are imported only when first n
 from __future__ import annotations
 
 import importlib
+from collections.abc import Collection
 from importlib.metadata import entry_points
 from typing import Any
 
@@ -18,6 +19,14 @@ from ckmconf.errors import ConfigError, Loc
 
 GROUP = "ckm.plugins"
 CATEGORIES = ("hardware", "controller", "function", "plugin", "behavior")
+NOUNS = {
+    "hardware": "hardware backend",
+    "controller": "controller kind",
+    "function": "function",
+    "plugin": "processing plugin",
+    "behavior": "behavior kind",
+}
+"""How messages name a kind of each category."""
 
 
 class RegistryError(RuntimeError):
@@ -27,14 +36,18 @@ class RegistryError(RuntimeError):
 class Registry:
     """Maps (category, kind) to a class, loaded lazily from entry points."""
 
-    def __init__(self, *, load_entry_points: bool = True) -> None:
+    def __init__(self, *, load_entry_points: bool = True, packages: Collection[str] | None = None) -> None:
+        """``packages``: load only the entry points of these distributions (None: of every one)."""
         self._targets: dict[tuple[str, str], str | type[Any]] = {}
         self._origins: dict[tuple[str, str], str] = {}
         if load_entry_points:
             for point in entry_points(group=GROUP):
+                origin = point.dist.name if point.dist is not None else ""
+                if packages is not None and origin not in packages:
+                    continue
                 category, _, kind = point.name.partition(".")
                 self._add(category, kind, point.value)
-                self._origins[(category, kind)] = point.dist.name if point.dist is not None else ""
+                self._origins[(category, kind)] = origin
 
     def register(self, category: str, kind: str, cls: type[Any]) -> None:
         self._add(category, kind, cls)
@@ -49,6 +62,10 @@ class Registry:
 
     def kinds(self, category: str) -> list[str]:
         return sorted(kind for cat, kind in self._targets if cat == category)
+
+    def missing(self, category: str, kind: str) -> str:
+        """The message for a kind nobody registered, with a suggestion or the list of those that are."""
+        return missing(NOUNS.get(category, category), kind, "the registry", self.kinds(category))
 
     def names(self) -> list[tuple[str, str]]:
         """Every registered (category, kind), sorted."""
@@ -82,7 +99,7 @@ class Registry:
         target = self._targets.get((category, kind))
         if target is None:
             loc = record.loc if record is not None and record.loc else Loc("<memory>", 1, 1, "/")
-            message = missing(f"{category} plugin", kind, "the registry", self.kinds(category))
+            message = self.missing(category, kind)
             raise ConfigError(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}", message)
         if isinstance(target, str):
             module, _, name = target.partition(":")

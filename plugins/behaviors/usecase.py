@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 _TARGET = (
     P("target", "", "Shape (or name) of the object looked for."),
@@ -222,7 +222,7 @@ class ArmSequence(_Goals):
     """PICK, PLACE: the ``sequence`` of ``group:pose`` goals, each after the previous is reached."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("sequence", "", "Space-separated goals 'arm:POSE' or 'gripper:POSE', reached in order (required).")
+        P("sequence", REQUIRED, "Space-separated goals 'arm:POSE' or 'gripper:POSE', reached in order.", type=str)
     )
     PORTS = Ports(outputs={"*": MAPPING})
 

@@ -133,7 +133,8 @@ class P:
             raise ParamError(f"parameter {self.name!r} = {text!r} is not a {self.type.__name__}") from None
         problem = self.out_of_range(value)
         if problem:
-            raise ParamError(f"parameter {self.name!r} = {value} {problem}")
+            shown = repr(value) if isinstance(value, str) else str(value)
+            raise ParamError(f"parameter {self.name!r} = {shown} {problem}")
         return value
 
     def out_of_range(self, value: Any) -> str:

@@ -26,7 +26,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from ckmconf.binding import Record, walk
-from ckmconf.checks.report import Reporter, missing
+from ckmconf.checks.report import Reporter
 from ckmconf.errors import ConfigError
 from ckmconf.model import (
     Actuator,
@@ -44,7 +44,7 @@ from ckmconf.model import (
 )
 from ckmconf.source import Limits, SourceFile, read_source
 
-from ..registry import Registry, RegistryError, default_registry
+from ..registry import NOUNS, Registry, RegistryError, default_registry
 from .manifest import NUMBER, NUMBERS, ParamError, params_of, ports_of
 from .types import describe, fits
 
@@ -105,9 +105,7 @@ class _Verifier:
             self.report.error(record, str(exc), attr)
             return None
         if cls is None:
-            self.report.error(
-                record, missing(f"{category} plugin", kind, "the registry", self.registry.kinds(category)), attr
-            )
+            self.report.error(record, self.registry.missing(category, kind), attr)
         return cls
 
     def _params(self, record: Record, cls: type[Any], params: Iterable[Param], owner: str) -> None:
@@ -134,7 +132,7 @@ class _Verifier:
     ) -> type[Any] | None:
         cls = self._kind(record, category, kind, attr)
         if cls is not None:
-            self._params(record, cls, params, f"{category} {kind!r}")
+            self._params(record, cls, params, f"{NOUNS[category]} {kind!r}")
         return cls
 
     # ------------------------------------------------------------------ topics and types

@@ -1,0 +1,266 @@
+"""Verify before build (issue G): the corpus of configurations that load but cannot run, and verify itself.
+
+Every file of ``tests/data/verify/`` passes the schema check and is refused by ``ckm-validate``
+with exactly the lines of ``expected.json``, verified against the kinds the ``ckm`` distribution
+registers. Also: the example configurations, ``--schema-only``, ``verify_or_report`` for
+``ckm-run``, and that nothing is instantiated.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from collections.abc import Mapping
+from functools import cache
+from pathlib import Path
+from typing import Any, ClassVar
+
+import pytest
+
+import ckmconf
+from ckmconf import cli
+from ckmconf.model import Controller as ControllerRecord
+from ckmconf.model import System
+from runtime.kernel.interfaces import Controller
+from runtime.registry import Registry
+from runtime.validate_cli import main as validate_main
+from runtime.verification.manifest import NUMBER, REQUIRED, P, Params, Ports
+from runtime.verification.verify import verify, verify_or_report, verify_safely
+from tests.conftest import REPO
+
+CORPUS = REPO / "tests" / "data" / "verify"
+EXPECTED = CORPUS / "expected.json"
+FILES = sorted(CORPUS.glob("*.xml"))
+EXAMPLES = sorted((REPO / "configs" / "examples").glob("*.xml"))
+
+# Examples that describe what no code runs yet (kinds of the simulation issue, off-line-only
+# services): verify must say so. Fixing one means moving it out of this set.
+NOT_RUNNABLE = {
+    "behavior_services.xml",  # services without scenarios; behavior kind 'spot-object'
+    "composition_matrix.xml",  # services without scenarios; behavior kind 'follow-path'
+    "mission_nested.xml",  # behavior kinds 'plan-path', 'follow-path', 'spot-object', 'pick-object'
+    "ros_resource.xml",  # a ROS-kernel resource; a service without scenarios
+    "service_api.xml",  # a service without scenarios
+    "split_system.xml",  # behavior kinds 'follow-path', 'wait-for-pickup'; services without scenarios
+    "validation.xml",  # a service without scenarios; behavior kind 'follow-path'
+}
+
+
+@cache
+def builtin() -> Registry:
+    """The kinds of this distribution only, so the expected lines do not depend on what else is installed."""
+    return Registry(packages=("ckm",))
+
+
+def relative(path: Path) -> str:
+    return path.relative_to(REPO).as_posix()
+
+
+def validate(*files: str, json_out: bool = False, registry: Registry | None = None) -> int:
+    """ckm-validate in process, verifying against ``registry`` (default: the built-in kinds)."""
+    args = argparse.Namespace(files=list(files), json=json_out, summary=False, max_bytes=ckmconf.Limits().max_bytes)
+    return cli.run(args, lambda system: verify_safely(system, registry or builtin()))
+
+
+def generate() -> dict[str, list[str]]:
+    """What expected.json should hold (run from the repository root)."""
+    import contextlib
+    import io
+
+    found: dict[str, list[str]] = {}
+    for path in FILES:
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            validate(relative(path))
+        found[path.name] = out.getvalue().splitlines()
+    return found
+
+
+@cache
+def expected() -> dict[str, list[str]]:
+    data = json.loads(EXPECTED.read_text(encoding="utf-8"))
+    assert isinstance(data, dict)
+    return data
+
+
+@pytest.fixture
+def at_repo(monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.chdir(REPO)
+    return REPO
+
+
+# ---------------------------------------------------------------- the corpus
+
+
+def test_corpus_and_expected_match() -> None:
+    assert len(FILES) >= 15
+    assert sorted(expected()) == [path.name for path in FILES]
+    assert all(expected()[path.name] for path in FILES), "every file must be refused"
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
+def test_schema_check_accepts_the_file(path: Path, at_repo: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert validate_main(["--schema-only", relative(path)]) == 0
+    assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
+def test_verify_reports_exactly_the_expected_lines(
+    path: Path, at_repo: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert validate(relative(path)) == 1
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    assert captured.out.splitlines() == expected()[path.name]
+
+
+def test_json_lists_the_same_problems(at_repo: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert validate(*map(relative, FILES), json_out=True) == 1
+    problems = json.loads(capsys.readouterr().out)
+    lines = [f"{p['file']}:{p['line']}:{p['column']}: {p['xpath']}: {p['message']}" for p in problems]
+    assert lines == [line for path in FILES for line in expected()[path.name]]
+
+
+def test_the_installed_command_verifies_by_default() -> None:
+    """The console script, in a fresh process: exit 1 with the located line, never a traceback."""
+    target = relative(CORPUS / "param_wrong_type.xml")
+    done = subprocess.run(
+        [sys.executable, "-m", "runtime.validate_cli", target], cwd=REPO, timeout=120, capture_output=True, text=True
+    )
+    assert (done.returncode, done.stderr) == (1, "")
+    assert done.stdout.splitlines() == expected()["param_wrong_type.xml"]
+    assert done.stdout.startswith(f"{target}:11:24: ")
+    bare = subprocess.run(
+        [sys.executable, "-m", "runtime.validate_cli", "--schema-only", target],
+        cwd=REPO,
+        timeout=120,
+        capture_output=True,
+        text=True,
+    )
+    assert (bare.returncode, bare.stdout, bare.stderr) == (0, "", "")
+
+
+def test_load_problems_come_first_and_verify_does_not_run_on_a_broken_file(
+    at_repo: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert validate("configs/invalid/sensor_unknown_channel.xml") == 1
+    [line] = capsys.readouterr().out.splitlines()
+    assert "HWChannel 'encodr' does not exist" in line
+
+
+# ---------------------------------------------------------------- the example configurations
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+def test_examples_verify_or_are_known_not_runnable(path: Path) -> None:
+    system = ckmconf.load(path)
+    problems = verify(system, builtin())
+    if path.name in NOT_RUNNABLE:
+        assert problems, f"{path.name} verifies now: remove it from NOT_RUNNABLE"
+    else:
+        assert [str(p) for p in problems] == []
+
+
+def test_the_use_case_names_kinds_that_do_not_exist_yet() -> None:
+    """Point 11 of issue G: the simulation's kinds are reported, none is registered as a placeholder."""
+    messages = [e.message for e in verify(ckmconf.load(REPO / "configs" / "usecase" / "lab.xml"), builtin())]
+    for kind in ("pybullet", "diff-drive-odometry", "pan-tilt-position", "ramp-stop", "joint-trajectory"):
+        assert any(f"'{kind}' does not exist in the registry" in m for m in messages), kind
+    assert any("friction-feedforward" in m for m in messages)
+    assert any("runs on a ROS kernel" in m for m in messages)
+    assert any("'MobileBase.Displacement' has no Scenario" in m for m in messages)
+
+
+# ---------------------------------------------------------------- verify itself
+
+
+class Probe(Controller):
+    """A controller that counts its instances: verify must never build one."""
+
+    built: ClassVar[int] = 0
+    PARAMS = Params(P("mode", REQUIRED, "Required.", type=str, choices=("a", "b")), P("gain", 1.0, "", min=0.0))
+    PORTS = Ports(inputs={"measure": NUMBER, "*": "string"})
+
+    def __init__(self, record: ControllerRecord) -> None:
+        Probe.built += 1
+        super().__init__(record)
+
+    def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        return 0.0
+
+
+SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="probe">
+  <Node name="n">
+    <Topic name="x" type="float64" scope="internal"/>
+    <Topic name="label" type="string" scope="internal"/>
+    <Controller name="c" kind="probe" period="0.1">{params}
+      <Input topic="x" role="measure"/>
+      <Input topic="x" role="other"/>
+      <Input topic="label" role="name"/>
+      <Output topic="x"/>
+    </Controller>
+  </Node>
+</System>
+"""
+
+
+def probe_system(tmp_path: Path, params: str) -> System:
+    path = tmp_path / "probe.xml"
+    path.write_text(SYSTEM.format(params=params))
+    return ckmconf.load(path)
+
+
+def probe_registry() -> Registry:
+    registry = Registry(load_entry_points=False)
+    registry.register("controller", "probe", Probe)
+    return registry
+
+
+def test_verify_checks_declared_ports_and_params_without_building(tmp_path: Path) -> None:
+    system = probe_system(tmp_path, '\n      <Param name="mode" value="c"/>\n      <Param name="gain" value="-1"/>')
+    problems = [(e.line, e.xpath.rsplit("/", 1)[-1], e.message) for e in verify(system, probe_registry())]
+    assert Probe.built == 0
+    assert problems == [
+        (7, "@value", "controller kind 'probe': parameter 'mode' = 'c' must be one of a, b"),
+        (8, "@value", "controller kind 'probe': parameter 'gain' = -1.0 must not be negative"),
+        (10, "@topic", "controller 'c' (probe) reads string values as 'other', but topic 'x' is of type float64"),
+    ]
+
+
+def test_missing_required_param_is_reported_at_the_element(tmp_path: Path) -> None:
+    [problem] = [e for e in verify(probe_system(tmp_path, ""), probe_registry()) if "needs" in e.message]
+    assert problem.line == 6 and problem.xpath.endswith("/Controller[@name='c']")
+    assert problem.message == "controller kind 'probe' needs parameter 'mode' (Required.)"
+
+
+def test_a_broken_manifest_is_one_located_problem_not_a_traceback(tmp_path: Path) -> None:
+    class Broken(Probe):
+        PARAMS: ClassVar[Any] = 5  # not a mapping
+
+    registry = Registry(load_entry_points=False)
+    registry.register("controller", "probe", Broken)
+    [problem] = verify_safely(probe_system(tmp_path, ""), registry)
+    assert problem.message.startswith("verification failed: ")
+    assert problem.file.endswith("probe.xml")
+
+
+def test_verify_or_report_for_ckm_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good = ckmconf.load(REPO / "configs" / "examples" / "closed_loop.xml")
+    assert verify_or_report(good, "closed_loop.xml", builtin()) is None
+    assert capsys.readouterr().err == ""
+    bad = probe_system(tmp_path, "")
+    assert verify_or_report(bad, "probe.xml", probe_registry()) == 1
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0].endswith("controller kind 'probe' needs parameter 'mode' (Required.)")
+    assert "reads string values as 'other'" in lines[1]
+    assert lines[-1] == "probe.xml: 2 problem(s) found before start; nothing was started"
+
+
+if __name__ == "__main__":  # regenerate expected.json (see tests/data/verify/README.md)
+    import os
+
+    os.chdir(REPO)
+    EXPECTED.write_text(json.dumps(generate(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
