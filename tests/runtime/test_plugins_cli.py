@@ -1,0 +1,86 @@
+"""ckm-plugins and the generated reference page docs/plugins.md (issue G, point 2)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from runtime.plugins_cli import main, markdown
+from runtime.registry import Registry
+from runtime.verification.manifest import params_of
+from tests.conftest import REPO
+
+PAGE = REPO / "docs" / "plugins.md"
+
+
+def builtin() -> Registry:
+    return Registry(packages=("ckm",))
+
+
+def test_docs_plugins_md_is_current() -> None:
+    """Regenerate with: .venv/bin/ckm-plugins markdown --package ckm > docs/plugins.md"""
+    assert PAGE.read_text(encoding="utf-8") == markdown(builtin(), "ckm")
+
+
+def test_every_builtin_kind_is_documented() -> None:
+    registry = builtin()
+    assert len(registry.names()) >= 30
+    for category, kind in registry.names():
+        cls = registry.find(category, kind)
+        assert cls is not None and (cls.__doc__ or "").strip(), f"{category}.{kind} has no docstring"
+        for name, entry in params_of(cls).specs.items():
+            assert entry.doc, f"{category}.{kind}: Param {name!r} has no doc"
+        assert f"### `{category}.{kind}`" in PAGE.read_text(encoding="utf-8")
+
+
+def test_list_names_every_kind(capsys: pytest.CaptureFixture[str]) -> None:
+    registry = builtin()
+    assert main(["list"], registry) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in lines] == [f"{c}.{k}" for c, k in registry.names()]
+    assert any(line.startswith("controller.pid ") and "anti-windup" in line for line in lines)
+
+
+def test_show_prints_params_and_ports(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["show", "pid", "hardware.loopback"], builtin()) == 0
+    out = capsys.readouterr().out
+    assert "controller.pid  (plugins.controllers.pid:PID)" in out
+    assert "    tau (float, 0, unit s, [0, inf)): Time constant of the derivative's low-pass filter" in out
+    assert "  channel sizes: 1" in out
+
+
+def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["show", "--json", "behavior.pick"], builtin()) == 0
+    [info] = json.loads(capsys.readouterr().out)
+    assert info["name"] == "behavior.pick" and info["package"] == "ckm"
+    [sequence] = info["params"]
+    assert (sequence["name"], sequence["default"], sequence["type"]) == ("sequence", "required", "string")
+    assert info["outputs"] == {"*": "mapping"}
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("pdi", "ckm-plugins: no kind 'pdi' is registered (see ckm-plugins list)"),
+        ("controller.pdi", "ckm-plugins: no controller kind 'pdi' (registered: constant, gpc, pid, relay)"),
+    ],
+)
+def test_unknown_kind_is_one_line_and_exit_1(name: str, message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["show", name], builtin()) == 1
+    captured = capsys.readouterr()
+    assert (captured.out, captured.err) == ("", message + "\n")
+
+
+def test_console_script_in_a_fresh_process() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "runtime.plugins_cli", "show", "wrap-angle"],
+        cwd=REPO,
+        timeout=120,
+        capture_output=True,
+        text=True,
+    )
+    assert (done.returncode, done.stderr) == (0, "")
+    assert done.stdout.startswith("function.wrap-angle  (plugins.functions.processing:WrapAngle)")
