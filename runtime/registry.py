@@ -49,7 +49,8 @@ class Registry:
                 self._add(category, kind, point.value)
                 self._origins[(category, kind)] = origin
 
-    def register(self, category: str, kind: str, cls: type[Any]) -> None:
+    def register(self, category: str, kind: str, cls: type[Any] | str) -> None:
+        """Register a class, or its ``module:Class`` path (imported when first needed)."""
         self._add(category, kind, cls)
 
     def _add(self, category: str, kind: str, target: str | type[Any]) -> None:
