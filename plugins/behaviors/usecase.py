@@ -83,6 +83,24 @@ def find_target(result: Any, shape: str, texture: str, min_sources: int = 1) -> 
     return best
 
 
+def object_position(found: Mapping[str, Any], stamp: float) -> dict[str, Any]:
+    """A recognised object as an ``ObjectPosition`` message (configs/usecase/network.xml)."""
+
+    def number(key: str) -> float:
+        value = found.get(key)
+        return float(value) if isinstance(value, int | float) else 0.0
+
+    return {
+        "stamp": float(stamp),
+        "label": str(found.get("name", "")),
+        "frame": str(found.get("frame", "camera")),
+        "x": number("x"),
+        "y": number("y"),
+        "z": number("z"),
+        "reliability": number("reliability"),
+    }
+
+
 class Init(Behavior):
     """INIT: records what the mission is after (target, home); no service."""
 
@@ -103,7 +121,9 @@ class SetNavGoal(Behavior):
     """NAV, NAV_HOME, NAV_COOP: sets AMCL's goal and waits until a path to it is established.
 
     With an input (NAV_COOP's ``spotted`` signal) the goal is the object's position there, moved
-    ``approachDistance`` towards the robot; the behavior waits for it (untraceable).
+    ``approachDistance`` towards the robot; the behavior waits for it (untraceable), logs it, and
+    also writes it on a ``goal`` output when it has one. Without a ``nav`` service it is done once
+    the goal is set (the goal is handed over on its output only).
     """
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
@@ -133,7 +153,13 @@ class SetNavGoal(Behavior):
             self.goal = self._goal_from_input()
             if self.goal is None:
                 return BehaviorStatus(progress=0.0, detail="waiting for the goal")
-            self.service("nav").configure({"goal": self.goal}, ())
+            self.context.log("goal set", goal=self.goal, source=self.record.inputs[0].name)
+            if "nav" in self.context.services:
+                self.service("nav").configure({"goal": self.goal}, ())
+            if "goal" in self.context.outputs:
+                self.write("goal", self.goal)
+        if "nav" not in self.context.services:  # no navigation service: the goal is handed over on its output
+            return BehaviorStatus(progress=1.0, done=self.goal is not None)
         status = self.service("nav").output("status")
         state = _state(status) if isinstance(status, Mapping) and status.get("goal") == self.goal else None
         if state in ("active", "arrived"):
@@ -288,7 +314,8 @@ class TrackObject(Behavior):
 
 class FixObject(Behavior):
     """OBJ_FIX: holds the camera on the target until the recognition has been reliable for
-    ``holdTime`` seconds, then writes the target's position on its output (the plan signal)."""
+    ``holdTime`` seconds, then writes the target's position (an ``ObjectPosition``) on its
+    outputs: the payload of the plan signal (``<Output signal=…>``) or a topic."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("holdTime", 2.0, "How long the recognition must stay reliable.", unit="s"),
@@ -312,6 +339,6 @@ class FixObject(Behavior):
         held = now - self.since
         if held >= p["holdTime"]:
             for port in self.record.outputs:
-                self.write(port.name, {"position": {k: found.get(k) for k in ("x", "y", "z")}, "object": found})
+                self.write(port.name, object_position(found, now))
             return BehaviorStatus(progress=1.0, done=True)
         return BehaviorStatus(progress=held / p["holdTime"])

@@ -9,8 +9,17 @@ signals it emits (``Signal agent=… state=… on=…``) published on their topi
 the plan received from its topic (so ``signal('s')`` and ``Input signal="s"`` see it); a
 heartbeat on ``/plan/PLAN/agents`` every ``heartbeat`` s with the agent's active state, and the
 other agents' heartbeats watched: an agent silent for the plan's ``lostAfter`` is reported lost
-(recorded, logged, ``lost`` set) and found again if it comes back. Everything is recorded in the
-run directory (:class:`~runtime.missions.recording.RunRecorder`).
+(recorded, logged, ``lost`` set) and found again if it comes back. An agent whose last heartbeat
+carries its outcome has *finished*: it is recorded ``agent-finished`` and never reported lost; a
+signal this agent sends it afterwards is recorded ``signal-dropped`` (and the finished agent
+drops it without touching its closed recording). Everything is recorded in the run directory
+(:class:`~runtime.missions.recording.RunRecorder`).
+
+Outcomes (issue G, fail loudly): :meth:`AgentRunner.run` returns the top mission's outcome — one
+of its finals, ``stopped`` (cut short by :meth:`stop` or ``duration``) — and :attr:`succeeded`
+tells whether it is the success final (the first declared). An exception inside the mission
+(a behavior, a bad signal payload) ends it with outcome ``crashed``, recorded with the error,
+and is raised again from :meth:`run` for the caller.
 """
 
 from __future__ import annotations
@@ -82,14 +91,23 @@ class LiveFactory:
         inputs: dict[str, Callable[[], Any]] = {}
         for port in record.inputs:
             if port.signal is not None:
-                inputs[port.name] = functools.partial(self.signals.values.get, port.signal)
+                inputs[port.name] = functools.partial(self.signals.data, port.signal)
             elif port.topic is not None:
                 inputs[port.name] = self._topic_reader(port.topic)
-        outputs = {p.name: self._publisher(p.topic) for p in record.outputs if p.topic is not None}
+        outputs: dict[str, Callable[[Any], None]] = {}
+        for out in record.outputs:
+            if out.signal is not None:  # the payload of the plan signal this state emits
+                outputs[out.name] = functools.partial(self.signals.supply, out.signal)
+            elif out.topic is not None:
+                outputs[out.name] = self._publisher(out.topic)
         context = BehaviorContext(services=services, inputs=inputs, outputs=outputs, now=now)
         cls = self.registry.resolve("behavior", record.kind, record)
         instance: Behavior = cls(record, context)
         return instance
+
+    def related(self, ref: str) -> NetworkServiceHandle | None:
+        """A service eq. 5.1 weighs that no behavior of this state uses: its published quality."""
+        return self._handle(ref)
 
     def close(self) -> None:
         for handle in self.handles.values():
@@ -123,7 +141,11 @@ class AgentRunner:
         self.recorder = RunRecorder(run_dir, agent)
         self.factory = LiveFactory(system, transport, self.signals, registry)
         self.lost: set[str] = set()
+        self.finished: dict[str, str | None] = {}  # agent → the outcome its last heartbeat gave
         self.seen: dict[str, float] = {}
+        self.outcome: str | None = None
+        self.error: BaseException | None = None
+        self._done = threading.Event()  # this agent's mission has ended: late signals are dropped
         self._publishers = {s.name: transport.publisher(self._qos(record, s.name)) for s in record.signals}
         for signal in record.signals:
             transport.subscribe(self._qos(record, signal.name), self._received(signal.name))
@@ -133,7 +155,10 @@ class AgentRunner:
         self.engine = MissionEngine(
             system, me.mission, factory=self.factory, clock=time.monotonic, agent=agent, recorder=self.recorder,
             signals=self.signals, emitters=emitters, on_signal=self._send, plan=plan,
+            signal_types={s.name: s.type for s in record.signals}, related=self.factory.related,
         )  # fmt: skip
+        finals = self.engine.record_mission.finals
+        self._success = finals[0].name if finals else None
         self._stop = threading.Event()
         self._started = 0.0
 
@@ -142,8 +167,19 @@ class AgentRunner:
         signal = next(s for s in plan.signals if s.name == name)
         return TopicQoS(plan.signal_topic(signal), signal.type or "ckm/signal", history=4)
 
+    @property
+    def succeeded(self) -> bool:
+        """True once the mission has ended in its success final (the first declared)."""
+        return self.outcome is not None and self.outcome == self._success
+
     def _send(self, name: str, value: Any) -> None:
         self._publishers[name].publish(codec.encode(value))
+        waiting = {d.agent for d in self.plan.dependencies if d.signal == name} or {
+            a.name for a in self.plan.agents if a.name != self.agent.name
+        }
+        for receiver in sorted(waiting & set(self.finished)):
+            self.recorder.write("signal-dropped", name=name, to=receiver, outcome=self.finished[receiver])
+            LOG.info("plan %s: signal %s reaches %s, which has finished: dropped", self.plan.name, name, receiver)
 
     def _received(self, name: str) -> Callable[[Sample], None]:
         def on(sample: Sample) -> None:
@@ -156,6 +192,9 @@ class AgentRunner:
                 return
             if isinstance(value, dict) and value.get("agent") == self.agent.name:
                 return  # our own emission (agents of one process share a transport)
+            if self._done.is_set():
+                LOG.info("%s: signal %s arrived after the mission ended: dropped", self.agent.name, name)
+                return  # never raise into the sender's thread (one process shares a transport)
             self.signals.set(name, value)
             self.recorder.write("signal", name=name, direction="received", value=value)
 
@@ -163,13 +202,21 @@ class AgentRunner:
 
     def _on_beat(self, sample: Sample) -> None:
         beat = sample.value
-        if isinstance(beat, dict) and isinstance(beat.get("agent"), str) and beat["agent"] != self.agent.name:
-            self.seen[beat["agent"]] = time.monotonic()
+        if not (isinstance(beat, dict) and isinstance(beat.get("agent"), str) and beat["agent"] != self.agent.name):
+            return
+        other = beat["agent"]
+        self.seen[other] = time.monotonic()
+        if "outcome" in beat and beat.get("state") is None and other not in self.finished:
+            outcome = beat["outcome"] if isinstance(beat["outcome"], str) else None
+            self.finished[other] = outcome
+            self.lost.discard(other)
+            self.recorder.write("agent-finished", finished=other, outcome=outcome)
+            LOG.info("plan %s: agent %s finished (%s)", self.plan.name, other, outcome)
 
     def _watch(self) -> None:
         now = time.monotonic()
         for other in self.plan.agents:
-            if other.name == self.agent.name:
+            if other.name == self.agent.name or other.name in self.finished:
                 continue
             last = self.seen.get(other.name, self._started)
             silent = now - last > self.plan.lost_after
@@ -189,12 +236,17 @@ class AgentRunner:
                 self.recorder.write("quality", service=ref, client="", measures=measures, scenario=handle.scenario)
 
     def run(self, duration: float | None = None) -> str | None:
-        """Run until the mission ends, ``duration`` passes or :meth:`stop`; the outcome (None if cut short)."""
+        """Run until the mission ends, ``duration`` passes or :meth:`stop`; the outcome.
+
+        Returns a final of the top mission, or ``stopped`` when cut short. An exception in the
+        mission ends it as ``crashed`` (recorded with the error, kept in :attr:`error`) and is
+        raised again.
+        """
         self._started = time.monotonic()
         end = None if duration is None else self._started + duration
-        self.engine.start()
         next_beat = 0.0
         try:
+            self.engine.start()
             while not self._stop.is_set():
                 now = time.monotonic()
                 if now >= next_beat:
@@ -206,13 +258,35 @@ class AgentRunner:
                 if self.engine.step() is not None or (end is not None and now >= end):
                     break
                 self._stop.wait(self.period)
+            self.outcome = self.engine.outcome or "stopped"
+        except Exception as error:
+            self.error, self.outcome = error, "crashed"
+            LOG.error("plan %s: agent %s crashed: %s", self.plan.name, self.agent.name, error)
+            self.recorder.write("error", error=f"{type(error).__name__}: {error}", where=self.engine.active_path())
+            raise
         finally:
+            self._finish()
+        return self.outcome
+
+    def _finish(self) -> None:
+        """End the recording with the outcome; each step isolated so that none skips the others."""
+        self._done.set()
+        outcome = self.outcome or "stopped"
+        try:
             if self.engine.outcome is None:
-                self.engine.stop("stopped")
-            self._beat.publish({"agent": self.agent.name, "state": None, "outcome": self.engine.outcome})
-            self.recorder.close()
-            self.factory.close()
-        return self.engine.outcome
+                if self.engine.top.state is not None:
+                    self.engine.stop(outcome)
+                else:  # crashed before the initial state was entered
+                    self.recorder.write("end", outcome=outcome)
+        except Exception:
+            LOG.exception("agent %s: stopping its mission failed", self.agent.name)
+            self.recorder.write("end", outcome=outcome)
+        try:
+            self._beat.publish({"agent": self.agent.name, "state": None, "outcome": outcome})
+        except Exception:
+            LOG.exception("agent %s: the last heartbeat could not be sent", self.agent.name)
+        self.recorder.close()
+        self.factory.close()
 
     def stop(self) -> None:
         self._stop.set()

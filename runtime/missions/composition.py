@@ -14,15 +14,25 @@ running, a performance measure is provided according to the average service qual
 it, of ``min(1, P(within bounds) / probability)`` on the measures seen recently — 1 when every
 requirement holds, falling smoothly as one is neglected; 1 for a running service the behavior
 requires nothing of.
+
+Services of the matrix that the behavior's services depend on but that it does not use itself
+(NAV uses AMCL only, yet AMCL's row names Scan and Displacement) are rated from what they
+publish (docs/decisions.md D70): 0 while silent; when running, the mean of their recent values
+of the measure their ``<Service performance=…>`` names, clamped to [0, 1]; 1 when they name none.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
-from ckmconf.model.missions import CompositionMatrix, Require
+from ckmconf.model import System
+from ckmconf.model.missions import Behavior, CompositionMatrix, Require
 
 from ..resources.quality import probability_within
+
+if TYPE_CHECKING:
+    from .behaviors import ServiceHandle
 
 
 def service_performance(
@@ -68,3 +78,55 @@ def composed_performance(
             continue
         total += sum(w * performance.get(other, 0.0) for other, w in zip(matrix.refs(), weights, strict=False)) / norm
     return total / len(used)
+
+
+def related_services(matrix: CompositionMatrix | None, services: Iterable[str]) -> list[str]:
+    """Services of ``matrix`` that a row of ``services`` weighs and that are not among them."""
+    if matrix is None:
+        return []
+    used = list(dict.fromkeys(services))
+    refs = matrix.refs()
+    related: dict[str, None] = {}
+    for ref in used:
+        if ref in refs:
+            for other, weight in zip(refs, matrix.rows[refs.index(ref)].values, strict=False):
+                if weight and other not in used:
+                    related[other] = None
+    return list(related)
+
+
+def published_performance(running: bool, samples: Sequence[float]) -> float:
+    """``sp`` of a service the behavior does not use: from its published quality (module docstring)."""
+    if not running:
+        return 0.0
+    if not samples:
+        return 1.0
+    return max(0.0, min(1.0, sum(samples) / len(samples)))
+
+
+def behavior_performance(
+    system: System,
+    matrix: CompositionMatrix | None,
+    record: Behavior,
+    services: Mapping[str, ServiceHandle],
+    related: Callable[[str], ServiceHandle | None],
+) -> float | None:
+    """Eq. 5.1 for one behavior: its services by alias, every other related service by ``related(ref)``."""
+    refs: list[str] = []
+    states: dict[str, float] = {}
+    for uses in record.uses:
+        handle = services.get(uses.alias)
+        if handle is None:
+            continue
+        samples = {r.measure: handle.samples(r.measure) for r in uses.requires}
+        states[uses.service] = service_performance(handle.running(), uses.requires, samples)
+        refs.append(uses.service)
+    for ref in related_services(matrix, refs):
+        handle = related(ref)
+        if handle is None:
+            states[ref] = 0.0
+            continue
+        found = system.service(ref)
+        measure = found[1].performance if found is not None else None
+        states[ref] = published_performance(handle.running(), handle.samples(measure) if measure else [])
+    return composed_performance(matrix, refs, states)

@@ -114,6 +114,7 @@ class FakeInteraction(MissionEngine):
         self.plans: dict[int, tuple[int, dict[Key, Any]] | None] = {}
         self.wanted: dict[int, set[str]] = {}
         self.problem: str | None = None
+        kwargs.setdefault("related", SimulatedService)  # eq. 5.1's other services: running and compliant
         super().__init__(system, mission, factory=self._behavior, **kwargs)
 
     def _behavior(self, behavior: str, path: str, now: Callable[[], float]) -> Behavior:

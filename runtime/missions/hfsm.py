@@ -33,12 +33,13 @@ from ckmconf.expressions import TRANSITION, Condition, Environment, evaluate, pa
 from ckmconf.model import System
 from ckmconf.model.missions import Mission, State
 
-from .behaviors import Behavior, BehaviorStatus
-from .composition import composed_performance, service_performance
+from .behaviors import Behavior, BehaviorStatus, ServiceHandle
+from .composition import behavior_performance
+from .payloads import check_payload
 
 
 class Recorder(Protocol):
-    def write(self, kind: str, **fields: Any) -> None: ...
+    def write(self, kind: str, **fields: Any) -> object: ...
 
 
 BehaviorFactory = Callable[[str, str, Callable[[], float]], Behavior]
@@ -47,15 +48,37 @@ BehaviorFactory = Callable[[str, str, Callable[[], float]], Behavior]
 
 @dataclass
 class Signals:
-    """Plan signals received so far (latched: once received, ``signal()`` stays true)."""
+    """Plan signals received so far (latched: once received, ``signal()`` stays true).
+
+    A signal travels as an envelope ``{"agent", "state", "time", "data"}``; ``data`` is the payload
+    the emitting state's behavior wrote on its ``<Output signal=…>`` (:meth:`supply`), None for a
+    signal that carries none. A behavior's ``<Input signal=…>`` reads :meth:`data`.
+    """
 
     values: dict[str, Any] = field(default_factory=dict)
+    payloads: dict[str, Any] = field(default_factory=dict)
+    """Outgoing: what this agent's behaviors supplied for the signals it will emit."""
 
     def received(self, name: str) -> bool:
         return name in self.values
 
     def set(self, name: str, value: Any) -> None:
         self.values[name] = value
+
+    def supply(self, name: str, value: Any) -> None:
+        """A behavior's ``<Output signal=name>``: the payload of the next emission of ``name``."""
+        self.payloads[name] = value
+
+    def data(self, name: str) -> Any:
+        """What an ``<Input signal=name>`` reads: the payload, or the envelope of a signal without one."""
+        envelope = self.values.get(name)
+        if isinstance(envelope, dict) and envelope.get("data") is not None:
+            return envelope["data"]
+        return envelope
+
+
+class SignalError(RuntimeError):
+    """A signal whose payload does not match its ``type`` (raised in the emitting agent)."""
 
 
 class MissionError(RuntimeError):
@@ -120,7 +143,6 @@ class MissionRun:
         engine.record(
             "enter", path=path, state=name, mission=self.mission.name, behavior=state.behavior, nested=state.mission
         )
-        engine.emit(path, "entry")
         if state.mission is not None:
             nested = engine.system.mission(state.mission)
             if nested is None:
@@ -131,6 +153,7 @@ class MissionRun:
             entered = self.entered
             self.behavior = engine.factory(state.behavior, path, lambda: engine.now() - entered)
             self.behavior.start()
+        engine.emit(path, "entry")  # after the behavior's start, which may supply the signal's payload
 
     def exit(self, to: str | None, condition: str | None, reason: str) -> None:
         if self.state is None:
@@ -160,7 +183,14 @@ class MissionRun:
                 self._try_transitions()
         elif self.behavior is not None:
             self.status = self.behavior.step()
+            self._record_logs()
             self._try_transitions()
+
+    def _record_logs(self) -> None:
+        """What the behavior logged (``BehaviorContext.log``) goes into the recording."""
+        events = self.behavior.context.events if self.behavior is not None else []
+        while events:
+            self.engine.record("log", path=self.state_path(), **events.pop(0))
 
     def _try_transitions(self) -> bool:
         assert self.state is not None
@@ -213,17 +243,9 @@ class MissionRun:
         """SPC (eq. 5.1) of the active behavior's services under this mission's matrix."""
         if self.behavior is None:
             return None
-        handles = self.behavior.context.services
         matrix = self.engine.system.matrix(self.mission.composition) if self.mission.composition else None
-        refs, states = [], {}
-        for uses in self.behavior.record.uses:
-            handle = handles.get(uses.alias)
-            if handle is None:
-                continue
-            samples = {r.measure: handle.samples(r.measure) for r in uses.requires}
-            states[uses.service] = service_performance(handle.running(), uses.requires, samples)
-            refs.append(uses.service)
-        return composed_performance(matrix, refs, states)
+        services = self.behavior.context.services
+        return behavior_performance(self.engine.system, matrix, self.behavior.record, services, self.engine.related)
 
 
 class MissionEngine:
@@ -243,6 +265,8 @@ class MissionEngine:
         on_signal: Callable[[str, Any], None] | None = None,
         progress_period: float = 0.25,
         plan: str | None = None,
+        signal_types: Mapping[str, str | None] | None = None,
+        related: Callable[[str], ServiceHandle | None] | None = None,
     ) -> None:
         record = system.mission(mission)
         if record is None:
@@ -255,6 +279,9 @@ class MissionEngine:
         self.on_signal = on_signal
         self.progress_period = progress_period
         self.plan = plan
+        self.signal_types = dict(signal_types or {})  # signal → its <Signal type> (None: no payload required)
+        self._types = {t.name: t for t in system.message_types}
+        self._related = related  # the services eq. 5.1 weighs that a behavior does not use itself
         self._conditions: dict[str, Condition] = {}
         self._start = 0.0
         self._last_progress = -1e9
@@ -269,6 +296,10 @@ class MissionEngine:
         if self.recorder is not None:
             self.recorder.write(kind, **fields)
 
+    def related(self, ref: str) -> ServiceHandle | None:
+        """A service the composition weighs though the active behavior does not use it (eq. 5.1)."""
+        return self._related(ref) if self._related is not None else None
+
     def condition(self, text: str, where: str) -> Condition:
         if text not in self._conditions:
             try:
@@ -281,7 +312,15 @@ class MissionEngine:
         relative = path.split("/", 1)[1] if "/" in path else path
         name = self.emitters.get((relative, when))
         if name is not None:
-            value = {"agent": self.agent, "state": relative, "time": self.now()}
+            data = self.signals.payloads.pop(name, None)
+            kind = self.signal_types.get(name)
+            if kind is not None:
+                problem = check_payload(data, kind, self._types, "payload")
+                if data is None:
+                    problem = f"no payload: the behavior of {relative} wrote nothing on an <Output signal={name!r}>"
+                if problem is not None:
+                    raise SignalError(f"signal {name!r} (type {kind}) sent by {self.agent} at {relative}: {problem}")
+            value = {"agent": self.agent, "state": relative, "time": self.now(), "data": data}
             self.signals.set(name, value)
             self.record("signal", name=name, direction="sent", value=value)
             if self.on_signal is not None:

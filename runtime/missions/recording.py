@@ -6,7 +6,9 @@ the common keys ``t`` (seconds since the recorder was created, on a monotonic cl
 and ``kind``. The kinds and their keys:
 
 - ``start``: mission, plan, wall · ``end``: outcome, wall
-- ``agent-lost``: lost · ``agent-found``: found
+- ``agent-lost``: lost · ``agent-found``: found · ``agent-finished``: finished, outcome
+- ``signal-dropped``: name, to (a finished agent), outcome (its) · ``error``: error, where
+- ``log``: path, message, and what the behavior logged with it (``BehaviorContext.log``)
 - ``enter``: path (``Top/Nested/STATE``), state, mission, behavior, nested
 - ``exit``: path, state, mission, to, condition, reason (``transition`` | ``stopped``)
 - ``progress``: path, progress, performance (eq. 5.1, or null), mission_progress
@@ -47,6 +49,7 @@ from typing import Any
 
 KINDS = frozenset(
     {"start", "enter", "exit", "progress", "quality", "signal", "outcome", "agent-lost", "agent-found", "end"}
+    | {"agent-finished", "signal-dropped", "error", "log"}
 )
 _KIND = re.compile(r"[a-z][a-z-]*")
 FILE_GLOB = "mission*.jsonl"
@@ -110,18 +113,26 @@ class RunRecorder:
         self._closed = False
         self._last_sync = 0.0
         self._dirty = False
+        self.dropped = 0
+        """Events written after :meth:`close` (a late signal, a thread still finishing): counted, not kept."""
 
     def elapsed(self) -> float:
         """Seconds since the recorder was created (the ``t`` the next event would get)."""
         return self._clock() - self._t0
 
-    def write(self, kind: str, **fields: Any) -> None:
-        """Append one event ``{"t", "agent", "kind", **fields}`` as one line."""
+    def write(self, kind: str, **fields: Any) -> bool:
+        """Append one event ``{"t", "agent", "kind", **fields}`` as one line; False if dropped.
+
+        A write after :meth:`close` is dropped and counted in :attr:`dropped`, never raised: the
+        writer is often another agent's thread (a signal reaching an agent that has finished),
+        and a recording that has ended must not crash it.
+        """
         if not isinstance(kind, str) or not _KIND.fullmatch(kind):
             raise ValueError(f"bad event kind {kind!r} (known kinds: {', '.join(sorted(KINDS))})")
         with self._lock:
             if self._closed:
-                raise ValueError(f"recorder {self.path} is closed")
+                self.dropped += 1
+                return False
             if kind in ("start", "end") and "wall" not in fields:
                 fields["wall"] = self._wall()
             event = {"t": round(self.elapsed(), 6), "agent": self.agent, "kind": kind, **fields}
@@ -135,6 +146,7 @@ class RunRecorder:
             if kind in ("start", "end") or now - self._last_sync >= self._fsync_every:
                 os.fsync(fd)
                 self._last_sync, self._dirty = now, False
+        return True
 
     def _open(self) -> int:
         if self._fd is None:

@@ -14,6 +14,7 @@ import ckmconf
 from ckmconf.model import System
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext
+from runtime.missions.payloads import check_payload
 from runtime.registry import default_registry
 from runtime.resources.api import Bounds
 
@@ -159,7 +160,11 @@ def test_fix_holds_a_reliable_recognition_then_signals_the_position(lab: System)
         assert not rig.behavior.step().done
     rig.time = 2.0
     assert rig.behavior.step().done
-    assert rig.last("spotted")["position"] == {"x": 2.0, "y": 1.0, "z": 0.3}
+    spotted = rig.last("spotted")
+    assert spotted == {"stamp": 2.0, "label": "cylinder_red_stripes", "frame": "camera", "x": 2.0, "y": 1.0,
+                       "z": 0.3, "reliability": 0.9}  # fmt: skip
+    types = {t.name: t for t in lab.message_types}
+    assert check_payload(spotted, "ObjectPosition", types) is None  # what the signal's type asks for
 
 
 def test_bad_params_are_refused_naming_the_behavior(lab: System) -> None:
