@@ -21,8 +21,11 @@ def builtin() -> Registry:
 
 
 def test_docs_plugins_md_is_current() -> None:
-    """Regenerate with: .venv/bin/ckm-plugins markdown --package ckm > docs/plugins.md"""
-    assert PAGE.read_text(encoding="utf-8") == markdown(builtin(), "ckm")
+    """A kind's docstring or manifest changed: regenerate the page and commit it with the change."""
+    current = markdown(builtin(), "ckm")
+    assert PAGE.read_text(encoding="utf-8") == current, (
+        "docs/plugins.md is stale: run .venv/bin/ckm-plugins markdown --package ckm > docs/plugins.md"
+    )
 
 
 def test_every_builtin_kind_is_documented() -> None:
