@@ -198,6 +198,7 @@ class ZoomMap(Record):
     height: float | None = attr(default=None)
     border: float = attr(default=0.1)
     timeout: float = attr(default=10.0)
+    max_objects: int | None = attr(default=None)
 
 
 @dataclass(frozen=True, kw_only=True)
