@@ -8,7 +8,9 @@ Every registered class declares, once, at the class:
   against before anything is built, so the two can never disagree.
 - ``PORTS`` (optional): a :class:`Ports` naming the value types of its inputs and outputs
   (controllers by role, behaviors by port name, ``"*"`` for any) and, for hardware backends, the
-  channel sizes it serves. Value types are the names of ``schemas/kernel.xsd`` (built-in types
+  channel sizes it serves. A backend whose reads depend on its Params (a simulated camera reads
+  images, a simulated joint numbers) may instead define a classmethod ``value_type(channel) ->
+  str`` (static: no I/O, no instance). Value types are the names of ``schemas/kernel.xsd`` (built-in types
   such as ``float64`` or ``string``, or a ``MessageType``) or the shapes :data:`NUMBER`,
   :data:`NUMBERS` (a vector of numbers, one per channel element), :data:`MAPPING` (a dict of
   fields) and :data:`ANY`.

@@ -179,7 +179,8 @@ class _Verifier:
             self.report.error(
                 channel, f"hardware {channel.backend!r} serves channels of size {sizes}, not {channel.size}", "size"
             )
-        read = ports.output("*")
+        typed = getattr(cls, "value_type", None)  # a backend whose reads depend on its Params
+        read = typed(channel) if callable(typed) else ports.output("*")
         if read == NUMBERS:
             return NUMBER if channel.size == 1 else NUMBERS
         return read

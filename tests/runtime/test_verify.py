@@ -22,8 +22,8 @@ import pytest
 import ckmconf
 from ckmconf import cli
 from ckmconf.model import Controller as ControllerRecord
-from ckmconf.model import System
-from runtime.kernel.interfaces import Controller
+from ckmconf.model import HWChannel, System, params_dict
+from runtime.kernel.interfaces import Backend, Controller, Value
 from runtime.registry import Registry
 from runtime.validate_cli import main as validate_main
 from runtime.verification.manifest import NUMBER, REQUIRED, P, Params, Ports
@@ -257,6 +257,51 @@ def test_verify_or_report_for_ckm_run(tmp_path: Path, capsys: pytest.CaptureFixt
     assert lines[0].endswith("controller kind 'probe' needs parameter 'mode' (Required.)")
     assert "reads string values as 'other'" in lines[1]
     assert lines[-1] == "probe.xml: 2 problem(s) found before start; nothing was started"
+
+
+class Camera(Backend):
+    """A backend whose reads depend on a Param: images for sensor=rgb, numbers otherwise."""
+
+    PARAMS = Params(P("sensor", "joint", "What the channel reads."))
+
+    @classmethod
+    def value_type(cls, channel: HWChannel) -> str:
+        return "Image" if params_dict(channel.params).get("sensor") == "rgb" else NUMBER
+
+    def read(self) -> float:
+        return 0.0
+
+    def write(self, value: Value) -> None:
+        return None
+
+
+CAMERA = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="camera">
+  <MessageType name="Image"><Field name="data" type="bytes"/></MessageType>
+  <Node name="n">
+    <HWChannel name="rgb" direction="in" kind="stream" backend="camera"><Param name="sensor" value="rgb"/></HWChannel>
+    <HWChannel name="pan" direction="in" kind="analog" backend="camera"/>
+    <Topic name="image" type="Image" scope="internal"/>
+    <Topic name="angle" type="float64" scope="internal"/>
+    <Topic name="other" type="float64" scope="internal"/>
+    <Sensor name="rgb" channel="rgb" topic="image" period="0.1"/>
+    <Sensor name="pan" channel="pan" topic="angle" period="0.1"/>
+    <Sensor name="wrong" channel="rgb" topic="other" period="0.1"/>
+  </Node>
+</System>
+"""
+
+
+def test_a_backend_may_type_its_reads_from_its_params(tmp_path: Path) -> None:
+    path = tmp_path / "camera.xml"
+    path.write_text(CAMERA)
+    registry = Registry(load_entry_points=False)
+    registry.register("hardware", "camera", Camera)
+    [problem] = verify(ckmconf.load(path), registry)
+    assert problem.line == 12
+    assert problem.message == (
+        "sensor 'wrong' writes Image messages (channel 'rgb', size 1) onto topic 'other' of type float64"
+    )
 
 
 if __name__ == "__main__":  # regenerate expected.json (see tests/data/verify/README.md)
