@@ -252,6 +252,10 @@ def _signal_style(event: Event) -> tuple[str, str] | None:
         return "X", "tab:red"
     if event.kind == "agent-found":
         return "P", "tab:olive"
+    if event.kind == "agent-finished":  # the other agent ended its mission: finished, not lost
+        return "s", "tab:gray"
+    if event.kind == "signal-dropped":
+        return "x", "tab:gray"
     return None
 
 
@@ -325,13 +329,23 @@ def _plan_plot(run: Run, leaf: Report, path: Path) -> Path:
         marker, color = style
         lane = lanes[event.agent] - 0.45
         ax.plot([event.t], [lane], marker=marker, color=color, linestyle="none")
-        other = event.kind.removeprefix("agent-")  # "lost" / "found": the key naming the other agent
-        label = event.get("name") if event.kind == "signal" else f"{other} {event.get(other)}"
+        other = event.kind.removeprefix("agent-")  # "lost" / "found" / "finished": the key naming the other agent
+        if event.kind == "signal":
+            label = event.get("name")
+        elif event.kind == "signal-dropped":
+            label = f"{event.get('name')} dropped ({event.get('to')} finished)"
+        else:
+            label = f"{other} {event.get(other)}"
+        if event.kind == "agent-finished":
+            label += f" ({event.get('outcome')})"
         ax.annotate(str(label), (event.t, lane), xytext=(2, -8), textcoords="offset points", fontsize=6)
-    ax.set_yticks(range(len(lanes)), list(lanes))
+    # Each lane is labelled with how its agent ended: finished with an outcome is never "lost".
+    labels = [f"{a.agent}\n{'finished: ' + a.outcome if a.outcome else 'no end'}" for a in leaf.agents]
+    ax.set_yticks(range(len(lanes)), labels)
     ax.set(ylim=(len(lanes) - 0.4, -0.8), xlabel="run time (s)")
     plans = sorted({a.plan for a in leaf.agents if a.plan})
-    ax.set_title(f"Plan {', '.join(plans) or '?'}: active states (▲ signal sent, ▼ received, ✕ agent lost, + found)")
+    legend = "▲ signal sent, ▼ received, ✕ agent lost, + found, ■ finished"
+    ax.set_title(f"Plan {', '.join(plans) or '?'}: active states ({legend})")
     fig.savefig(path, dpi=100)
     return path
 

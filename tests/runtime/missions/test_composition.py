@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 import ckmconf
-from ckmconf.model.missions import CompositionMatrix, MatrixService, Require, Row
+from ckmconf.model.missions import CompositionMatrix, MatrixService, Require, Row, Uses
 from runtime.missions.composition import composed_performance, service_performance
 
 REPO = Path(__file__).resolve().parents[3]
@@ -45,3 +45,99 @@ def test_without_a_matrix_or_a_row_a_service_counts_alone() -> None:
         name="m", rule="strict", services=(MatrixService(ref="a.b"),), rows=(Row(values=(1.0,)),)
     )
     assert composed_performance(strict, ["a.b", "x.y"], {"a.b": 0.4}) == pytest.approx(0.2)  # x.y not running
+
+
+class KnownService:
+    """A service handle with a known state: running, and ``value`` for every measure it is asked for."""
+
+    def __init__(
+        self, ref: str, value: float, running: bool = True, per_measure: dict[str, float] | None = None
+    ) -> None:
+        self.ref, self.value, self._running, self.per_measure = ref, value, running, per_measure or {}
+
+    def configure(self, parameters: object, requirements: object) -> None:
+        return None
+
+    def output(self, name: str) -> None:
+        return None
+
+    def measures(self) -> dict[str, float]:
+        return {}
+
+    def samples(self, measure: str) -> list[float]:
+        return [self.per_measure.get(measure, self.value)] * 10
+
+    def running(self) -> bool:
+        return self._running
+
+
+def compliant(uses: Uses) -> KnownService:
+    """A running service whose samples sit inside every bound the behavior requires of it."""
+    inside = {r.measure: r.lower if r.lower is not None else (r.upper or 0.0) / 2 for r in uses.requires}
+    return KnownService(uses.service, 1.0, per_measure=inside)
+
+
+# Table 7.6, rows (normalised, D13) over MoveIt Scan RGB Depth Displ AMCL Fusion.
+TABLE_7_6 = {
+    "RoboticArm.MoveIt": {"RoboticArm.MoveIt": 1.0},
+    "LaserSensor.Scan": {"LaserSensor.Scan": 1.0},
+    "RGBDCamera.RGBRecog": {"RGBDCamera.RGBRecog": 1.0},
+    "RGBDCamera.DepthRecog": {"RGBDCamera.DepthRecog": 1.0},
+    "MobileBase.Displacement": {"LaserSensor.Scan": 0.5, "MobileBase.Displacement": 0.5},
+    "Navigation.AMCL": {"LaserSensor.Scan": 1 / 3, "MobileBase.Displacement": 1 / 3, "Navigation.AMCL": 1 / 3},
+    "GlobalRecog.Fusion": {"RGBDCamera.RGBRecog": 0.25, "RGBDCamera.DepthRecog": 0.25, "GlobalRecog.Fusion": 0.5},
+}
+
+
+@pytest.mark.parametrize("behavior", ["NAV", "NAV_HOME", "WAIT", "SPOT", "APPR", "PICK", "PLACE", "BACK"])
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_every_table_7_6_behavior_composes_from_every_related_service(behavior: str, scale: float) -> None:
+    """Eq. 5.1 per behavior of Table 7.5 under Table 7.6 (D70): the services it uses rate 1 (their
+    requirements hold); the related ones it does not use count with their published performance."""
+    from runtime.missions.composition import behavior_performance
+
+    lab = ckmconf.load(REPO / "configs" / "usecase" / "lab.xml")
+    matrix = lab.matrix("turtlebot")
+    record = lab.behavior(behavior)
+    assert matrix is not None and record is not None
+    published = {"LaserSensor.Scan": 0.9, "MobileBase.Displacement": 0.6, "Navigation.AMCL": 0.3,
+                 "RGBDCamera.RGBRecog": 0.8, "RGBDCamera.DepthRecog": 0.4, "GlobalRecog.Fusion": 0.7,
+                 "RoboticArm.MoveIt": 0.5}  # fmt: skip
+    published = {ref: value * scale for ref, value in published.items()}
+    used = {u.service for u in record.uses}
+    # Used services meet their requirements (sp = 1): samples inside every Require's bounds.
+    handles = {}
+    for uses in record.uses:
+        handles[uses.alias] = compliant(uses)
+    related = {ref: KnownService(ref, value) for ref, value in published.items()}
+    asked: list[str] = []
+
+    def lookup(ref: str) -> KnownService:
+        asked.append(ref)
+        return related[ref]
+
+    value = behavior_performance(lab, matrix, record, handles, lookup)  # type: ignore[arg-type]
+    sp = {ref: 1.0 if ref in used else published[ref] for ref in published}
+    expected = sum(sum(w * sp[o] for o, w in TABLE_7_6[ref].items()) for ref in used) / len(used)
+    assert value == pytest.approx(expected)
+    assert set(asked) == {o for ref in used for o in TABLE_7_6[ref]} - used  # only the related ones
+    if scale == 1.0 and behavior == "NAV":
+        assert value == pytest.approx((0.9 + 0.6 + 1.0) / 3)  # not 1/3 as when the others counted 0
+
+
+def test_every_service_at_one_composes_to_one_for_every_behavior_of_table_7_6() -> None:
+    from runtime.missions.composition import behavior_performance
+
+    lab = ckmconf.load(REPO / "configs" / "usecase" / "lab.xml")
+    matrix = lab.matrix("turtlebot")
+    assert matrix is not None
+    for behavior in ("NAV", "NAV_HOME", "WAIT", "SPOT", "APPR", "PICK", "PLACE", "BACK"):
+        record = lab.behavior(behavior)
+        assert record is not None
+        handles = {}
+        for uses in record.uses:
+            handles[uses.alias] = compliant(uses)
+        value = behavior_performance(lab, matrix, record, handles, lambda ref: KnownService(ref, 1.0))  # type: ignore[arg-type]
+        assert value == pytest.approx(1.0), behavior
+        silent = behavior_performance(lab, matrix, record, handles, lambda ref: KnownService(ref, 1.0, running=False))  # type: ignore[arg-type]
+        assert silent is not None and silent <= 1.0
