@@ -304,6 +304,14 @@ def test_a_backend_may_type_its_reads_from_its_params(tmp_path: Path) -> None:
     )
 
 
+def test_the_console_scripts_point_at_the_verifying_commands() -> None:
+    from importlib.metadata import entry_points
+
+    scripts = {point.name: point.value for point in entry_points(group="console_scripts")}
+    assert scripts["ckm-validate"] == "runtime.validate_cli:main"
+    assert scripts["ckm-plugins"] == "runtime.plugins_cli:main"
+
+
 if __name__ == "__main__":  # regenerate expected.json (see tests/data/verify/README.md)
     import os
 
