@@ -13,7 +13,8 @@ single node; ``verify`` does the same for a loaded System:
   the ``type`` of the topic or plan signal (:mod:`runtime.verification.types`);
 - channel sizes are ones the backend serves (a loopback plant has one output);
 - what the runtime would silently not run is refused: Smart Resources on a ROS kernel (no ROS
-  kernel runs here) and services without scenarios (only SPT scenarios are executed).
+  kernel runs here), services without scenarios (only SPT scenarios are executed), services whose
+  scenarios start from different acquisition plugins, and streams no service feeds an Input.
 
 Classes are imported to read their manifests; none is instantiated, no file or device is opened.
 Every problem is a ConfigError at its element (attribute when there is one), ``FILE:LINE:COL``.
@@ -38,6 +39,7 @@ from ckmconf.model import (
     Node,
     Param,
     Sensor,
+    Service,
     SmartResource,
     System,
     Topic,
@@ -259,13 +261,34 @@ class _Verifier:
             return
         for plugin in resource.plugins:
             self._checked(plugin, "plugin", plugin.kind, plugin.params)
+        profiles = {p.name: p for p in resource.profiles}
+        streams: dict[str, list[Service]] = {}  # acquisition (root) plugin → the services it feeds
         for service in resource.services:
+            ref = f"'{resource.name}.{service.name}'"
             if not service.scenarios:
                 self.report.error(
                     service,
-                    f"service '{resource.name}.{service.name}' has no Scenario: the runtime executes services "
+                    f"service {ref} has no Scenario: the runtime executes services "
                     "through their scenarios' SPT profiles, so nothing would produce its outputs (not runnable)",
                 )
+                continue
+            roots = sorted({profiles[s.profile].root.plugin for s in service.scenarios if s.profile in profiles})
+            if len(roots) > 1:
+                self.report.error(
+                    service,
+                    f"service {ref}: the profiles of its scenarios must share one acquisition (root) plugin, "
+                    f"found {', '.join(roots)} (not runnable)",
+                )
+            elif roots:
+                streams.setdefault(roots[0], []).append(service)
+        for root, services in streams.items():
+            if not any(service.inputs for service in services):
+                for service in services:
+                    self.report.error(
+                        service,
+                        f"service '{resource.name}.{service.name}' has no Input: its stream (acquisition plugin "
+                        f"{root!r}) would have nothing to process (not runnable)",
+                    )
 
     def _behavior(self, behavior: Behavior) -> None:
         cls = self._checked(behavior, "behavior", behavior.kind, behavior.params)
