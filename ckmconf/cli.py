@@ -48,13 +48,17 @@ def run(args: argparse.Namespace, check: Check | None = None) -> int:
     limits = Limits(max_bytes=args.max_bytes)
     errors: list[ConfigError] = []
     results: list[tuple[str, LoadResult]] = []
+    checked: set[ConfigError] = set()
     for path in args.files:
         try:
             result = load(path, strict=False, limits=limits)
         except RecursionError:  # pathological nesting that slipped past the parser limits
             result = LoadResult(None, [ConfigError(path, 1, 1, "/", "elements are nested too deeply")])
         if check is not None and result.system is not None and not result.errors:
-            result = LoadResult(result.system, check(result.system), result.files)
+            # A Part included by several files given is checked with each: report its problems once.
+            found = [e for e in check(result.system) if e not in checked]
+            checked.update(found)
+            result = LoadResult(result.system, found, result.files)
         errors.extend(result.errors)
         results.append((path, result))
     if args.json:

@@ -312,6 +312,21 @@ def test_the_console_scripts_point_at_the_verifying_commands() -> None:
     assert scripts["ckm-plugins"] == "runtime.plugins_cli:main"
 
 
+def test_a_part_included_by_several_files_is_reported_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "part.xml").write_text(
+        '<?xml version="1.0" encoding="UTF-8"?>\n<Part xmlns="urn:ckm:1" version="1.0">\n'
+        '  <Behavior name="GOTO" kind="follow-path" timeout="10"/>\n</Part>\n'
+    )
+    for name in ("a", "b"):
+        (tmp_path / f"{name}.xml").write_text(
+            '<?xml version="1.0" encoding="UTF-8"?>\n'
+            f'<System xmlns="urn:ckm:1" version="1.0" name="{name}">\n  <Include href="part.xml"/>\n</System>\n'
+        )
+    assert validate(str(tmp_path / "a.xml"), str(tmp_path / "b.xml")) == 1
+    [line] = capsys.readouterr().out.splitlines()
+    assert line.startswith(f"{tmp_path / 'part.xml'}:3:25: ") and "'follow-path' does not exist" in line
+
+
 if __name__ == "__main__":  # regenerate expected.json (see tests/data/verify/README.md)
     import os
 
