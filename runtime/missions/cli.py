@@ -5,8 +5,10 @@ top mission (those no other mission nests): (a) the static checks of the mission
 in simulated time against simulated services with the fake interaction forcing every transition
 — state and transition coverage, each episode's state sequence — and (c) SRFlowGen's trace of
 the quality requirements through the services (eq. 5.2–5.7). Findings are printed one per line,
-``FILE:LINE:COL: XPATH: [kind] message``; exit 0 when no mission has an error, 1 otherwise (a
-file that does not load is reported like ``ckm-validate`` and exits 1). ``--run-dir`` keeps the
+``FILE:LINE:COL: XPATH: [kind] message``; then (d) each plan's wait-for graph
+(:mod:`.validation.plans`: deadlocks, late signals, signals off the sender's success path). Exit
+0 when no mission and no plan has an error, 1 otherwise (a file that does not load has every
+problem reported like ``ckm-validate`` and exits 1). ``--run-dir`` keeps the
 episodes' recordings (``ckm-mission report DIR/MISSION/episode-1`` draws Fig. 7.21).
 
 ``report`` prints Table 7.9 for a recorded run and writes its Fig. 7.23-style plots.
@@ -22,8 +24,9 @@ from pathlib import Path
 from typing import Any
 
 from ckmconf import ConfigError, load
+from ckmconf.loader import LoadResult
 from ckmconf.model import System
-from ckmconf.model.missions import Validation
+from ckmconf.model.missions import Plan, Validation
 
 from . import report
 from .fake import Coverage, explore, record_into
@@ -73,13 +76,17 @@ def _coverage_findings(system: System, mission: str, coverage: Coverage, require
 
 def validate_mission(system: System, mission: str, run_dir: Path | None = None) -> dict[str, Any]:
     """Every check on one top mission: its findings, coverage, episodes and SRFlowGen report."""
+    from .validation.plans import assumable_signals
     from .validation.srflowgen import srflowgen
     from .validation.static import check_mission
 
     settings = system.validation or Validation()
     findings = list(check_mission(system, mission))
     recorder = record_into(run_dir / mission) if run_dir is not None else None
-    coverage = explore(system, mission, step=settings.step, horizon=settings.horizon, recorder=recorder)
+    signals = assumable_signals(system, mission)
+    coverage = explore(
+        system, mission, step=settings.step, horizon=settings.horizon, recorder=recorder, signals=signals
+    )
     findings += _coverage_findings(system, mission, coverage, settings.coverage)
     flow_findings, flow = srflowgen(system, mission, settings)
     findings += flow_findings
@@ -97,12 +104,32 @@ def validate_mission(system: System, mission: str, run_dir: Path | None = None) 
     }
 
 
+def _plans_of(system: System, mission: str | None) -> list[Plan]:
+    """The plans to check: every one, or those with an agent running ``mission`` (or nesting it)."""
+    if mission is None:
+        return list(system.plans)
+    from .fake import missions_below
+
+    return [p for p in system.plans if any(mission in missions_below(system, a.mission) for a in p.agents)]
+
+
 def _validate(args: argparse.Namespace) -> int:
+    from .validation.plans import check_plan
+
     try:
-        system = load(args.system)
-    except ConfigError as error:
-        print(error, file=sys.stderr)
+        result = load(args.system, strict=False)
+    except RecursionError:
+        result = LoadResult(None, [ConfigError(args.system, 1, 1, "/", "elements are nested too deeply")])
+    if result.errors or result.system is None:
+        for error in result.errors:  # every load problem, as ckm-validate lists them
+            print(error, file=sys.stderr)
         return 1
+    system = result.system
+    if system.validation is None:
+        defaults = Validation()
+        print(f"{args.system}: no <Validation> here, so the defaults apply (pMin {defaults.p_min:g}, kMax "
+              f"{defaults.k_max}, coverage {defaults.coverage:.0%}); a plan file that includes this one "
+              "usually sets them: validate that file to use its settings", file=sys.stderr)  # fmt: skip
     names = [args.mission] if args.mission else top_missions(system)
     if args.mission and system.mission(args.mission) is None:
         known = ", ".join(m.name for m in system.missions) or "none"
@@ -112,18 +139,26 @@ def _validate(args: argparse.Namespace) -> int:
         print(f"{args.system}: no mission to validate", file=sys.stderr)
         return 1
     results = [validate_mission(system, name, args.run_dir) for name in names]
-    for result in results:
-        for item in result.pop("_findings"):
+    for outcome in results:
+        for item in outcome.pop("_findings"):
             print(item.format())
-        coverage = result["coverage"]
-        verdict = "coherent" if result["ok"] else "NOT coherent"
+        coverage = outcome["coverage"]
+        verdict = "coherent" if outcome["ok"] else "NOT coherent"
         print(
-            f"{result['mission']}: {verdict}; coverage {coverage['states']:.0%} of states, "
-            f"{coverage['transitions']:.0%} of transitions in {len(result['episodes'])} simulated runs"
+            f"{outcome['mission']}: {verdict}; coverage {coverage['states']:.0%} of states, "
+            f"{coverage['transitions']:.0%} of transitions in {len(outcome['episodes'])} simulated runs"
         )
-    ok = all(r["ok"] for r in results)
+    plans = []
+    for plan in _plans_of(system, args.mission):
+        plan_findings = check_plan(system, plan)
+        for item in plan_findings:
+            print(item.format())
+        plan_ok = not any(f.severity == "error" for f in plan_findings)
+        print(f"plan {plan.name}: {'coherent' if plan_ok else 'NOT coherent'} ({len(plan.agents)} agents)")
+        plans.append({"plan": plan.name, "ok": plan_ok, "findings": [f.to_json() for f in plan_findings]})
+    ok = all(r["ok"] for r in results) and all(p["ok"] for p in plans)
     if args.json:
-        print(json.dumps({"ok": ok, "missions": results}))
+        print(json.dumps({"ok": ok, "missions": results, "plans": plans}))
     return 0 if ok else 1
 
 

@@ -2,7 +2,9 @@
 
 The mission runs on the real HFSM engine in simulated time, its behaviors replaced by scripted
 ones (progress ramps over ``dwell`` simulated seconds) and its services by simulated ones that
-meet every requirement. The fake interaction decides, when a state is entered (or when its
+meet every requirement. A ``signal('s')`` is taken as true only for a signal some agent of a plan can send and that is
+in no deadlock (:func:`~runtime.missions.validation.plans.assumable_signals`); with no plan in
+the system every signal counts as an outside input. The fake interaction decides, when a state is entered (or when its
 nested mission has ended), which transition it will take, and after the dwell makes exactly that
 transition's condition the first that holds (:mod:`runtime.missions.solver`). Episodes are
 repeated from the initial state, each steering towards transitions not yet covered: an
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import collections
 import math
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +37,7 @@ from .behaviors import Behavior, BehaviorContext, BehaviorStatus
 from .hfsm import MissionEngine, MissionRun, Recorder
 from .solver import Key, environment, solve
 
+_SIGNAL = re.compile(r"signal\(\s*['\"]([^'\"]+)['\"]\s*\)")
 TKey = tuple[str, int]  # (mission, index of the transition in the mission)
 
 
@@ -109,8 +113,12 @@ class Coverage:
 class FakeInteraction(MissionEngine):
     """The engine with conditions answered by the fake interaction (see the module docstring)."""
 
-    def __init__(self, system: System, mission: str, coverage: Coverage, dwell: float, **kwargs: Any) -> None:
+    def __init__(
+        self, system: System, mission: str, coverage: Coverage, dwell: float, assumable: set[str] | None = None,
+        **kwargs: Any,
+    ) -> None:  # fmt: skip
         self.coverage, self.dwell = coverage, dwell
+        self.assumable = assumable  # signals signal() may be taken as true for (None: every one)
         self.plans: dict[int, tuple[int, dict[Key, Any]] | None] = {}
         self.wanted: dict[int, set[str]] = {}
         self.problem: str | None = None
@@ -156,6 +164,11 @@ class FakeInteraction(MissionEngine):
 
     def _fixed(self, run: MissionRun) -> dict[Key, Any]:
         fixed: dict[Key, Any] = {}
+        if self.assumable is not None:  # a signal no agent of a plan can send is never received
+            for transition in run.mission.transitions:
+                for name in _SIGNAL.findall(transition.when):
+                    if name not in self.assumable:
+                        fixed[("call", "signal", name)] = False
         if run.child is not None:
             fixed[("call", "done")] = run.child.outcome is not None
             for name in run.child.finals:
@@ -265,8 +278,13 @@ def explore(
     dwell: float = 1.0,
     max_episodes: int | None = None,
     recorder: Callable[[int, Callable[[], float]], Recorder | None] | None = None,
+    signals: set[str] | None = None,
 ) -> Coverage:
-    """Run episodes until every transition is covered or an episode covers nothing new twice."""
+    """Run episodes until every transition is covered or an episode covers nothing new twice.
+
+    ``signals``: the plan signals ``signal()`` may be taken as received for (None: any), from
+    :func:`~runtime.missions.validation.plans.assumable_signals`.
+    """
     missions = missions_below(system, mission)
     coverage = Coverage(
         states={
@@ -284,7 +302,7 @@ def explore(
         before = sum(1 for v in coverage.transitions.values() if v)
         clock = SimulatedClock()
         engine = FakeInteraction(
-            system, mission, coverage, dwell, clock=clock, agent=f"{mission}#{number}",
+            system, mission, coverage, dwell, signals, clock=clock, agent=f"{mission}#{number}",
             recorder=recorder(number, clock) if recorder else None,
         )  # fmt: skip
         episode = Episode()
