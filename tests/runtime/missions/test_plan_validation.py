@@ -90,7 +90,8 @@ def test_the_use_case_plans_are_coherent() -> None:
 def test_ckm_mission_validate_lists_every_load_problem(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     text = (PLANS / "deadlock_two.xml").read_text()
     broken = text.replace('mission="A"', 'mission="Nope"')
-    broken = broken.replace('behavior="WORK"/>\n    <State name="SEND"', 'behavior="MISSING"/>\n    <State name="SEND"', 1)
+    first_state = 'behavior="WORK"/>\n    <State name="SEND"'
+    broken = broken.replace(first_state, first_state.replace("WORK", "MISSING"), 1)
     path = tmp_path / "broken.xml"
     path.write_text(broken)
     assert main(["validate", str(path)]) == 1
