@@ -1,6 +1,7 @@
 """ckm-plugins: every registered kind with its parameters and ports (the manifests ``verify`` uses).
 
-- ``ckm-plugins list [--json]``: one line per kind (``CATEGORY.KIND``, class, summary);
+- ``ckm-plugins list [--long] [--json]``: one line per kind (``CATEGORY.KIND`` and its summary;
+  ``--long``: with its Params and ports);
 - ``ckm-plugins show KIND…``: a kind's description, Params (type, default, unit, range, doc) and
   ports; ``KIND`` is ``CATEGORY.KIND`` or a kind name registered in one category only;
 - ``ckm-plugins markdown [--package NAME]``: the reference page ``docs/plugins.md`` is generated
@@ -150,6 +151,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     listing = sub.add_parser("list", help="every registered kind, one per line")
     listing.add_argument("--json", action="store_true", help="every kind's manifest as a JSON list")
+    listing.add_argument("--long", action="store_true", help="every kind with its Params and ports, as show does")
     show = sub.add_parser("show", help="a kind's description, Params and ports")
     show.add_argument("kinds", nargs="+", metavar="KIND", help="CATEGORY.KIND, or KIND when unambiguous")
     show.add_argument("--json", action="store_true", help="as JSON")
@@ -168,6 +170,8 @@ def main(argv: Sequence[str] | None = None, registry: Registry | None = None) ->
             names = registry.names()
             if args.json:
                 print(json.dumps([describe(registry, c, k) for c, k in names], indent=2))
+            elif args.long:
+                print("\n\n".join(_show(describe(registry, c, k)) for c, k in names))
             else:
                 width = max((len(c) + len(k) + 1 for c, k in names), default=0)
                 for category, kind in names:

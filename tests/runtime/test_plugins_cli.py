@@ -47,6 +47,15 @@ def test_list_names_every_kind(capsys: pytest.CaptureFixture[str]) -> None:
     assert any(line.startswith("controller.pid ") and "anti-windup" in line for line in lines)
 
 
+def test_list_long_shows_every_kind_with_its_params(capsys: pytest.CaptureFixture[str]) -> None:
+    registry = builtin()
+    assert main(["list", "--long"], registry) == 0
+    out = capsys.readouterr().out
+    for category, kind in registry.names():
+        assert f"{category}.{kind}  (" in out
+    assert "    sequence (string, required): " in out and "    outputLimit (float, inf, (0, inf)): " in out
+
+
 def test_show_prints_params_and_ports(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["show", "pid", "hardware.loopback"], builtin()) == 0
     out = capsys.readouterr().out
