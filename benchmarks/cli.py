@@ -27,8 +27,9 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "discovery": ("benchmarks.netbench", "run_discovery", "describe_discovery"),
     "jitter": ("benchmarks.jitter", "run", "describe"),
     "rates": ("benchmarks.rates", "run", "describe"),
+    "zoom": ("benchmarks.zoom", "run", "describe"),
 }
-TAKES_OPTIONS = {"adaptation"}  # these take their own options: ckm-bench NAME --help lists them
+TAKES_OPTIONS = {"adaptation", "zoom"}  # these take their own options: ckm-bench NAME --help lists them
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:

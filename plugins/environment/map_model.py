@@ -16,9 +16,10 @@ restricted-area object may not leave its area.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
@@ -68,6 +69,8 @@ class MapObject:
 
     def _placed(self, shapes: Iterable[BaseGeometry]) -> BaseGeometry:
         placed = [place(s, self.x, self.y, self.yaw) for s in shapes]
+        if len(placed) == 1:
+            return placed[0]
         return unary_union(placed) if placed else Point(self.x, self.y)
 
     def obstacle(self, height: float = math.inf) -> BaseGeometry | None:
@@ -372,5 +375,11 @@ def small_object(
     name: str, tag: str, x: float, y: float, *, z: float = 0.0, radius: float = 0.05, **kw: Any
 ) -> MapObject:
     """A perceived object of unknown geometry: a 2.5D cylinder of ``radius`` centred at height ``z``."""
-    part = Part(Point(0, 0).buffer(radius, quad_segs=4), z - radius, z + radius)
-    return replace(MapObject(name=name, tag=tag, x=x, y=y, z=z, parts=(part,), dimension="2.5D"), **kw)
+    part = Part(_disc(radius), z - radius, z + radius)
+    return MapObject(name=name, tag=tag, x=x, y=y, z=z, parts=(part,), dimension="2.5D", **kw)
+
+
+@functools.lru_cache(maxsize=64)
+def _disc(radius: float) -> BaseGeometry:
+    """One shared disc per radius (shapely geometries are immutable)."""
+    return Point(0, 0).buffer(radius, quad_segs=4)

@@ -55,13 +55,21 @@ def manage(
     matches = associate(model, perceptions, rows, gate)
     for (x, y), row in zip(perceptions.tolist(), matches.tolist(), strict=True):
         if row < 0:
-            name = f"{tag}-{len(model)}"
+            name = fresh_name(model, tag)
             model.add(small_object(name, tag, x, y, stamp=stamp, source=source, reliability=reliability or 1.0))
             counts["added"] += 1
         else:
             outcome = model.observe(model.names[row], x, y, stamp=stamp, reliability=reliability, source=source)
             counts[outcome] += 1
     return counts
+
+
+def fresh_name(model: MapModel, base: str) -> str:
+    """``base-N`` with N the map's size, counting up past names already taken."""
+    number = len(model)
+    while f"{base}-{number}" in model:
+        number += 1
+    return f"{base}-{number}"
 
 
 def _to_map(frame: tuple[float, float, float, float], x: float, y: float, z: float) -> tuple[float, float, float]:
@@ -101,7 +109,7 @@ def ingest_fused(
             outcome = model.observe(target, x, y, z=z, stamp=stamp, reliability=reliability, source=source)
             outcomes.append((target, outcome))
             continue
-        new = f"{name}-{len(model)}"
+        new = fresh_name(model, name)
         tag = str(shape or name)
         model.add(small_object(new, tag, x, y, z=z, stamp=stamp, reliability=reliability, source=source,
                                texture=item.get("texture")))

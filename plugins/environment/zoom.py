@@ -156,10 +156,18 @@ class ZoomMap:
     def manage(self, perceptions: np.ndarray, *, stamp: float, gate: float = 0.3, **options: object) -> dict[str, int]:
         """One perception update against the managed objects only (the t'_i of eq. 6.2).
 
-        New objects inside the area join it, as long as the bound allows.
+        Perceptions outside the area are out of attention: counted as ``outside`` and not applied
+        (they would otherwise be taken for new objects). New objects inside the area join it, as
+        long as the bound allows.
         """
         before = len(self.model)
-        counts = manage(self.model, perceptions, stamp=stamp, rows=self.rows, gate=gate, **options)  # type: ignore[arg-type]
+        inside = np.ones(len(perceptions), dtype=bool)
+        if self._area is not None and len(perceptions):
+            xmin, ymin, xmax, ymax = self._area.bounds  # the area is an axis-aligned rectangle
+            x, y = perceptions[:, 0], perceptions[:, 1]
+            inside = (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
+        counts = manage(self.model, perceptions[inside], stamp=stamp, rows=self.rows, gate=gate, **options)  # type: ignore[arg-type]
+        counts["outside"] = int(len(perceptions) - inside.sum())
         if len(self.model) > before and self._area is not None:
             bound = self.settings.max_objects
             joining = [
