@@ -184,7 +184,7 @@ class WaitGoal(Behavior):
 
 class SpotObjects(Behavior):
     """SPOT, SPOT_COOP: waits until the fused recognition holds the target (untraceable), then
-    writes its position on the ``target`` output."""
+    writes its position (an ``ObjectPosition``) on the ``target`` output."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         *_TARGET, P("minSources", 1, "Fewest recognition sources that must have seen the object.")
@@ -197,7 +197,7 @@ class SpotObjects(Behavior):
         found = find_target(result, p["target"], p["targetTexture"], p["minSources"])
         if found is None:
             return BehaviorStatus(progress=0.0)
-        self.write("target", found)
+        self.write("target", object_position(found, self.context.now()))  # an ObjectPosition (topic or signal)
         return BehaviorStatus(progress=1.0, done=True, detail=f"{found.get('name')} at {found.get('reliability')}")
 
 

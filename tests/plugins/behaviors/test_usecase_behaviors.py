@@ -118,6 +118,8 @@ def test_spot_needs_the_target_from_enough_sources(lab: System) -> None:
     assert not rig.behavior.step().done
     rig.inputs["objects"] = {"objects": [{**seen, "sources": ["rgb", "depth", "pantilt"]}], "reliability": 0.9}
     assert rig.behavior.step().done and rig.last("target")["x"] == 1.0
+    types = {t.name: t for t in lab.message_types}
+    assert check_payload(rig.last("target"), "ObjectPosition", types) is None  # /agent1/target's type
 
 
 def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -> None:

@@ -114,3 +114,58 @@ def test_both_agents_in_one_embedded_run_still_signal_each_other(tmp_path: Path)
     table = json.loads(report.stdout.strip().splitlines()[-1])
     assert table
     assert (tmp_path / "run" / "report" / "plan.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_signal_payload_crosses_two_processes_and_sets_the_receivers_goal(tmp_path: Path) -> None:
+    """Fig. 7.13: the spotter's SPOT writes the object's position as the payload of `spotted`
+    (checked against ObjectPosition when sent); in another process the fetcher's NAV_COOP reads
+    it and sets its goal approachDistance (1 m) short of the object."""
+    import threading
+
+    from ckmconf.loader import load
+    from runtime.network import open_transport
+    from runtime.network.api import TopicQoS
+    from runtime.resources import codec
+
+    config = _config_from((DATA.parent / "payload.xml").read_text(), tmp_path)
+    network = load(config).network
+    assert network is not None
+    feed = open_transport(network, name="recognition")  # what a recognition service would publish
+    feed.setup()
+    feed.start()
+    seen = {"name": "cylinder_red_stripes", "shape": "cylinder", "texture": "red_stripes", "x": 3.0, "y": 4.0,
+            "z": 0.1, "reliability": 0.9}  # fmt: skip
+    publisher = feed.publisher(TopicQoS("/recog/objects", "ckm/behavior-input"))
+    stop = threading.Event()
+
+    def publish() -> None:
+        while not stop.wait(0.1):
+            publisher.publish(codec.encode({"objects": [seen], "reliability": 0.9}))
+
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    fetcher = _ckm_run(config, "fetcher-pc", tmp_path / "run", 40)
+    spotter = _ckm_run(config, "spotter-pc", tmp_path / "run", 40)
+    try:
+        for process in (fetcher, spotter):
+            _, err = process.communicate(timeout=90)
+            assert process.returncode == 0, err
+    finally:
+        stop.set()
+        thread.join(5)
+        feed.stop()
+        for process in (fetcher, spotter):
+            if process.poll() is None:
+                process.kill()
+                process.wait(10)
+    run = read_run(tmp_path / "run")
+    ends = {e.agent: e.fields["outcome"] for e in run.events if e.kind == "end"}
+    assert ends == {"spotter": "spotted", "fetcher": "underway"}
+    sent = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "sent")
+    received = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "received")
+    assert sent.agent == "spotter" and received.agent == "fetcher"
+    payload = received.fields["value"]["data"]
+    assert (payload["label"], payload["x"], payload["y"], payload["z"]) == ("cylinder_red_stripes", 3.0, 4.0, 0.1)
+    goal = next(e for e in run.events if e.kind == "log" and e.agent == "fetcher")
+    assert goal.fields["message"] == "goal set" and goal.fields["source"] == "spotted"
+    assert goal.fields["goal"] == "2.400 3.200 0.927"  # 1 m short of (3, 4), facing it
