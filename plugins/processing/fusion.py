@@ -21,10 +21,17 @@ all joined (the θ̂' of eq. 6.41); the rest form C(θ') and the loop repeats. A
 instance once, so a second observation from an input already joined goes to C(θ').
 
 Knowledge (eq. 6.39–6.40): each observation's ``object``/``shape``/``texture`` is added unless a
-more reliable one already gave it. Reliability (eq. 6.41): r̂ = r₁ + Σ 1/(1 + dᵢ), dᵢ to x₁ when
-xᵢ's magnitude (2D texture, 3D shape) is already in ψ̂, else to θ̂'. The formula exceeds 1 with
-any match; ``reliability`` is r̂ clamped to [0, 1] (the service's QoC measure of Table 7.1 is a
-share) and ``reinforcement`` the raw r̂.
+more reliable one already gave it. Reliability (eq. 6.41): each matched xᵢ brings the support
+sᵢ = 1/(1 + dᵢ), dᵢ to x₁ when xᵢ's magnitude (2D texture, 3D shape) is already in ψ̂, else to
+θ̂'. Added literally (r₁ + Σ sᵢ, reported as ``reinforcement``) it exceeds 1 with any match, so
+``reliability`` adds each support as a probabilistic sum, r̂ ← r̂ + sᵢ·(1 − r̂) (docs/decisions.md
+D74): a match always raises r̂, r̂ stays a share in [0, 1] and reaches 1 only with a certain first
+observation or a match at distance 0. :func:`share_at_bound` tells how many fused values sit at 1.
+
+Max sensors (Table 7.1, ``Max_sensors``): at most ``maxSensors`` observations are fused into one
+object, the most reliable first (the order of Algorithm 4); a further observation within
+``dThreshold`` is of the same instance, so it is left out rather than starting C(θ'). The service
+Parameter ``max_sensors`` sets it at run time (:meth:`FeatureFusion.apply_service_parameters`).
 """
 
 from __future__ import annotations
@@ -102,7 +109,8 @@ class FeatureFusion(ProcessingPlugin):
     and per-input ``sigmas`` (``"name: σ; …"``); ``dThreshold`` (eq. 6.38); ``minReliability``
     (r_th of eq. 6.31); ``minRange`` (m, nearest feature along a ray); ``objects`` (``"name: shape
     [texture]; …"``) and ``environment`` (an environment XML file, relative to the configuration
-    file, read in ``setup()``; ``objects`` entries win).
+    file, read in ``setup()``; ``objects`` entries win); ``maxSensors`` (most observations per fused
+    object, Table 7.1; the service Parameter ``max_sensors`` overrides it at run time).
 
     Output (msgpack-able): ``{"objects": [{"name", "shape", "texture", "x", "y", "z", "sigma",
     "origin", "direction", "reliability", "reinforcement", "sources", "observations"}],
@@ -129,6 +137,7 @@ class FeatureFusion(ProcessingPlugin):
         P("minRange", 0.3, "Nearest feature along a ray.", unit="m"),
         P("objects", "", "Known objects: 'name: shape [texture]; …' (win over the environment's)."),
         P("environment", "", "Environment XML file, relative to the configuration file, read in setup()."),
+        P("maxSensors", 8, "Most observations fused into one object (Table 7.1 Max_sensors).", min=1),
     )
 
     def __init__(self, record: Plugin) -> None:
@@ -144,6 +153,7 @@ class FeatureFusion(ProcessingPlugin):
             raise ParamError(f"{owner}: parameter 'minRange' = {p['minRange']} must be greater than 0")
         if not 0 <= p["minReliability"] <= 1:
             raise ParamError(f"{owner}: parameter 'minReliability' = {p['minReliability']} is not in [0, 1]")
+        self.max_sensors = self._max_sensors(p["maxSensors"], "parameter 'maxSensors'")
         self.kinds: dict[str, str] = {}
         for name, values in _entries(p["inputs"], "inputs", owner).items():
             if len(values) != 1 or values[0] not in KINDS:
@@ -183,6 +193,21 @@ class FeatureFusion(ProcessingPlugin):
                 wanted = f"a {kind} input" if kind else "an input"
                 raise ParamError(f"{self.owner}: parameter {param!r} names {name!r}, not {wanted} of 'inputs'")
         return entries
+
+    def _max_sensors(self, value: Any, where: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value) or value < 1:
+            raise ParamError(f"{self.owner}: {where} = {value!r} must be a whole number of at least 1")
+        return int(value)
+
+    def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
+        """The service's ``max_sensors`` Parameter (Table 7.1) caps the observations per object.
+
+        Called by the Smart Resource runtime with a service instance's parameters whenever a
+        client configures it; the SPT runs the plugin once for every client (§3.2.2), so the
+        value last configured holds for all of them. Other names are not this plugin's.
+        """
+        if "max_sensors" in parameters:
+            self.max_sensors = self._max_sensors(parameters["max_sensors"], "service parameter 'max_sensors'")
 
     def setup(self) -> None:
         """Read the environment's Objects (name → semantic tag as the shape, texture); Params win."""
@@ -299,20 +324,25 @@ class FeatureFusion(ProcessingPlugin):
         while pending:
             first, left = pending[0], []
             members, theta, r_hat = [first], first.geometry, first.reliability
+            raw = first.reliability
             knowledge = dict(first.knowledge)
             for obs in pending[1:]:
                 d = distance(theta, obs.geometry)  # eq. 6.38
                 if any(m.source == obs.source for m in members) or not d < self.params["dThreshold"]:
                     left.append(obs)
                     continue
+                if len(members) >= self.max_sensors:  # the same instance, beyond the cap: not fused
+                    continue
                 if any(m.magnitude == obs.magnitude for m in members):  # eq. 6.41, first case
                     d = distance(first.geometry, obs.geometry)
-                r_hat += 1.0 / (1.0 + d)
+                support = 1.0 / (1.0 + d)
+                raw += support
+                r_hat = reinforce(r_hat, support)
                 for key, value in obs.knowledge.items():  # eq. 6.40: new magnitudes' knowledge only
                     knowledge.setdefault(key, value)
                 members.append(obs)
                 theta = estimate([m.geometry for m in members])  # θ̂' (eq. 6.36)
-            fused.append(_fused_object(model, knowledge, theta, r_hat, members))
+            fused.append(_fused_object(model, knowledge, theta, r_hat, raw, members))
             pending = left
         return fused
 
@@ -325,8 +355,25 @@ def _number(value: Any, bad: Callable[[str, str], ValueError], where: str) -> fl
     return float(value)
 
 
+def reinforce(reliability: float, support: float) -> float:
+    """Eq. 6.41 kept in [0, 1] (D74): the support adds as a probabilistic sum, r + s·(1 − r)."""
+    return reliability + support * (1.0 - reliability)
+
+
+def share_at_bound(reliabilities: Iterable[float], bound: float = 1.0, tolerance: float = 1e-9) -> float:
+    """The share of fused reliabilities at the upper bound (within ``tolerance``); 0 for none.
+
+    A fused reliability that saturates says nothing about the observations any more: Fig. 7.18
+    compares spreads, which a value stuck at the bound hides (``ckm-bench fusion`` reports it).
+    """
+    values = np.asarray(list(reliabilities), dtype=np.float64)
+    if values.size == 0:
+        return 0.0
+    return float(np.count_nonzero(values >= bound - tolerance)) / values.size
+
+
 def _fused_object(
-    model: str, knowledge: dict[str, str], theta: Geometry, r_hat: float, members: list[Observation]
+    model: str, knowledge: dict[str, str], theta: Geometry, r_hat: float, raw: float, members: list[Observation]
 ) -> dict[str, Any]:
     """f̂ and r̂ of eq. 6.39 as a msgpack-able dict."""
     place: dict[str, Any] = dict.fromkeys(("x", "y", "z", "sigma", "origin", "direction"))
@@ -340,8 +387,8 @@ def _fused_object(
         "shape": knowledge.get("shape"),
         "texture": knowledge.get("texture"),
         **place,
-        "reliability": min(1.0, r_hat),
-        "reinforcement": r_hat,
+        "reliability": r_hat,
+        "reinforcement": raw,
         "sources": [m.source for m in members],
         "observations": len(members),
     }

@@ -17,7 +17,7 @@ from ckmconf.errors import Loc
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.processing.depth import DepthAcquisition, EuclideanClustering, KdTreeShapeClassifier
-from plugins.processing.fusion import FeatureFusion
+from plugins.processing.fusion import FeatureFusion, reinforce, share_at_bound
 from plugins.processing.geometry import IDENTITY, Point, Pose, Ray, distance, estimate
 from plugins.processing.shapes import render_depth_scene
 from runtime.kernel.interfaces import ParamError
@@ -96,8 +96,9 @@ def test_reinforcement_of_a_new_magnitude_is_eq_6_41() -> None:
     u = np.array(RED) / np.linalg.norm(RED)
     t = float(off @ u)
     d = float(np.linalg.norm(off - t * u)) / math.hypot(0.03, 0.01 * t)  # across the ray, over σ_point ⊕ σ_line·t
-    assert obj["reinforcement"] == pytest.approx(0.4 + 1 / (1 + d), rel=1e-9)
-    assert obj["reliability"] == pytest.approx(obj["reinforcement"])
+    support = 1 / (1 + d)
+    assert obj["reinforcement"] == pytest.approx(0.4 + support, rel=1e-9)  # eq. 6.41 literally
+    assert obj["reliability"] == pytest.approx(0.4 + support * (1 - 0.4), rel=1e-9)  # its bounded sum (D74)
 
 
 def test_reinforcement_of_a_known_magnitude_measures_to_x1() -> None:
@@ -110,7 +111,9 @@ def test_reinforcement_of_a_known_magnitude_measures_to_x1() -> None:
     }
     (obj,) = plugin.process(data, CTX)["objects"]
     assert obj["sources"] == ["a", "b", "c"]
-    assert obj["reinforcement"] == pytest.approx(0.9 + 2 / (1 + 0.06 / math.hypot(0.03, 0.03)))
+    support = 1 / (1 + 0.06 / math.hypot(0.03, 0.03))
+    assert obj["reinforcement"] == pytest.approx(0.9 + 2 * support)
+    assert obj["reliability"] == pytest.approx(1 - 0.1 * (1 - support) ** 2)  # two probabilistic sums
     assert obj["x"] == pytest.approx(0.0) and obj["sigma"] == pytest.approx(0.03 / math.sqrt(3))
 
 
@@ -206,7 +209,8 @@ def test_the_result_is_msgpack_able() -> None:
 
 
 def test_fusion_raises_reliability_and_lowers_its_dispersion() -> None:
-    """Fig. 7.18: over noisy frames, r̂ is higher and less spread than either service's r."""
+    """Fig. 7.18: over noisy frames, r̂ is higher and less spread than either service's r, and no
+    fused value sits at the bound (a clamped r̂ would pass the first two by construction)."""
     rng = np.random.default_rng(5)
     plugin, r_rgb, r_depth, fused = fusion(), [], [], []
     for _ in range(300):
@@ -222,6 +226,62 @@ def test_fusion_raises_reliability_and_lowers_its_dispersion() -> None:
     assert np.mean(fused) > max(np.mean(r_rgb), np.mean(r_depth))
     assert np.std(fused) < min(np.std(r_rgb), np.std(r_depth))
     assert min(f - max(a, b) for f, a, b in zip(fused, r_rgb, r_depth, strict=True)) > 0
+    assert share_at_bound(fused) == 0.0 and max(fused) < 1.0
+    assert len(set(fused)) == len(fused)  # every frame keeps its own value: nothing collapses onto a bound
+
+
+def test_reinforcement_stays_a_share_and_grows_with_every_match() -> None:
+    assert reinforce(0.6, 0.5) == pytest.approx(0.8)
+    assert reinforce(0.0, 0.3) == pytest.approx(0.3) and reinforce(1.0, 0.3) == 1.0
+    r = 0.5
+    for support in (0.9, 0.9, 0.9, 0.9):
+        grown = reinforce(r, support)
+        assert r < grown < 1.0
+        r = grown
+
+
+def test_share_at_bound_counts_the_saturated_values() -> None:
+    assert share_at_bound([1.0, 0.5, 1.0 - 1e-12, 0.99]) == 0.5
+    assert share_at_bound([]) == 0.0
+    assert share_at_bound([0.8, 0.9], bound=0.9) == 0.5
+
+
+# --------------------------------------------------------------------------- max sensors (Table 7.1)
+
+
+def three_lines_and_a_point() -> dict[str, Any]:
+    side = (0.9, 0.05, 1.2, 0.0, -math.pi / 2, 0.0)
+    return {
+        "rgb": rgb(seen("cylinder_red_stripes", RED, 0.6)),
+        "depth": depth(("cylinder", RED, 0.9)),
+        "pantilt": rgb(seen("cylinder_red_stripes", RED, 0.7, Pose.from_xyzrpy(*side))),
+    }
+
+
+def test_max_sensors_caps_the_observations_of_one_object() -> None:
+    """The most reliable observations are fused; the one beyond the cap is the same instance, so
+    it is left out, not reported as another object."""
+    poses = "pantilt: 0.9 0.05 1.2 0 -1.5707963267948966 0"
+    everything = fusion({"poses": poses}).process(three_lines_and_a_point(), CTX)["objects"]
+    assert [o["sources"] for o in everything] == [["depth", "pantilt", "rgb"]]
+    capped = fusion({"poses": poses, "maxSensors": 2}).process(three_lines_and_a_point(), CTX)["objects"]
+    assert [o["sources"] for o in capped] == [["depth", "pantilt"]]
+    assert capped[0]["reliability"] < everything[0]["reliability"]
+    alone = fusion({"poses": poses, "maxSensors": 1}).process(three_lines_and_a_point(), CTX)["objects"]
+    assert [(o["sources"], o["reliability"]) for o in alone] == [(["depth"], 0.9)]
+
+
+def test_the_service_parameter_max_sensors_sets_the_cap_at_run_time() -> None:
+    plugin = fusion({"poses": "pantilt: 0.9 0.05 1.2 0 -1.5707963267948966 0"})
+    plugin.apply_service_parameters({"max_sensors": 2, "other": "ignored"})
+    assert plugin.max_sensors == 2
+    (obj,) = plugin.process(three_lines_and_a_point(), CTX)["objects"]
+    assert obj["observations"] == 2
+    plugin.apply_service_parameters({"max_sensors": 3})
+    assert plugin.process(three_lines_and_a_point(), CTX)["objects"][0]["observations"] == 3
+    with pytest.raises(ParamError, match="service parameter 'max_sensors' = 0 must be a whole number"):
+        plugin.apply_service_parameters({"max_sensors": 0})
+    assert plugin.max_sensors == 3
 
 
 # --------------------------------------------------------------------------- poses, cameras, geometry
@@ -369,6 +429,7 @@ def test_malformed_inputs_name_the_input_and_field(data: Any, message: str) -> N
         ),
         ({"sigmas": "rgb: 0"}, "parameter 'sigmas' for 'rgb' = 0.0 must be greater than 0"),
         ({"objects": "a: b c d"}, "parameter 'objects' for 'a' needs a shape and maybe a texture"),
+        ({"maxSensors": 0}, "parameter 'maxSensors' = 0 must be at least 1"),
     ],
 )
 def test_bad_params_are_refused(params: Mapping[str, object], message: str) -> None:
