@@ -223,9 +223,11 @@ def check_plan(system: System, plan: Plan) -> list[Finding]:
             if other is None or other.agent != dependency.agent or dependency.state not in receiver.graph:
                 continue
             if other.state in receiver.graph and not nx.has_path(receiver.graph, other.state, dependency.state):
-                message = (f"{signal.name!r} can only be sent after {dependency.agent} has sent {needed!r} at "
-                           f"{other.state}, after which it never waits at {dependency.state} again: the signal "
-                           "arrives too late")  # fmt: skip
+                message = (
+                    f"{dependency.agent} waits at {dependency.state} for {signal.name!r}, which can only be sent "
+                    f"after {dependency.agent} has sent {needed!r} at {other.state}, after which it never waits at "
+                    f"{dependency.state} again: the signal arrives too late"
+                )
                 found.append(finding("late-signal", "error", message, dependency, mission=plan.name))
                 break
     for signal in plan.signals:

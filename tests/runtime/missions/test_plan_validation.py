@@ -64,6 +64,25 @@ def test_a_wait_for_a_signal_that_needs_the_waiters_own_later_signal_is_a_deadlo
     assert "deadlock among 2 agent(s) (a, b)" in found[0].message
 
 
+def test_a_signal_that_needs_what_its_receiver_sends_only_after_waiting_is_late() -> None:
+    found = check_plans(ckmconf.load(PLANS / "late_signal.xml"))
+    assert [(f.kind, f.line, f.column) for f in found] == [("late-signal", 33, 5)]
+    assert found[0].message == (
+        "a waits at WAITX for 'late', which can only be sent after a has sent 'from_a' at SEND, after which it "
+        "never waits at WAITX again: the signal arrives too late"
+    )
+
+
+def test_a_typed_signal_whose_state_writes_no_payload_is_reported(tmp_path: Path) -> None:
+    text = (PLANS / "late_signal.xml").read_text()
+    path = tmp_path / "typed.xml"
+    path.write_text(text.replace('state="SEND" on="entry"/>\n    <Signal name="late"',
+                                 'state="SEND" on="entry" type="string"/>\n    <Signal name="late"'))  # fmt: skip
+    found = [f for f in check_plans(ckmconf.load(path)) if f.kind == "signal-without-payload"]
+    assert [f.line for f in found] == [31]
+    assert "behavior 'WORK' of a's SEND writes no <Output signal='from_a'>" in found[0].message
+
+
 def test_the_fake_interaction_assumes_no_signal_of_a_deadlock() -> None:
     system = ckmconf.load(PLANS / "deadlock_two.xml")
     assert assumable_signals(system, "A") == set()
