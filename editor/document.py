@@ -7,7 +7,8 @@ on :attr:`Document.undo`, so every edit can be undone; new elements get the inde
 siblings so saved files stay diff-friendly.
 
 Validation runs the lax ckmconf loader on the serialised tree (its path anchors the includes),
-then the static mission checks when the system loads; both give located problems. It runs a
+then the static mission checks and the plans' wait-for graph checks when the system loads; all
+give located problems. It runs a
 moment after the last edit (debounced), which keeps typing responsive on the use case.
 """
 
@@ -48,7 +49,7 @@ class Problem:
     xpath: str
     message: str
     severity: str = "error"
-    source: str = "config"  # "config" (ckmconf) or "mission" (off-line checks)
+    source: str = "config"  # "config" (ckmconf), "mission" (off-line checks) or "plan" (wait-for graph)
 
     def text(self) -> str:
         return f"{Path(self.file).name}:{self.line}: {self.message}"
@@ -187,6 +188,10 @@ def _mission_problems(system: object) -> list[Problem]:
         findings = [*check_mission(system, mission), *srflowgen(system, mission, system.validation)[0]]  # type: ignore[arg-type, attr-defined]
         for f in findings:
             found.append(Problem(f.file, f.line, f.column, f.xpath, f"[{f.kind}] {f.message}", f.severity, "mission"))
+    from runtime.missions.validation.plans import check_plans  # the plans' wait-for graphs (deadlocks …)
+
+    for f in check_plans(system):  # type: ignore[arg-type]
+        found.append(Problem(f.file, f.line, f.column, f.xpath, f"[{f.kind}] {f.message}", f.severity, "plan"))
     return list(dict.fromkeys(found))
 
 

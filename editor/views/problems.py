@@ -1,4 +1,5 @@
-"""The problems panel: every ConfigError of the lax load and every off-line mission finding.
+"""The problems panel: every ConfigError of the lax load, every off-line mission finding and
+every plan finding (deadlocks, late signals … of the plans' wait-for graphs).
 
 A click selects the element the problem names (its readable xpath, resolved in the tree).
 """

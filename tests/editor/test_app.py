@@ -199,3 +199,20 @@ def test_a_split_configuration_is_edited_across_its_files(qtbot: QtBot, settings
     assert [name for name in before if before[name] != after[name]] == ["missions.xml"]
     assert b'<State name="WAIT" behavior="WAIT" timeout="99"/>' in after["missions.xml"]
     assert not workspace.modified
+
+
+def test_plan_deadlocks_show_in_the_problems_panel_at_their_dependency(
+    qtbot: QtBot, settings: QSettings, tmp_path: Path
+) -> None:
+    import shutil
+
+    path = tmp_path / "deadlock_two.xml"
+    shutil.copy(REPO / "tests" / "data" / "plans" / "deadlock_two.xml", path)
+    win = window(qtbot, settings, path)
+    problems = [p for p in win.document.validate() if p.source == "plan"]
+    assert [(p.line, p.column) for p in problems] == [(29, 5), (30, 5)]
+    assert "[deadlock] deadlock among 2 agent(s) (a, b)" in problems[0].message
+    listed = [p for p in win.problems.problems() if p.source == "plan"]
+    assert listed == problems
+    element = win.document.find(problems[0])
+    assert element is not None and local(element) == "Dependency" and element.get("agent") == "a"
