@@ -20,6 +20,11 @@ processing thread over the TCM period, as a share of one CPU (``time.thread_time
 the process is not counted). ``memory``: the process's resident memory (MiB, psutil) at each TCM
 period. Any other source is the field of the result it names (e.g. ``reliability``).
 
+Service parameters reach the plugins of the service's profiles that take them: a plugin with an
+``apply_service_parameters(parameters)`` method (fusion's ``max_sensors``) gets the service's
+defaults at start and each instance's parameters whenever a client connects or configures. A
+plugin runs once for all clients (§3.2.2), so the value configured last holds for all of them.
+
 The service API (see :mod:`runtime.resources.api`): requests on the config topic, every answer,
 the periodic quality messages and the scenario events on the quality topic, alarms on the alarm
 topic, and a directory entry on :data:`~runtime.resources.api.DIRECTORY_TOPIC` every
@@ -44,7 +49,7 @@ from ckmconf.model.resources import Service, SmartResource
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry
 from . import codec
-from .api import DIRECTORY_TOPIC, Request, describe, parse_request, preferred_scenario, topics
+from .api import DIRECTORY_TOPIC, Request, describe, parse_request, preferred_scenario, topics, typed_default
 from .buffers import Supplied, TripleBuffer
 from .instance import Instance
 from .spt import Frame, Topology
@@ -233,6 +238,11 @@ class SmartResourceRuntime:
 
     def start(self) -> None:
         self._start_time = time.monotonic()
+        for service in self.services.values():
+            defaults = {p.name: typed_default(p) for p in service.parameters if p.default is not None}
+            problems = self._forward(service, defaults)
+            if problems:
+                raise ValueError(f"service {self.resource.name}.{service.name}: {'; '.join(problems)}")
         if self.primary:
             for name, service in self.services.items():
                 initial = preferred_scenario(service, {p.name: p.default for p in service.parameters})
@@ -341,13 +351,37 @@ class SmartResourceRuntime:
                 parameters=request.parameters,
                 baseline=self.baseline,
             )
+            problems = self._forward(service, request.parameters)
+            if problems:
+                return problems
             if request.requirements:
                 instance.configure({}, request.requirements, self.now())
             self._add(instance)
             return []
+        problems = self._forward(service, request.parameters)
+        if problems:
+            return problems
         existing.configure(request.parameters, request.requirements, self.now())
         self._service_stream[service.name].topology.select(existing.key, existing.profile, share=self.share)
         return []
+
+    def _forward(self, service: Service, parameters: Mapping[str, Any]) -> list[str]:
+        """Hand the parameters to the plugins of the service's profiles that take service parameters."""
+        if not parameters:
+            return []
+        stream = self._service_stream[service.name]
+        wanted = {s.profile for s in service.scenarios}
+        names = {n for p in self.resource.profiles if p.name in wanted for n in p.root.plugins()}
+        problems = []
+        for name in sorted(names):
+            apply = getattr(stream.topology.plugins.get(name), "apply_service_parameters", None)
+            if apply is None:
+                continue
+            try:
+                apply(dict(parameters))
+            except ValueError as exc:
+                problems.append(str(exc))
+        return problems
 
     def _joining_scenario(self, service: Service, parameters: Mapping[str, Any]) -> str | None:
         """Where a new client's instance starts: its preference, or lower if the service's other
