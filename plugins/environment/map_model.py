@@ -4,7 +4,7 @@ Built from an ``<Environment>`` record (:meth:`MapModel.from_environment`). Obje
 name with their pose, parts (§6.1.1.1), texture, semantic tag, time mark (``stamp``, seconds
 since the epoch) and reliability. Spatial queries go through a shapely STRtree. STRtrees are
 immutable, so the tree is built over the objects' shapes at some moment and the objects added or
-moved since are kept aside (``_moved``) and checked one by one; the tree is rebuilt lazily once
+moved since are kept aside (``_moved``) and checked with the tree's candidates; the tree is rebuilt lazily once
 they are more than a twentieth of the map. Each object's centre is also kept in one numpy array
 (:attr:`MapModel.xy`), which the per-perception association of eq. 6.1/6.2 scans.
 
@@ -115,9 +115,10 @@ class MapModel:
         self.index: dict[str, int] = {}  # name → row of xy
         self.names: list[str] = []
         self._xy = np.zeros((64, 2))
-        self._tree: shapely.STRtree | None = None
-        self._tree_names: list[str] = []
-        self._moved: set[str] = set()
+        self._z = np.zeros((64, 2))  # zmin, zmax per row (2.5D zoom selection)
+        self._shapes = np.empty(64, dtype=object)  # current shape per row (exact, vectorised tests)
+        self._tree: shapely.STRtree | None = None  # built over _shapes[:n]: tree index = row
+        self._moved: set[int] = set()  # rows added or moved since the tree was built
 
     @classmethod
     def from_environment(cls, env: Environment) -> MapModel:
@@ -158,11 +159,18 @@ class MapModel:
         row = len(self.names)
         if row == len(self._xy):
             self._xy = np.concatenate([self._xy, np.zeros_like(self._xy)])
-        self._xy[row] = (obj.x, obj.y)
+            self._z = np.concatenate([self._z, np.zeros_like(self._z)])
+            self._shapes = np.concatenate([self._shapes, np.empty(len(self._shapes), dtype=object)])
         self.objects[obj.name] = obj
         self.index[obj.name] = row
         self.names.append(obj.name)
-        self._moved.add(obj.name)
+        self._store(row, obj)
+
+    def _store(self, row: int, obj: MapObject) -> None:
+        self._xy[row] = (obj.x, obj.y)
+        self._z[row] = (obj.zmin, obj.zmax)
+        self._shapes[row] = obj.shape
+        self._moved.add(row)
 
     def add_many(self, objects: Sequence[MapObject]) -> None:
         """Add many objects and index them at once (generated maps, benchmarks)."""
@@ -171,27 +179,41 @@ class MapModel:
         self._build_index()
 
     def _set_pose(self, obj: MapObject, x: float, y: float, z: float, yaw: float) -> None:
+        if z != obj.z:  # parts hold absolute heights: they rise or sink with the object
+            lift = z - obj.z
+            obj.parts = tuple(Part(p.local, p.zmin + lift, p.zmax + lift) for p in obj.parts)
         obj.x, obj.y, obj.z, obj.yaw = x, y, z, yaw
         obj.shape = obj._placed(p.local for p in obj.parts)
-        self._xy[self.index[obj.name]] = (x, y)
-        self._moved.add(obj.name)
+        self._store(self.index[obj.name], obj)
 
     # ------------------------------------------------------------------ index
 
     def _build_index(self) -> None:
-        self._tree_names = list(self.objects)
-        self._tree = shapely.STRtree([self.objects[n].shape for n in self._tree_names])
+        self._tree = shapely.STRtree(self._shapes[: len(self.names)])
         self._moved.clear()
 
     def candidates(self, region: BaseGeometry) -> list[MapObject]:
         """Objects whose shape intersects ``region`` (STRtree, plus the objects moved since it was built)."""
+        return [self.objects[self.names[row]] for row in self.candidate_rows(region).tolist()]
+
+    def candidate_rows(self, region: BaseGeometry) -> np.ndarray:
+        """The rows (sorted) of the objects whose current shape intersects ``region``."""
         if self._tree is None or len(self._moved) > max(32, len(self.objects) // 20):
             self._build_index()
         assert self._tree is not None
-        names = {self._tree_names[i] for i in self._tree.query(region)}
-        names |= self._moved
-        found = [self.objects[n] for n in names if self.objects[n].shape.intersects(region)]
-        return sorted(found, key=lambda o: self.index[o.name])
+        rows = self._tree.query(region)
+        if self._moved:
+            rows = np.union1d(rows, np.fromiter(self._moved, dtype=np.int64, count=len(self._moved)))
+        else:
+            rows = np.sort(rows)
+        keep = shapely.intersects(self._shapes[rows], region)
+        found: np.ndarray = rows[keep].astype(np.int64)
+        return found
+
+    @property
+    def z_ranges(self) -> np.ndarray:
+        """``(zmin, zmax)`` of every object, one row per object (a view: read only)."""
+        return self._z[: len(self.names)]
 
     # ------------------------------------------------------------------ queries
 
@@ -341,10 +363,8 @@ class MapModel:
             return True
         if (obj.stamp, obj.source) <= (old.stamp, old.source):  # equal stamps: the larger source wins everywhere
             return False
-        row = self.index[obj.name]
         self.objects[obj.name] = obj
-        self._xy[row] = (obj.x, obj.y)
-        self._moved.add(obj.name)
+        self._store(self.index[obj.name], obj)
         return True
 
     def fingerprint(self) -> list[tuple[str, float, float, float]]:

@@ -34,6 +34,7 @@ from .geometry import Footprint
 from .map_model import MapModel
 
 Waypoint = tuple[float, float]
+QUAD_SEGS = 8
 
 
 class Unreachable(ValueError):
@@ -74,13 +75,15 @@ class Planner:
         self.named = model.obstacles(footprint, include_mobile=include_mobile)
         xmin, ymin, xmax, ymax = model.bounds
         outside = model.outline.buffer(max(xmax - xmin, ymax - ymin)).difference(model.outline)
-        self.inflated = unary_union([*self.named.values(), outside]).buffer(self.radius, quad_segs=8)
+        # A buffer is a polygon inscribed in the true rounded outline: grow it so it circumscribes it.
+        grown = self.radius / math.cos(math.pi / (4 * QUAD_SEGS))
+        self.inflated = unary_union([*self.named.values(), outside]).buffer(grown, quad_segs=QUAD_SEGS)
         self._clear = prep(self.inflated)
         margin = self.radius + 0.75 * resolution
         self.xs = np.arange(xmin + resolution / 2, xmax, resolution)
         self.ys = np.arange(ymin + resolution / 2, ymax, resolution)
         grid_x, grid_y = np.meshgrid(self.xs, self.ys, indexing="ij")
-        blocked = unary_union([*self.named.values(), outside]).buffer(margin, quad_segs=8)
+        blocked = unary_union([*self.named.values(), outside]).buffer(margin, quad_segs=QUAD_SEGS)
         self.free = ~shapely.contains_xy(blocked, grid_x, grid_y) & ~shapely.intersects_xy(blocked, grid_x, grid_y)
         self.graph = self._graph()
 
@@ -107,9 +110,9 @@ class Planner:
         return not self._clear.intersects(path)
 
     def _blocker(self, where: Waypoint) -> str | None:
-        shape = Point(where).buffer(self.radius)
-        hits = [name for name, g in self.named.items() if g.intersects(shape)]
-        if not self.model.outline.contains(shape):
+        point = Point(where)
+        hits = [name for name, g in self.named.items() if g.distance(point) < self.radius]
+        if not self.model.outline.contains(point) or self.model.outline.exterior.distance(point) < self.radius:
             hits.append("map bounds")
         return ", ".join(repr(h) for h in hits) if hits else None
 
@@ -168,8 +171,7 @@ class Planner:
     def check(self, waypoints: Sequence[Waypoint]) -> list[str]:
         """The obstacles a path's swept footprint meets (empty for a valid plan): used by tests and callers."""
         line = LineString(waypoints) if len(waypoints) > 1 else Point(waypoints[0])
-        swept = line.buffer(self.radius)
-        hits = [name for name, g in self.named.items() if g.intersects(swept)]
-        if not self.model.outline.contains(swept):
+        hits = [name for name, g in self.named.items() if g.distance(line) < self.radius]
+        if not self.model.outline.contains(line) or self.model.outline.exterior.distance(line) < self.radius:
             hits.append("map bounds")
         return hits

@@ -128,12 +128,14 @@ class ZoomMap:
             self.recentre(x, y, now, reason)
         return reason
 
-    def _inside(self, obj: MapObject) -> bool:
-        return self.settings.mode == "2D" or (obj.zmin < self.settings.height and obj.zmax > 0)
-
-    def _select(self, x: float, y: float, width: float, depth: float) -> list[MapObject]:
-        area = box(x - width / 2, y - depth / 2, x + width / 2, y + depth / 2)
-        return [o for o in self.model.in_region(area) if self._inside(o)]
+    def _select(self, x: float, y: float, width: float, depth: float) -> np.ndarray:
+        """Rows of the objects in the area centred at ``(x, y)``: an STRtree query, the 2.5D height test."""
+        rows = self.model.candidate_rows(box(x - width / 2, y - depth / 2, x + width / 2, y + depth / 2))
+        if self.settings.mode == "2D" or len(rows) == 0:
+            return rows
+        z = self.model.z_ranges[rows]
+        kept: np.ndarray = rows[(z[:, 0] < self.settings.height) & (z[:, 1] > 0)]
+        return kept
 
     def recentre(self, x: float, y: float, now: float, reason: str = "start") -> Recentring:
         """Centre the area on ``(x, y)``, sized from the objects' density (``max_objects``)."""
@@ -146,8 +148,10 @@ class ZoomMap:
             width, depth = width * scale, depth * scale
             found = self._select(x, y, width, depth)
         if bound is not None and len(found) > bound:
-            found = sorted(found, key=lambda o: (math.hypot(o.x - x, o.y - y), o.name))[:bound]
-        self.rows = np.array(sorted(self.model.index[o.name] for o in found), dtype=np.int64)
+            offsets = self.model.xy[found] - (x, y)
+            order = np.lexsort((found, np.hypot(offsets[:, 0], offsets[:, 1])))
+            found = np.sort(found[order[:bound]])
+        self.rows = found.astype(np.int64)
         self._area = box(x - width / 2, y - depth / 2, x + width / 2, y + depth / 2)
         move = Recentring(now, reason, x, y, width, depth, len(found))
         self.history.append(move)
