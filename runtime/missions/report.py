@@ -308,6 +308,11 @@ def write_plots(run: Run, out_dir: Path) -> list[Path]:
     return paths
 
 
+def lane_label(agent: AgentReport) -> str:
+    """An agent's lane in the plan plot: its name and how it ended (finished is never "lost")."""
+    return f"{agent.agent}\n{'finished: ' + agent.outcome if agent.outcome else 'no end'}"
+
+
 def _plan_plot(run: Run, leaf: Report, path: Path) -> Path:
     from matplotlib.figure import Figure
 
@@ -339,9 +344,7 @@ def _plan_plot(run: Run, leaf: Report, path: Path) -> Path:
         if event.kind == "agent-finished":
             label += f" ({event.get('outcome')})"
         ax.annotate(str(label), (event.t, lane), xytext=(2, -8), textcoords="offset points", fontsize=6)
-    # Each lane is labelled with how its agent ended: finished with an outcome is never "lost".
-    labels = [f"{a.agent}\n{'finished: ' + a.outcome if a.outcome else 'no end'}" for a in leaf.agents]
-    ax.set_yticks(range(len(lanes)), labels)
+    ax.set_yticks(range(len(lanes)), [lane_label(a) for a in leaf.agents])
     ax.set(ylim=(len(lanes) - 0.4, -0.8), xlabel="run time (s)")
     plans = sorted({a.plan for a in leaf.agents if a.plan})
     legend = "▲ signal sent, ▼ received, ✕ agent lost, + found, ■ finished"

@@ -126,3 +126,15 @@ def test_only_the_success_final_counts_as_success(tmp_path: Path, outcome: str) 
         assert stopped.run(0.2) == "stopped" and not stopped.succeeded
     finally:
         transport.stop()
+
+
+def test_the_report_draws_finished_agents_as_finished(tmp_path: Path) -> None:
+    from runtime.missions.report import build_report, lane_label, write_plots
+
+    _run_both(tmp_path, "string")
+    run = read_run(tmp_path / "run")
+    report = build_report(run, "leaf")
+    assert sorted(lane_label(a) for a in report.agents) == ["early\nfinished: done", "late\nfinished: done"]
+    paths = write_plots(run, tmp_path / "plots")
+    assert tmp_path / "plots" / "plan.png" in paths and (tmp_path / "plots" / "plan.png").stat().st_size > 0
+    assert not [e for e in run.events if e.kind == "agent-lost"]
