@@ -62,6 +62,7 @@ def test_two_agents_in_two_processes_complete_the_plan_with_a_signal(tmp_path: P
     sent = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "sent")
     received = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "received")
     assert sent.agent == "spotter" and received.agent == "fetcher"
+    assert not [e for e in run.events if e.kind == "agent-lost"]  # the spotter finished: never "lost"
     left_nav = next(e for e in run.events if e.kind == "exit" and e.agent == "fetcher" and e.fields["state"] == "NAV")
     assert left_nav.fields["to"] == "GO" and left_nav.t >= received.t
     stats = json.loads((tmp_path / "run" / "stats.json").read_text())

@@ -36,6 +36,24 @@ def test_a_three_agent_circle_written_in_conditions_is_reported_at_each_transiti
     assert "deadlock among 3 agent(s) (a, b, c)" in message
 
 
+def test_a_deadlock_through_a_nested_mission_is_found(tmp_path: Path) -> None:
+    text = (PLANS / "two_agents.xml").read_text()
+    assert check_plans(ckmconf.load(PLANS / "two_agents.xml")) == []
+    # The spotter now waits at TRACK for the fetcher's `ready`, sent when the fetcher's nested
+    # NAVIGATION mission enters GO — which happens only after `spotted`, sent after TRACK.
+    text = text.replace('<Transition from="TRACK" to="FIX"/>', "<Transition from=\"TRACK\" to=\"FIX\" "
+                        "when=\"signal('ready') and done()\"/>")  # fmt: skip
+    text = text.replace('<Signal name="spotted" agent="spotter" state="FIX" on="done"/>',
+                        '<Signal name="spotted" agent="spotter" state="FIX" on="done"/>'
+                        '<Signal name="ready" agent="fetcher" state="NAVIGATION/GO" on="entry"/>')  # fmt: skip
+    path = tmp_path / "nested.xml"
+    path.write_text(text)
+    found = check_plans(ckmconf.load(path))
+    assert {f.kind for f in found} == {"deadlock"}
+    assert "fetcher waits at NAVIGATION/NAV for 'spotted' before it can send 'ready'" in found[0].message
+    assert "spotter waits at TRACK for 'ready' before it can send 'spotted'" in found[0].message
+
+
 def test_a_dependency_on_a_signal_off_the_senders_success_path_is_reported() -> None:
     found = _located(PLANS / "deadlock_three.xml")
     assert ("signal-off-success-path", 60, "Dependency") in found
