@@ -116,7 +116,7 @@ def test_every_table_7_6_behavior_composes_from_every_related_service(behavior: 
         asked.append(ref)
         return related[ref]
 
-    value = behavior_performance(lab, matrix, record, handles, lookup)  # type: ignore[arg-type]
+    value = behavior_performance(lab, matrix, record, handles, lookup)
     sp = {ref: 1.0 if ref in used else published[ref] for ref in published}
     expected = sum(sum(w * sp[o] for o, w in TABLE_7_6[ref].items()) for ref in used) / len(used)
     assert value == pytest.approx(expected)
@@ -137,7 +137,7 @@ def test_every_service_at_one_composes_to_one_for_every_behavior_of_table_7_6() 
         handles = {}
         for uses in record.uses:
             handles[uses.alias] = compliant(uses)
-        value = behavior_performance(lab, matrix, record, handles, lambda ref: KnownService(ref, 1.0))  # type: ignore[arg-type]
+        value = behavior_performance(lab, matrix, record, handles, lambda ref: KnownService(ref, 1.0))
         assert value == pytest.approx(1.0), behavior
-        silent = behavior_performance(lab, matrix, record, handles, lambda ref: KnownService(ref, 1.0, running=False))  # type: ignore[arg-type]
+        silent = behavior_performance(lab, matrix, record, handles, lambda ref: KnownService(ref, 1.0, running=False))
         assert silent is not None and silent <= 1.0
