@@ -254,6 +254,12 @@ def _payload_findings(system: System, plan: Plan, signal: Signal) -> list[Findin
         state = mission.state(parts.pop(0))
         mission = system.mission(state.mission) if state is not None and state.mission else None
     state = mission.state(parts[0]) if mission is not None else None
+    if state is not None and state.mission is not None:
+        message = (
+            f"signal {signal.name!r} carries a {signal.type}, but {signal.agent}'s {signal.state} runs the "
+            f"mission {state.mission!r}, not a behavior that could write it: emit it from a behavior state"
+        )
+        return [finding("signal-without-payload", "error", message, signal, mission=plan.name)]
     if state is None or state.behavior is None:
         return []
     behavior = system.behavior(state.behavior)

@@ -101,6 +101,17 @@ def test_a_typed_signal_whose_state_writes_no_payload_is_reported(tmp_path: Path
     assert "behavior 'WORK' of a's SEND writes no <Output signal='from_a'>" in found[0].message
 
 
+def test_a_typed_signal_of_a_nested_mission_state_has_no_behavior_to_supply_it(tmp_path: Path) -> None:
+    text = (PLANS / "two_agents.xml").read_text()
+    path = tmp_path / "typed.xml"
+    spotted = '<Signal name="spotted" agent="spotter" state="FIX" on="done"/>'
+    going = '<Signal name="going" agent="fetcher" state="NAVIGATION" type="string"/>'
+    path.write_text(text.replace(spotted, spotted + going))
+    found = check_plans(ckmconf.load(path))
+    assert [f.kind for f in found] == ["signal-without-payload"]
+    assert "fetcher's NAVIGATION runs the mission 'Go', not a behavior that could write it" in found[0].message
+
+
 def test_the_fake_interaction_assumes_no_signal_of_a_deadlock() -> None:
     system = ckmconf.load(PLANS / "deadlock_two.xml")
     assert assumable_signals(system, "A") == set()
