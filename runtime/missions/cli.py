@@ -127,9 +127,9 @@ def _validate(args: argparse.Namespace) -> int:
     system = result.system
     if system.validation is None:
         defaults = Validation()
-        print(f"{args.system}: no <Validation> here, so the defaults apply (pMin {defaults.p_min:g}, kMax "
-              f"{defaults.k_max}, coverage {defaults.coverage:.0%}); a plan file that includes this one "
-              "usually sets them: validate that file to use its settings", file=sys.stderr)  # fmt: skip
+        print(f"{args.system}: no <Validation> in this file, so the defaults apply (pMin {defaults.p_min:g}, "
+              f"kMax {defaults.k_max}, coverage {defaults.coverage:.0%}); when a plan file includes this one and "
+              "sets them, validate that file instead", file=sys.stderr)  # fmt: skip
     names = [args.mission] if args.mission else top_missions(system)
     if args.mission and system.mission(args.mission) is None:
         known = ", ".join(m.name for m in system.missions) or "none"

@@ -153,4 +153,4 @@ def test_missions_alone_say_in_one_line_where_their_validation_settings_come_fro
 ) -> None:
     main(["validate", str(REPO / "configs" / "usecase" / "missions.xml"), "--mission", "Agent2Spot"])
     notes = [line for line in capsys.readouterr().err.splitlines() if "<Validation>" in line]
-    assert len(notes) == 1 and "a plan file that includes this one usually sets them" in notes[0]
+    assert len(notes) == 1 and "when a plan file includes this one and sets them, validate that file" in notes[0]
