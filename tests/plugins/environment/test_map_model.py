@@ -136,3 +136,39 @@ def test_manage_compares_every_perception_with_every_managed_element(lab: MapMod
     assert counts == {"confirmed": 1, "moved": 1, "added": 1, "stale": 0, "refused": 0}
     assert (lab.get("chair").x, lab.get("chair").y) == (5.32, 1.33)
     assert "thing-10" in lab and lab.get("thing-10").tag == "thing"
+
+
+@pytest.mark.parametrize(
+    "path",
+    ["usecase/environment.xml", "examples/environment_objects.xml", "examples/split/environment.xml",
+     "examples/zoom_map.xml"],
+)
+def test_every_environment_file_builds_a_map(path: str) -> None:
+    from plugins.environment.planner import Planner
+    from tests.plugins.environment.conftest import environment
+
+    env = environment(path)
+    model = MapModel.from_environment(env)
+    assert sorted(model.objects) == sorted(o.name for o in env.objects)
+    for obj in model.objects.values():
+        assert model.outline.buffer(1e-6).contains(obj.shape.centroid)
+        assert model.in_region(obj.shape.centroid.buffer(1e-3))  # the index finds every object
+    assert Planner(model, Footprint.round(0.2), resolution=0.2).graph.number_of_nodes() > 0
+
+
+def test_the_example_objects_have_the_geometry_they_declare() -> None:
+    from tests.plugins.environment.conftest import environment
+
+    model = MapModel.from_environment(environment("examples/environment_objects.xml"))
+    red, blue = model.get("can-red"), model.get("can-blue")
+    assert red.parts == blue.parts and red.texture != blue.texture  # same geometry: told apart by texture
+    assert red.shape.equals_exact(_moved(blue.shape, -0.2), 1e-9)
+    assert model.get("chair-1").dimension == "2D" and len(model.get("chair-1").parts) == 2
+    assert model.get("shelf").dimension == "3D" and model.get("shelf").zmax == 1.5
+    assert model.semantics.localization_class("chair") == "restricted-area"
+
+
+def _moved(shape, dx: float):  # type: ignore[no-untyped-def]
+    from shapely import affinity
+
+    return affinity.translate(shape, dx, 0.0)
