@@ -282,6 +282,7 @@ class MissionEngine:
         self.signal_types = dict(signal_types or {})  # signal → its <Signal type> (None: no payload required)
         self._types = {t.name: t for t in system.message_types}
         self._related = related  # the services eq. 5.1 weighs that a behavior does not use itself
+        self._stopping = False
         self._conditions: dict[str, Condition] = {}
         self._start = 0.0
         self._last_progress = -1e9
@@ -319,7 +320,11 @@ class MissionEngine:
                 if data is None:
                     problem = f"no payload: the behavior of {relative} wrote nothing on an <Output signal={name!r}>"
                 if problem is not None:
-                    raise SignalError(f"signal {name!r} (type {kind}) sent by {self.agent} at {relative}: {problem}")
+                    error = f"signal {name!r} (type {kind}) sent by {self.agent} at {relative}: {problem}"
+                    if self._stopping:  # stopping after a crash: record it, do not raise a second time
+                        self.record("error", error=f"SignalError: {error}", where=relative)
+                        return
+                    raise SignalError(error)
             value = {"agent": self.agent, "state": relative, "time": self.now(), "data": data}
             self.signals.set(name, value)
             self.record("signal", name=name, direction="sent", value=value)
@@ -386,5 +391,6 @@ class MissionEngine:
 
     def stop(self, reason: str = "stopped") -> None:
         if self.top.outcome is None and self.top.state is not None:
+            self._stopping = True
             self.top.exit(None, None, reason)
             self.record("end", outcome=reason, wall=time.time())

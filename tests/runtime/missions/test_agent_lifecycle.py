@@ -105,6 +105,7 @@ def test_a_payload_that_breaks_the_signal_type_crashes_the_sender_loudly(tmp_pat
     assert results["early"][0].succeeded
     events = read_run(tmp_path / "run").events
     assert {e.agent: e.fields["outcome"] for e in events if e.kind == "end"} == {"early": "done", "late": "crashed"}
+    assert [e.fields["outcome"] for e in events if e.kind == "end" and e.agent == "late"] == ["crashed"]  # once
     error = next(e for e in events if e.kind == "error")
     assert error.agent == "late" and error.fields["error"].startswith("SignalError: signal 'ping'")
 
