@@ -174,11 +174,12 @@ class ZoomMap:
         counts["outside"] = int(len(perceptions) - inside.sum())
         if len(self.model) > before and self._area is not None:
             bound = self.settings.max_objects
-            joining = [
-                row
-                for row in range(before, len(self.model))
-                if self.model.objects[self.model.names[row]].shape.intersects(self._area)
-            ]
+            new_rows = np.arange(before, len(self.model))
+            inside_now = self.model.candidate_rows(self._area)
+            if self.settings.mode == "2.5D":
+                z = self.model.z_ranges[inside_now]
+                inside_now = inside_now[(z[:, 0] < self.settings.height) & (z[:, 1] > 0)]
+            joining = np.intersect1d(new_rows, inside_now).tolist()
             room = len(joining) if bound is None else max(0, bound - len(self.rows))
             self.rows = np.concatenate([self.rows, np.array(joining[:room], dtype=np.int64)])
         return counts
