@@ -17,7 +17,8 @@ sender's graph, the emitting state can no longer be reached (``on="entry"``) or 
 - a Dependency on σ emitted by a state on no path of its sender to its success final
   (``signal-off-success-path``), or that can never be emitted (``signal-never-emitted``);
 - a Signal with a ``type`` whose emitting state's behavior writes no ``<Output signal=…>`` for it
-  would fail at run time (``signal-without-payload``).
+  would fail at run time (``signal-without-payload``); a behavior that writes a signal's payload
+  in a state that does not send that signal writes in vain (``payload-never-sent``, a warning).
 
 :func:`assumable_signals` tells the fake interaction which ``signal()`` it may take as true.
 """
@@ -33,7 +34,7 @@ import networkx as nx  # type: ignore[import-untyped]
 from ckmconf.binding import Record
 from ckmconf.expressions import TRANSITION, parse
 from ckmconf.model import System
-from ckmconf.model.missions import Mission, Plan, Signal
+from ckmconf.model.missions import Behavior, Mission, Plan, Signal
 
 from ..solver import solve
 from .findings import Finding, finding, ordered
@@ -55,6 +56,8 @@ class AgentGraph:
     """(state node, signal) → the edges that wait for it (all out-edges for a blocking wait)."""
     why: dict[tuple[str, str], Record] = field(default_factory=dict)
     """(state node, signal) → the record stating the wait (Dependency, Behavior input or Transition)."""
+    behaviors: dict[str, Behavior] = field(default_factory=dict)
+    """State node → the behavior it runs."""
 
     def reachable(self, node: str, removed: Sequence[tuple[str, str]] = ()) -> bool:
         graph = self.graph
@@ -107,6 +110,8 @@ def _add(system: System, flat: AgentGraph, mission: Mission, prefix: str, seen: 
             graph.add_edge(node, f"{node}/{nested.initial}")
             children[state.name] = _add(system, flat, nested, f"{node}/", seen | {nested.name})
         behavior = system.behavior(state.behavior) if state.behavior else None
+        if behavior is not None:
+            flat.behaviors[node] = behavior
         for port in behavior.inputs if behavior is not None else ():
             if port.signal is not None:
                 flat.why.setdefault((node, port.signal), port)
@@ -232,7 +237,25 @@ def check_plan(system: System, plan: Plan) -> list[Finding]:
                 break
     for signal in plan.signals:
         found += _payload_findings(system, plan, signal)
+    found += _unsent_payloads(plan, built)
     return ordered(found)
+
+
+def _unsent_payloads(plan: Plan, built: PlanGraph) -> list[Finding]:
+    """Behavior outputs that supply a signal's payload in a state that does not send that signal."""
+    found = []
+    senders = {(s.name, s.agent, s.state) for s in plan.signals}
+    names = {s.name for s in plan.signals}
+    for flat in built.agents.values():
+        for node, behavior in flat.behaviors.items():
+            for port in behavior.outputs:
+                if port.signal in names and (port.signal, flat.agent, node) not in senders:
+                    message = (
+                        f"behavior {behavior.name!r} writes the payload of {port.signal!r} in {flat.agent}'s {node}, "
+                        f"which does not send it (plan {plan.name!r}): that payload is never sent"
+                    )
+                    found.append(finding("payload-never-sent", "warning", message, port, mission=plan.name))
+    return found
 
 
 def _on_success_path(flat: AgentGraph, signal: Signal) -> bool:

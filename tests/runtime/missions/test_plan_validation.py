@@ -112,6 +112,18 @@ def test_a_typed_signal_of_a_nested_mission_state_has_no_behavior_to_supply_it(t
     assert "fetcher's NAVIGATION runs the mission 'Go', not a behavior that could write it" in found[0].message
 
 
+def test_a_payload_written_where_the_signal_is_not_sent_is_a_warning(tmp_path: Path) -> None:
+    text = (PLANS / "payload.xml").read_text()
+    path = tmp_path / "elsewhere.xml"
+    path.write_text(text.replace('state="SPOT" on="done" type="ObjectPosition"', 'state="SPOT" on="entry"'))
+    assert check_plans(ckmconf.load(path)) == []  # untyped, same state: fine
+    other = '<Agent name="other" node="fetcher-pc" mission="Spot"/>'  # runs SPOT too, sends nothing
+    path.write_text(text.replace('<Agent name="fetcher"', other + '<Agent name="fetcher"'))
+    found = check_plans(ckmconf.load(path))
+    assert [(f.kind, f.severity, f.line) for f in found] == [("payload-never-sent", "warning", 37)]
+    assert "behavior 'SPOT' writes the payload of 'spotted' in other's SPOT, which does not send it" in found[0].message
+
+
 def test_the_fake_interaction_assumes_no_signal_of_a_deadlock() -> None:
     system = ckmconf.load(PLANS / "deadlock_two.xml")
     assert assumable_signals(system, "A") == set()
