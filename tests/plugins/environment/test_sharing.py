@@ -1,6 +1,6 @@
 """The map shared between two robots as a Smart Resource service: they converge on one object list.
 
-Two map instances, each with its own transport, on one private loopback network.
+Two map instances, each with its own transport, on one private loopback network (CKMultiPeer and Zenoh).
 """
 
 from __future__ import annotations
@@ -16,14 +16,14 @@ from plugins.environment.map_model import MapModel, small_object
 from plugins.environment.sharing import FUNCTION, MapShare, decode_object, encode_object
 from runtime.network import Transport, open_transport
 from runtime.resources.client import ServiceDirectory
-from tests.runtime.network.conftest import private_network
+from tests.runtime.network.conftest import TRANSPORTS, private_network
 
 TIMEOUT = 15.0
 
 
-@pytest.fixture
-def network() -> Iterator[Callable[[str], Transport]]:
-    settings = private_network()
+@pytest.fixture(params=TRANSPORTS)
+def network(request: pytest.FixtureRequest) -> Iterator[Callable[[str], Transport]]:
+    settings = private_network(request.param)
     made: list[Transport] = []
 
     def make(name: str) -> Transport:
