@@ -263,6 +263,24 @@ class MapModel:
                 found[obj.name] = obstacle
         return found
 
+    def segments(self, height: float, *, include_mobile: bool = False) -> np.ndarray:
+        """The edges a planar sensor at ``height`` sees, ``k × 4`` rows ``x1 y1 x2 y2`` (for ray casting).
+
+        The map's outline, the avoided areas and the outlines of the object parts that span
+        ``height`` (a laser at 0.3 m sees table legs, not the top); mobile objects only if asked.
+        """
+        shapes: list[BaseGeometry] = [self.outline, *self.avoided.values()]
+        for obj in self.objects.values():
+            if include_mobile or not self.semantics.is_mobile(obj.tag):
+                shapes += [floor for floor, zmin, zmax in obj.placed_parts() if zmin <= height <= zmax]
+        rings = []
+        for shape in shapes:
+            for polygon in getattr(shape, "geoms", [shape]):
+                rings += [polygon.exterior, *polygon.interiors]
+        edges = [np.asarray(ring.coords) for ring in rings]
+        found: np.ndarray = np.concatenate([np.hstack([c[:-1], c[1:]]) for c in edges])
+        return found
+
     # ------------------------------------------------------------------ updates
 
     def observe(

@@ -60,6 +60,10 @@ class MapObject:
             return self.shape
         return self._placed(low) if low else None
 
+    def placed_parts(self) -> list[tuple[BaseGeometry, float, float]]:
+        """Each part's floor polygon in the map frame with its height range."""
+        return [(place(p.local, self.x, self.y, self.yaw), p.zmin, p.zmax) for p in self.parts]
+
     @property
     def zmin(self) -> float:
         return min((p.zmin for p in self.parts), default=self.z)

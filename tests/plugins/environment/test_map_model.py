@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from plugins.environment.geometry import Footprint
@@ -172,3 +173,19 @@ def _moved(shape, dx: float):  # type: ignore[no-untyped-def]
     from shapely import affinity
 
     return affinity.translate(shape, dx, 0.0)
+
+
+def test_segments_for_a_planar_sensor_follow_its_height(lab: MapModel) -> None:
+    low = lab.segments(0.1)  # a laser 0.1 m above the floor
+    high = lab.segments(1.0)
+    assert low.shape[1] == 4 and len(low) > len(high)
+    # the map outline, the four avoided rectangles and the desk (2D: every height) at 2.9 m: 6 × 4 edges
+    assert len(lab.segments(2.9)) == 24
+    # at 0.1 m the workbench's legs (4 circles) are seen, its top (0.28-0.30 m) is not
+    legs = [row for row in low.tolist() if 7.3 <= row[0] <= 8.9 and 5.85 <= row[1] <= 6.55]
+    assert legs and all(math.hypot(x - 8.1, y - 6.2) > 0.7 for x, y, _, _ in legs)
+    # the chair (mobile) only when asked
+    def near_chair(rows: np.ndarray) -> list[list[float]]:
+        return [row for row in rows.tolist() if math.hypot(row[0] - 5.3, row[1] - 1.35) < 0.31]
+
+    assert near_chair(lab.segments(0.1, include_mobile=True)) and not near_chair(low)
