@@ -64,6 +64,8 @@ def _check_service(resource: SmartResource, service: Service, scope: Scope, repo
     measures = [m.name for m in service.measures]
     if service.performance is not None and service.performance not in measures:
         report.error(service, missing("quality measure", service.performance, where, measures), "performance")
+    _check_combined(service, measures, where, report)
+    measures = service.measure_names()
     profiles = [p.name for p in resource.profiles]
     for scenario in service.scenarios:
         if scenario.profile not in profiles:
@@ -81,6 +83,29 @@ def _check_service(resource: SmartResource, service: Service, scope: Scope, repo
             report.error(service.tcm, f"{where} has a TCM but no Scenario to choose from")
         elif service.tcm.initial is not None and service.tcm.initial not in names:
             report.error(service.tcm, missing("scenario", service.tcm.initial, where, names), "initial")
+
+
+def _check_combined(service: Service, measures: list[str], where: str, report: Reporter) -> None:
+    """CombinedMeasure (eq. 4.5): a new name, summing two or more distinct QualityMeasures."""
+    for combined in service.combined:
+        if combined.name in measures:
+            report.error(combined, f"{where} already has a quality measure {combined.name!r}", "name")
+        if len(combined.measures) < 2:
+            report.error(combined, "a combined measure sums at least two quality measures (eq. 4.5)", "measures")
+        seen: set[str] = set()
+        for name in combined.measures:
+            if name in seen:
+                report.error(
+                    combined, f"measure {name!r} is summed twice (eq. 4.5 needs independent measures)", "measures"
+                )
+            elif name in measures:
+                pass
+            elif name in service.combinations():
+                report.error(combined, f"{name!r} is a combined measure: sum its quality measures instead", "measures")
+            else:
+                report.error(combined, missing("quality measure", name, where, measures), "measures")
+            seen.add(name)
+    report.unique(service.combined, "combined measure", where)
 
 
 def check_bounds(record: Record, lower: float | None, upper: float | None, report: Reporter) -> None:

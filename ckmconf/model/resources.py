@@ -108,6 +108,18 @@ class QualityMeasure(Record):
 
 
 @dataclass(frozen=True, kw_only=True)
+class CombinedMeasure(Record):
+    """<CombinedMeasure>: the sum of independent quality measures, distributed as their convolution (eq. 4.5)."""
+
+    TAG = "CombinedMeasure"
+    name: str = attr()
+    measures: tuple[str, ...] = attr()
+    resolution: float | None = attr(default=None)
+    unit: str = attr(default="")
+    description: str | None = attr(default=None)
+
+
+@dataclass(frozen=True, kw_only=True)
 class Policy(Record):
     """<Policy>: a quality policy, bounds and required probability (eq. 4.2, 4.4)."""
 
@@ -160,8 +172,17 @@ class Service(Record):
     outputs: tuple[ServiceOutput, ...] = children()
     parameters: tuple[Parameter, ...] = children()
     measures: tuple[QualityMeasure, ...] = children()
+    combined: tuple[CombinedMeasure, ...] = children()
     scenarios: tuple[Scenario, ...] = children()
     tcm: TCM | None = child(default=None)
+
+    def combinations(self) -> dict[str, tuple[str, ...]]:
+        """Each combined measure's name and the measures it sums (eq. 4.5)."""
+        return {c.name: c.measures for c in self.combined}
+
+    def measure_names(self) -> list[str]:
+        """Every measure a Policy or a client's requirement may bound: quality, then combined ones."""
+        return [m.name for m in self.measures] + [c.name for c in self.combined]
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -80,6 +80,8 @@ class Instance:
             on_event=self._event,
             on_alarm=self._alarm,
             alarm_after=ALARM_AFTER,
+            combined=service.combinations(),
+            resolutions={c.name: c.resolution for c in service.combined},
         )
         if preferred is not None:
             self.tcm.set_ceiling(preferred)
@@ -144,7 +146,7 @@ class Instance:
                 "time": now,
                 "scenario": decision.active,
                 "profile": decision.profile,
-                "measures": dict(self.measures.last),
+                "measures": self._measures(),
                 "probabilities": {
                     c.measure: c.probability
                     for e in (decision.evaluations.get(decision.active),)
@@ -158,6 +160,15 @@ class Instance:
             }
         self._send("quality", message)
         return decision
+
+    def _measures(self) -> dict[str, float]:
+        """The last value of each measure; a combined one's is the sum of its components' (eq. 4.5)."""
+        values = dict(self.measures.last)
+        for combined in self.service.combined:
+            parts = [values.get(name) for name in combined.measures]
+            if all(v is not None for v in parts):
+                values[combined.name] = sum(v for v in parts if v is not None)
+        return values
 
     def _event(self, event: ScenarioEvent) -> None:  # called by the TCM, under self._lock
         self.events.append(event)

@@ -77,7 +77,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from ckmconf.model.resources import TCM, Scenario, Service
+from ckmconf.model.resources import TCM, Policy, Scenario, Service
 
 from .learning import ScenarioLearner
 from .quality import DEFAULT_WINDOW, Distribution, MeasureWindow, PolicyEvaluator, QualityBounds, combined_distribution
@@ -205,6 +205,7 @@ class TaskConfiguringModule:
         requirements: Iterable[QualityBounds] = (),
         combined: Mapping[str, Sequence[str]] | None = None,
         resolution: float | None = None,
+        resolutions: Mapping[str, float | None] | None = None,
         band: float = 0.05,
         margin: float = 0.2,
         dwell: int = 3,
@@ -220,6 +221,7 @@ class TaskConfiguringModule:
         self._unheld = 0
         self.settings = settings if settings is not None else TCM()
         self.combined = {name: tuple(parts) for name, parts in (combined or {}).items()}
+        self.resolutions = {name: (resolutions or {}).get(name) or resolution for name in self.combined}
         self.resolution, self.band, self.margin, self.dwell = resolution, band, margin, max(1, dwell)
         self.decay = self.settings.penalty_step / decay_evaluations if decay_evaluations else 0.0
         self.horizon = max(1, horizon)
@@ -253,7 +255,9 @@ class TaskConfiguringModule:
 
     @classmethod
     def from_service(cls, service: Service, **options: Any) -> TaskConfiguringModule:
-        """The TCM of a configured service (its Scenario records and TCM settings)."""
+        """The TCM of a configured service: its Scenario records, TCM settings and CombinedMeasures."""
+        options.setdefault("combined", service.combinations())
+        options.setdefault("resolutions", {c.name: c.resolution for c in service.combined})
         return cls(service.scenarios, service.tcm, **options)
 
     # -- state -------------------------------------------------------------------------------
@@ -309,7 +313,7 @@ class TaskConfiguringModule:
         windows = [self._windows[p].last(window) for p in parts]
         if any(w.size == 0 for w in windows):
             return ()
-        return combined_distribution(windows, self.resolution)
+        return combined_distribution(windows, self.resolutions[measure])
 
     # -- requirements ------------------------------------------------------------------------
 
@@ -519,21 +523,36 @@ class TaskConfiguringModule:
 
 class ThresholdSwitcher:
     """Baseline without windows, penalty or hysteresis: the highest-weight scenario whose policy
-    bounds contain the latest sample of each measure (the lowest-weight one when none does)."""
+    bounds contain the latest sample of each measure (the lowest-weight one when none does); a
+    combined measure's latest sample is the sum of its components' latest ones."""
 
-    def __init__(self, scenarios: Sequence[Scenario], initial: str | None = None) -> None:
+    def __init__(
+        self,
+        scenarios: Sequence[Scenario],
+        initial: str | None = None,
+        combined: Mapping[str, Sequence[str]] | None = None,
+    ) -> None:
         self._ranked = sorted(scenarios, key=lambda s: -s.weight)
         self.active = initial or scenarios[0].name
         self._latest: dict[str, float] = {}
+        self._combined = {name: tuple(parts) for name, parts in (combined or {}).items()}
         self.switches = 0
 
     def observe(self, measure: str, value: float) -> None:
         self._latest[measure] = value
 
+    def latest(self, measure: str) -> float | None:
+        """The latest sample of a measure (of every component, summed, for a combined one)."""
+        parts = self._combined.get(measure)
+        if parts is None:
+            return self._latest.get(measure)
+        values = [self._latest.get(part) for part in parts]
+        return None if any(v is None for v in values) else sum(v for v in values if v is not None)
+
     def evaluate(self) -> str:
         def contains(scenario: Scenario) -> bool:
             for p in scenario.policies:
-                value = self._latest.get(p.measure)
+                value = self.latest(p.measure)
                 if value is not None and not (
                     (p.lower is None or value >= p.lower) and (p.upper is None or value <= p.upper)
                 ):
@@ -558,10 +577,11 @@ class ThresholdSelector:
         *,
         on_event: Callable[[ScenarioEvent], None] | None = None,
         on_alarm: Callable[[Alarm], None] | None = None,
+        combined: Mapping[str, Sequence[str]] | None = None,
         **_: Any,
     ) -> None:
         self._records = {s.name: s for s in scenarios}
-        self._switcher = ThresholdSwitcher(scenarios, (settings or TCM()).initial)
+        self._switcher = ThresholdSwitcher(scenarios, (settings or TCM()).initial, combined)
         self.on_event, self.on_alarm = on_event, on_alarm
         self.alarm_active = False
         self.requirements: tuple[QualityBounds, ...] = ()
@@ -605,12 +625,11 @@ class ThresholdSelector:
         return self._decide(now or 0.0, chosen)
 
     def _contains(self, scenario: Scenario) -> bool:
-        latest = self._switcher._latest
-        return all(
-            (p.lower is None or latest.get(p.measure, p.lower) >= p.lower)
-            and (p.upper is None or latest.get(p.measure, p.upper) <= p.upper)
-            for p in scenario.policies
-        )
+        def within(p: Policy) -> bool:
+            value = self._switcher.latest(p.measure)
+            return value is None or ((p.lower is None or value >= p.lower) and (p.upper is None or value <= p.upper))
+
+        return all(within(p) for p in scenario.policies)
 
     def _decide(self, time: float, chosen: str) -> Decision:
         events: list[ScenarioEvent] = []

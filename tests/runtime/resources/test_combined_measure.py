@@ -1,0 +1,126 @@
+"""A combined quality measure configured in the XSD (<CombinedMeasure>, eq. 4.5) and used by the TCM:
+configs/examples/combined_measure.xml's ``staleness`` = ``age`` + ``period``, evaluated on the
+convolution of both windows; the TCM leaves the fine scenario when the sum's policy fails although
+each component alone looks harmless; the threshold baseline sums the latest samples; and the
+example's own service, on real plugins and synthetic frames, publishes the combined measure."""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from ckmconf.loader import load
+from ckmconf.model.resources import Service, SmartResource
+from runtime.network import TopicQoS, Transport, open_transport
+from runtime.resources.quality import combined_distribution
+from runtime.resources.resource import SmartResourceRuntime
+from runtime.resources.tcm import TaskConfiguringModule, ThresholdSelector
+from tests.conftest import CONFIGS
+from tests.runtime.network.conftest import private_network
+from tests.runtime.resources.test_service_api import until
+
+EXAMPLE = CONFIGS / "examples" / "combined_measure.xml"
+
+
+@pytest.fixture(scope="module")
+def resource() -> SmartResource:
+    record = load(EXAMPLE).resource("Camera")
+    assert record is not None
+    return record
+
+
+@pytest.fixture
+def service(resource: SmartResource) -> Service:
+    return resource.services[0]
+
+
+def feed(tcm: TaskConfiguringModule | ThresholdSelector, ages: Any, periods: Any) -> None:
+    for age, period in zip(ages, periods, strict=True):
+        tcm.observe("age", float(age))
+        tcm.observe("period", float(period))
+
+
+def test_the_tcm_of_a_service_takes_its_combined_measures(service: Service) -> None:
+    tcm = TaskConfiguringModule.from_service(service)
+    assert tcm.combined == {"staleness": ("age", "period")}
+    assert tcm.resolutions == {"staleness": 0.001}
+
+
+def test_the_tcm_acts_on_the_convolution_of_the_components(service: Service) -> None:
+    tcm = TaskConfiguringModule.from_service(service)
+    rng = np.random.default_rng(4)
+    feed(tcm, rng.uniform(0.02, 0.05, 40), rng.uniform(0.045, 0.055, 40))  # sum ≤ 0.105 < 0.12
+    decision = tcm.evaluate(1.0)
+    assert decision.active == "fine" and not decision.events
+    (condition,) = decision.evaluations["fine"].conditions
+    assert (condition.measure, condition.probability) == ("staleness", 1.0)
+
+    # A slower processing and a jittery period: each stays below 0.08 s, their sum often exceeds 0.12 s.
+    ages, periods = rng.uniform(0.03, 0.075, 40), rng.uniform(0.045, 0.08, 40)
+    feed(tcm, ages, periods)
+    expected = combined_distribution([ages, periods], 0.001).probability_within(None, 0.12)
+    assert 0.3 < expected < 0.9  # the policy asks 0.9
+    decision = tcm.evaluate(2.0)
+    (condition,) = decision.evaluations["fine"].conditions
+    assert condition.probability == pytest.approx(expected)
+    (event,) = decision.events
+    assert (event.previous, event.current, event.reason) == ("fine", "coarse", "neglected")
+    assert "staleness" in event.detail and tcm.penalties["fine"] > 0
+
+
+def test_the_threshold_baseline_sums_the_latest_samples(service: Service) -> None:
+    baseline = ThresholdSelector(service.scenarios, service.tcm, combined=service.combinations())
+    feed(baseline, [0.05], [0.05])
+    assert baseline.evaluate(1.0).active == "fine"
+    feed(baseline, [0.07], [0.06])  # 0.13 > 0.12
+    assert baseline.evaluate(2.0).active == "coarse"
+    blind = ThresholdSelector(service.scenarios, service.tcm)  # without the combination the bound is never seen
+    feed(blind, [0.07], [0.06])
+    assert blind.evaluate(1.0).active == "fine"
+
+
+@pytest.fixture
+def pair() -> Iterator[tuple[Transport, Transport]]:
+    network = private_network()
+    made = [open_transport(network, name="resource"), open_transport(network, name="client")]
+    try:
+        for transport in made:
+            transport.setup()
+            transport.start()
+        yield made[0], made[1]
+    finally:
+        for transport in made:
+            transport.stop()
+
+
+def test_the_example_service_publishes_its_combined_measure(
+    resource: SmartResource, pair: tuple[Transport, Transport]
+) -> None:
+    """The example's own plugins (acquisition, resize, ORB recognition) on synthetic VGA frames."""
+    from plugins.processing.scenes import USECASE_MODEL, load_catalog, render_rgb_scene
+
+    names = [o.name for o in load_catalog(str(USECASE_MODEL)).objects]
+    rng = random.Random(3)
+    frames = [render_rgb_scene(rng.sample(names, 2), seed=i).image for i in range(3)]
+    counter = iter(range(10**9))
+    server, remote = pair
+    quality: list[dict[str, Any]] = []
+    remote.subscribe(
+        TopicQoS("/Camera/Recog/quality", "ckm/service-quality", history=64), lambda s: quality.append(s.value)
+    )
+    runtime = SmartResourceRuntime(resource, server, sources={"grab": lambda: frames[next(counter) % 3]})
+
+    def combined() -> list[dict[str, Any]]:
+        return [m for m in quality if m.get("type") == "quality" and "staleness" in m.get("probabilities", {})]
+
+    with runtime:
+        assert until(lambda: len(combined()) >= 2, timeout=30)
+    message = combined()[-1]
+    measures = message["measures"]
+    assert measures["staleness"] == pytest.approx(measures["age"] + measures["period"])
+    assert 0.0 <= message["probabilities"]["staleness"] <= 1.0
+    assert message["scenario"] in ("fine", "coarse")
