@@ -15,7 +15,8 @@ the policy's probability over its last ``window`` samples.
 - :class:`Distribution` is a discrete probability mass function (the empirical pmf of a window,
   or the result of a convolution); :func:`convolve` is eq. 4.5, the distribution of the *sum* of
   two independent measures, ``(f * f')(t) = Σ_x f(x) f'(t − x)``, the discrete form of the
-  integral. A policy is evaluated on a distribution just as on a window.
+  integral. A policy is evaluated on a distribution just as on a window. A service's
+  ``<CombinedMeasure>`` names the measures :func:`combined_distribution` sums (D72).
 - :class:`PolicyEvaluator` says whether a policy (or a client's requirement) is met: ``None``
   when there is no sample yet (unknown), otherwise ``P(within) ≥ probability``.
 

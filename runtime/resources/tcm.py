@@ -6,6 +6,9 @@ which rates every scenario on the current measure windows:
 
 - **Conditions** of a scenario: its policies, then the client's quality requirements QR (a list
   of Require-like bounds per measure, changed at run time with :meth:`set_requirements`).
+- **Combined measures** (``<CombinedMeasure>``, eq. 4.5; :meth:`from_service` takes them): a
+  condition on one is evaluated on the convolution of its components' last ``window`` samples,
+  each component observed under its own name (docs/decisions.md D72).
 - **f_ev** (Algorithm 1, eq. 4.8): ``acc`` counts the conditions that hold — the line
   ``if Q_i = RQ_i`` is read as "the condition's probability condition holds",
   ``P(lower ≤ Q ≤ upper) ≥ probability`` over its window (eq. 4.4); ``suit = acc / n``;
