@@ -124,3 +124,21 @@ def test_the_example_service_publishes_its_combined_measure(
     assert measures["staleness"] == pytest.approx(measures["age"] + measures["period"])
     assert 0.0 <= message["probabilities"]["staleness"] <= 1.0
     assert message["scenario"] in ("fine", "coarse")
+
+
+def test_a_requirement_on_the_combined_measure_selects_the_scenario_that_can_promise_it(service: Service) -> None:
+    """A client's QR on ``staleness`` (eq. 4.9) is evaluated on the convolution too: only the fine
+    scenario's policy lies within 0.2 s, so a requirement of 0.2 s keeps the TCM there and one of
+    0.05 s, which the measured sum cannot meet, raises an alarm."""
+    from runtime.resources.api import Bounds
+
+    tcm = TaskConfiguringModule.from_service(service, requirements=[Bounds("staleness", upper=0.2, probability=0.9)])
+    rng = np.random.default_rng(9)
+    feed(tcm, rng.uniform(0.02, 0.04, 40), rng.uniform(0.045, 0.055, 40))
+    decision = tcm.evaluate(1.0)
+    assert decision.active == "fine" and not decision.alarms
+    requirement = decision.evaluations["fine"].conditions[-1]
+    assert (requirement.kind, requirement.measure, requirement.probability) == ("requirement", "staleness", 1.0)
+    assert decision.evaluations["coarse"].conditions[-1].compatible is False  # its 0.4 s bound exceeds 0.2 s
+    decision = tcm.set_requirements([Bounds("staleness", upper=0.05, probability=0.9)], 2.0)
+    assert any(alarm.raised for alarm in decision.alarms)
