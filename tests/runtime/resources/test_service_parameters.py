@@ -91,3 +91,39 @@ def test_max_sensors_reaches_the_fusion_plugin(resource: SmartResource, pair: tu
             with pytest.raises(ServiceError, match="max_sensors"):
                 client.configure(parameters={"max_sensors": 0}, timeout=10)  # refused by the Parameter's min
             assert plugin.max_sensors == 3
+
+
+def test_a_value_the_plugin_refuses_is_an_error_naming_the_service(
+    tmp_path: Path, pair: tuple[Transport, Transport]
+) -> None:
+    """Without min/max on the Parameter the service API lets 0 through; the plugin refuses it: at
+    start (the default) the service fails to start, at run time the request is refused."""
+    server, remote = pair
+    registry = Registry(load_entry_points=False)
+    registry.register("plugin", "feature-fusion", FeatureFusion)
+    path = tmp_path / "system.xml"
+    path.write_text(SYSTEM.replace('default="2" min="1" max="8"', 'default="0"'), encoding="utf-8")
+    record = load(path).resource("GlobalRecog")
+    assert record is not None
+    runtime = SmartResourceRuntime(record, server, registry=registry, sources={"fusion": three_lines_and_a_point})
+    runtime.setup()
+    try:
+        with pytest.raises(ValueError, match=r"service GlobalRecog.Fusion: .*'max_sensors' = 0 must be a whole number"):
+            runtime.start()
+    finally:
+        runtime.stop()
+
+    path.write_text(SYSTEM.replace('default="2" min="1" max="8"', 'default="2"'), encoding="utf-8")
+    record = load(path).resource("GlobalRecog")
+    assert record is not None
+    runtime = SmartResourceRuntime(
+        record, server, registry=registry, sources={"fusion": three_lines_and_a_point}, announce_period=0.2
+    )
+    with runtime:
+        entry = ServiceDirectory(remote).wait_for("GlobalRecog", "Fusion", timeout=10)
+        with ServiceClient(remote, entry, "agent1") as client:
+            client.connect(timeout=10)
+            with pytest.raises(ServiceError, match="'max_sensors' = 0 must be a whole number"):
+                client.configure(parameters={"max_sensors": 0}, timeout=10)
+            plugin = runtime.streams["fusion"].topology.plugins["fusion"]
+            assert isinstance(plugin, FeatureFusion) and plugin.max_sensors == 2
