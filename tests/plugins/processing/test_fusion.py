@@ -279,9 +279,24 @@ def test_the_service_parameter_max_sensors_sets_the_cap_at_run_time() -> None:
     assert obj["observations"] == 2
     plugin.apply_service_parameters({"max_sensors": 3})
     assert plugin.process(three_lines_and_a_point(), CTX)["objects"][0]["observations"] == 3
-    with pytest.raises(ParamError, match="service parameter 'max_sensors' = 0 must be a whole number"):
-        plugin.apply_service_parameters({"max_sensors": 0})
+    for bad in (0, 2.5, "3", True):
+        with pytest.raises(ParamError, match=f"service parameter 'max_sensors' = {bad!r} must be a whole number"):
+            plugin.apply_service_parameters({"max_sensors": bad})
     assert plugin.max_sensors == 3
+
+
+def test_the_cap_holds_per_object_not_per_frame() -> None:
+    """Two cylinders, each seen by both inputs: with maxSensors 2 each keeps both of its observations."""
+    blue = (0.45, 0.05, 1.25)
+    data = {
+        "rgb": rgb(seen("cylinder_blue_dots", blue, 0.7), seen("cylinder_red_stripes", RED, 0.6)),
+        "depth": depth(("cylinder", blue, 0.8), ("cylinder", RED, 0.9)),
+    }
+    objects = fusion({"maxSensors": 2}).process(data, CTX)["objects"]
+    assert sorted((o["name"], o["observations"]) for o in objects) == [
+        ("cylinder_blue_dots", 2),
+        ("cylinder_red_stripes", 2),
+    ]
 
 
 # --------------------------------------------------------------------------- poses, cameras, geometry
