@@ -142,3 +142,19 @@ def test_a_requirement_on_the_combined_measure_selects_the_scenario_that_can_pro
     assert decision.evaluations["coarse"].conditions[-1].compatible is False  # its 0.4 s bound exceeds 0.2 s
     decision = tcm.set_requirements([Bounds("staleness", upper=0.05, probability=0.9)], 2.0)
     assert any(alarm.raised for alarm in decision.alarms)
+
+
+def test_the_quality_message_carries_the_sum_once_every_component_has_a_value(
+    service: Service, pair: tuple[Transport, Transport]
+) -> None:
+    from runtime.resources.instance import Instance
+
+    sent: list[tuple[str, dict[str, Any]]] = []
+    instance = Instance("Camera", service, "", pair[0], lambda kind, message: sent.append((kind, message)))
+    instance.observe("deadline", 0.03)  # the kernel's deadline is the service's "age"
+    instance.tick(1.0)
+    assert sent[-1][1]["measures"] == {"age": 0.03}
+    instance.observe("rate", 0.05)  # and its rate the "period"
+    instance.tick(2.0)
+    assert sent[-1][1]["measures"] == pytest.approx({"age": 0.03, "period": 0.05, "staleness": 0.08})
+    assert sent[-1][1]["probabilities"] == {"staleness": 1.0}
