@@ -53,7 +53,7 @@ def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
             problem = check_value(parameter, configure.value)
             if problem:
                 report.error(configure, f"value {configure.value!r} for {configure.parameter} {problem}", "value")
-        measures = [m.name for m in service.measures]
+        measures = service.measure_names()
         for require in uses.requires:
             if require.measure not in measures:
                 report.error(

@@ -79,6 +79,7 @@ from .missions import (
 )
 from .resources import (
     TCM,
+    CombinedMeasure,
     Parameter,
     Plugin,
     Policy,
@@ -109,6 +110,7 @@ __all__ = [
     "BehaviorOutput",
     "Circle",
     "Clamp",
+    "CombinedMeasure",
     "CompositionMatrix",
     "Configure",
     "Connect",

@@ -96,6 +96,7 @@ def describe(resource: SmartResource, service: Service, node: str) -> dict[str, 
             {"name": m.name, "kind": m.kind, "domain": m.domain, "unit": m.unit, "source": m.source}
             for m in service.measures
         ],
+        "combined": [{"name": c.name, "measures": list(c.measures), "unit": c.unit} for c in service.combined],
         "scenarios": [
             {
                 "name": s.name,
@@ -221,7 +222,7 @@ def parse_request(service: Service, message: Any) -> tuple[Request | None, list[
         if not isinstance(raw_requirements, list | tuple) or len(raw_requirements) > MAX_REQUIREMENTS:
             errors.append(f"requirements must be a list of at most {MAX_REQUIREMENTS} bounds")
         else:
-            measures = {m.name for m in service.measures}
+            measures = set(service.measure_names())
             parsed = []
             for index, item in enumerate(raw_requirements):
                 bounds, problems = _bounds(item, index, measures)

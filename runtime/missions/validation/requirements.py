@@ -72,7 +72,7 @@ def _not_provided(system: System, uses: Uses, where: str, mission: str, state: s
 
 def _check_requires(uses: Uses, service: Service, where: str, mission: str, state: str, strict: bool) -> list[Finding]:
     found: list[Finding] = []
-    measures = [m.name for m in service.measures]
+    measures = service.measure_names()
     usable: list[Require] = []
     for require in uses.requires:
         qr = f"{where} requires {uses.service} {require.measure} in {_bounds(require.lower, require.upper)}"

@@ -158,3 +158,19 @@ def test_the_quality_message_carries_the_sum_once_every_component_has_a_value(
     instance.tick(2.0)
     assert sent[-1][1]["measures"] == pytest.approx({"age": 0.03, "period": 0.05, "staleness": 0.08})
     assert sent[-1][1]["probabilities"] == {"staleness": 1.0}
+
+
+def test_a_client_may_require_a_combined_measure_and_discovers_it(resource: SmartResource, service: Service) -> None:
+    from runtime.resources.api import describe, parse_request
+
+    combined = service.combined[0].name
+    request, errors = parse_request(
+        service,
+        {"op": "connect", "client": "c1", "id": 1, "requirements": [{"measure": combined, "upper": 1.0}]},
+    )
+    assert errors == [] and request is not None
+    assert [r.measure for r in request.requirements or ()] == [combined]
+    entry = describe(resource, service, "node")
+    assert entry["combined"] == [
+        {"name": combined, "measures": list(service.combined[0].measures), "unit": service.combined[0].unit}
+    ]
