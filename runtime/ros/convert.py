@@ -82,7 +82,8 @@ def to_message(types: RosTypes, type_name: str, payload: Any, *, where: str = "p
     """
     if type_name == IMAGE and isinstance(payload, np.ndarray):
         return _image_message(types, payload, {}, where)
-    if type_name == IMAGE and isinstance(payload, Mapping) and isinstance(payload.get("data"), np.ndarray):
+    pixels = payload.get("data") if isinstance(payload, Mapping) else None
+    if type_name == IMAGE and isinstance(pixels, np.ndarray) and pixels.ndim > 1:  # else raw Image fields
         rest = {k: v for k, v in payload.items() if k != "data"}
         return _image_message(types, payload["data"], rest, where)
     return _struct(types, type_name, payload, where)
@@ -176,8 +177,9 @@ def _scalar(base: str, value: Any, where: str) -> Any:
 def _time(types: RosTypes, type_name: str, seconds: Any, where: str) -> Any:
     if isinstance(seconds, bool) or not isinstance(seconds, int | float | np.number) or not math.isfinite(seconds):
         raise RosTypeError(f"{where} is {seconds!r}, not seconds (a number) or {{sec, nanosec}}")
-    total = round(float(seconds) * 1e9)
-    sec, nanosec = divmod(total, 1_000_000_000)
+    sec = math.floor(seconds)  # whole seconds first: seconds × 1e9 would round away the nanoseconds of an epoch time
+    nanosec = round((float(seconds) - sec) * 1e9)
+    sec, nanosec = sec + nanosec // 1_000_000_000, nanosec % 1_000_000_000
     if not -(2**31) <= sec < 2**31:
         raise RosTypeError(f"{where} is {seconds!r} s, outside the int32 seconds of {type_name}")
     return types.message_class(type_name)(sec=sec, nanosec=nanosec)
@@ -245,7 +247,7 @@ def image_array(message: Any) -> np.ndarray:
 
 def _plain(types: RosTypes, type_name: str, message: Any) -> Any:
     if type_name in TIME_TYPES:
-        return message.sec + message.nanosec * 1e-9
+        return (message.sec * 1_000_000_000 + message.nanosec) / 1_000_000_000  # int / int: one rounding
     result: dict[str, Any] = {}
     for name, (kind, detail) in types.fields(type_name):
         value = getattr(message, name)
