@@ -127,7 +127,7 @@ class BagRecorder:
         self._type_of(topic)
         if not math.isfinite(stamp) or stamp < 0:
             raise BagError(
-                f"{self.path}: {topic}: a message time must be a non-negative number of seconds, got {stamp!r}"
+                f"{self.path}: {topic}: a message time must be non-negative seconds, got {stamp!r}"
             )
         self._open_writer().write(self._connections[topic], round(stamp * 1e9), data)
 
