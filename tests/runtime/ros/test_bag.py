@@ -40,13 +40,22 @@ def _record(path: Path, storage: str, steps: int = 5) -> None:
             bag.add_topic(topic, type_name, qos=qos)
         for i in range(steps):
             t = START + 0.1 * i
-            bag.write("/robot1/scan", {"header": {"stamp": t, "frame_id": "laser"},
-                                       "ranges": np.full(90, 1.0 + i, np.float32)}, t)
+            bag.write(
+                "/robot1/scan",
+                {"header": {"stamp": t, "frame_id": "laser"}, "ranges": np.full(90, 1.0 + i, np.float32)},
+                t,
+            )
             bag.write("/robot1/camera/image", np.full((4, 6, 3), i, np.uint8), t + 0.01)
-            bag.write("/robot1/odom", {"header": {"stamp": t, "frame_id": "odom"},
-                                       "pose": {"pose": {"position": {"x": 0.1 * i}}}}, t + 0.02)
-            bag.write("/tf", {"transforms": [{"child_frame_id": "base_link",
-                                              "transform": {"rotation": {"w": 1.0}}}]}, t + 0.03)
+            bag.write(
+                "/robot1/odom",
+                {"header": {"stamp": t, "frame_id": "odom"}, "pose": {"pose": {"position": {"x": 0.1 * i}}}},
+                t + 0.02,
+            )
+            bag.write(
+                "/tf",
+                {"transforms": [{"child_frame_id": "base_link", "transform": {"rotation": {"w": 1.0}}}]},
+                t + 0.03,
+            )
             bag.write("/ckm/detections", {"label": f"cup{i}", "reliability": 0.5}, t + 0.04)
 
 
@@ -83,7 +92,7 @@ def test_mcap_reads_back_with_the_mcap_library_and_its_ros2_decoder(tmp_path: Pa
         assert header.profile == "ros2"
         summary = reader.get_summary()
         assert summary is not None
-        assert {s.name: s.encoding for s in summary.schemas.values()} == {t: "ros2msg" for t in TOPICS.values()}
+        assert {s.name: s.encoding for s in summary.schemas.values()} == dict.fromkeys(TOPICS.values(), "ros2msg")
         assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
         decoded = list(reader.iter_decoded_messages())
     assert len(decoded) == 25
@@ -104,18 +113,25 @@ def test_sqlite3_reads_back_with_plain_sqlite_and_the_mcap_ros2_decoder(tmp_path
     path = tmp_path / "run"
     _record(path, "sqlite3")
     with sqlite3.connect(path / "run.db3") as db:
-        topics = {tid: (name, type_name, fmt, digest) for tid, name, type_name, fmt, digest in db.execute(
-            "SELECT id, name, type, serialization_format, type_description_hash FROM topics")}
-        definitions = dict(db.execute(
-            "SELECT topic_type, encoded_message_definition FROM message_definitions WHERE encoding = 'ros2msg'"))
+        topics = {
+            tid: (name, type_name, fmt, digest)
+            for tid, name, type_name, fmt, digest in db.execute(
+                "SELECT id, name, type, serialization_format, type_description_hash FROM topics"
+            )
+        }
+        definitions = dict(
+            db.execute(
+                "SELECT topic_type, encoded_message_definition FROM message_definitions WHERE encoding = 'ros2msg'"
+            )
+        )
         rows = db.execute("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp").fetchall()
     assert {t[0] for t in topics.values()} == set(TOPICS) and {t[2] for t in topics.values()} == {"cdr"}
     assert set(definitions) == set(TOPICS.values())
     assert len(rows) == 25
     decoders = {t: generate_dynamic(t, text)[t] for t, text in definitions.items()}
     decoded = [(topics[tid][0], decoders[topics[tid][1]](data)) for tid, _stamp, data in rows]
-    assert [d.label for topic, d in decoded if topic == "/ckm/detections"] == [f"cup{i}" for i in range(5)]  # type: ignore[attr-defined]
-    assert [d.ranges[0] for topic, d in decoded if topic == "/robot1/scan"] == [1.0, 2.0, 3.0, 4.0, 5.0]  # type: ignore[attr-defined]
+    assert [d.label for topic, d in decoded if topic == "/ckm/detections"] == [f"cup{i}" for i in range(5)]
+    assert [d.ranges[0] for topic, d in decoded if topic == "/robot1/scan"] == [1.0, 2.0, 3.0, 4.0, 5.0]
 
 
 def test_rosbags_reader_sees_every_connection_with_its_hash(bag: tuple[Path, str]) -> None:
@@ -123,7 +139,8 @@ def test_rosbags_reader_sees_every_connection_with_its_hash(bag: tuple[Path, str
     ros = _types()
     with Reader(path) as reader:
         assert {c.topic: (c.msgtype, c.digest) for c in reader.connections} == {
-            t: (n, ros.rihs01(n)) for t, n in TOPICS.items()}
+            t: (n, ros.rihs01(n)) for t, n in TOPICS.items()
+        }
         assert sum(1 for _ in reader.messages()) == 25
 
 

@@ -29,7 +29,11 @@ def _message(name: str, *fields: tuple[str, str, int]) -> MessageType:
 
 def test_snake_case() -> None:
     assert [snake_case(n) for n in ("angleMin", "x", "rangeMax2D", "frame_id")] == [
-        "angle_min", "x", "range_max2_d", "frame_id"]
+        "angle_min",
+        "x",
+        "range_max2_d",
+        "frame_id",
+    ]
 
 
 def test_the_example_vector3_fits_geometry_msgs_vector3(ros: RosTypes) -> None:
@@ -44,14 +48,27 @@ def test_the_example_vector3_fits_geometry_msgs_vector3(ros: RosTypes) -> None:
 
 def test_a_ckm_scan_type_shaped_like_the_ros_one_fits(ros: RosTypes) -> None:
     header = _message("Header", ("stamp", "time", 1), ("frameId", "string", 1))
-    scan = _message("Scan", ("header", "Header", 1), ("angleMin", "float32", 1), ("angleIncrement", "float32", 1),
-                    ("ranges", "float32", 0), ("intensities", "float32", 0))
+    scan = _message(
+        "Scan",
+        ("header", "Header", 1),
+        ("angleMin", "float32", 1),
+        ("angleIncrement", "float32", 1),
+        ("ranges", "float32", 0),
+        ("intensities", "float32", 0),
+    )
     assert compatibility_problems("Scan", "sensor_msgs/msg/LaserScan", ros, _types(header, scan)) == []
 
 
 def test_number_widths_arrays_and_nesting(ros: RosTypes) -> None:
-    info = _message("Info", ("width", "uint16", 1), ("height", "float64", 1), ("k", "float64", 9), ("d", "float64", 0),
-                    ("p", "float64", 3), ("r", "float32", 0))
+    info = _message(
+        "Info",
+        ("width", "uint16", 1),
+        ("height", "float64", 1),
+        ("k", "float64", 9),
+        ("d", "float64", 0),
+        ("p", "float64", 3),
+        ("r", "float32", 0),
+    )
     assert compatibility_problems("Info", "sensor_msgs/msg/CameraInfo", ros, _types(info)) == [
         "Info.height: a float64 does not fit a uint32 without loss",
         "Info.p: 3 values do not fit an array of 12",
@@ -59,13 +76,16 @@ def test_number_widths_arrays_and_nesting(ros: RosTypes) -> None:
     ]
     flags = _message("Flags", ("data", "int32", 1))
     assert compatibility_problems("Flags", "std_msgs/msg/Bool", ros, _types(flags)) == [
-        "Flags.data: a int32 cannot fill a bool"]
+        "Flags.data: a int32 cannot fill a bool"
+    ]
     many = _message("Many", ("x", "float64", 2))
     assert compatibility_problems("Many", "geometry_msgs/msg/Vector3", ros, _types(many)) == [
-        "Many.x: 2 values of float64 cannot fill a single field"]
+        "Many.x: 2 values of float64 cannot fill a single field"
+    ]
     listed = _message("Listed", ("name", "string", 1))
     assert compatibility_problems("Listed", "sensor_msgs/msg/JointState", ros, _types(listed)) == [
-        "Listed.name: one string cannot fill an array or sequence"]
+        "Listed.name: one string cannot fill an array or sequence"
+    ]
 
 
 def test_bytes_time_and_nested_types(ros: RosTypes) -> None:
@@ -79,14 +99,18 @@ def test_bytes_time_and_nested_types(ros: RosTypes) -> None:
     stamp = _message("Stamp", ("stamp", "float64", 1))
     header = _message("H", ("stamp", "Stamp", 1))
     assert compatibility_problems("H", "std_msgs/msg/Header", ros, _types(stamp, header)) == [
-        "H.stamp.stamp: builtin_interfaces/msg/Time has no field 'stamp'"]
+        "H.stamp.stamp: builtin_interfaces/msg/Time has no field 'stamp'"
+    ]
     assert compatibility_problems("time", "builtin_interfaces/msg/Time", ros, {}) == []
     assert compatibility_problems("float64", "std_msgs/msg/Float64", ros, {}) == [
-        "float64: a float64 is not a std_msgs/msg/Float64 message"]
+        "float64: a float64 is not a std_msgs/msg/Float64 message"
+    ]
 
 
 def test_unknown_types(ros: RosTypes) -> None:
     assert compatibility_problems("Nope", "geometry_msgs/msg/Twist", ros, {}) == [
-        "Nope: unknown CKM message type 'Nope'"]
+        "Nope: unknown CKM message type 'Nope'"
+    ]
     assert compatibility_problems("Nope", "geometry_msgs/msg/Twist3", ros, {}) == [
-        "Nope: unknown ROS 2 type 'geometry_msgs/msg/Twist3'"]
+        "Nope: unknown ROS 2 type 'geometry_msgs/msg/Twist3'"
+    ]
