@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 from rosbags.interfaces import (
     MessageDefinitionFormat,
@@ -34,6 +34,8 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_types_from_msg
+
+from ckmconf.model import Topic
 
 from .convert import from_message, to_message
 from .types import RosTypeError, RosTypes
@@ -69,6 +71,19 @@ def offered_qos(
         liveliness_lease_duration=QosTime(0, 0),
         avoid_ros_namespace_conventions=False,
     )
+
+
+class RecordedSample(Protocol):
+    """What a received CKM sample offers (``runtime.network.api.Sample``)."""
+
+    @property
+    def topic(self) -> str: ...
+    @property
+    def value(self) -> Any: ...
+    @property
+    def stamp(self) -> float: ...
+    @property
+    def offset(self) -> float: ...
 
 
 class BagRecorder:
@@ -116,6 +131,21 @@ class BagRecorder:
             offered_qos_profiles=[qos or offered_qos()],
         )
         self._topic_types[topic] = type_name
+
+    def add_topics(self, topics: Iterable[Topic]) -> list[str]:
+        """Declare every configured ``<Topic>`` whose type is a known ROS 2 type, offered the QoS
+        it is configured with; returns their names (topics of CKM types are left out)."""
+        declared = []
+        for topic in topics:
+            if topic.type in self.types and topic.name not in self._connections:
+                qos = offered_qos(topic.reliability, topic.history, topic.deadline, topic.lifespan)
+                self.add_topic(topic.name, topic.type, qos=qos)
+                declared.append(topic.name)
+        return declared
+
+    def write_sample(self, sample: RecordedSample) -> None:
+        """Record a received sample at its publication time, on this host's clock."""
+        self.write(sample.topic, sample.value, sample.stamp - sample.offset)
 
     def write(self, topic: str, payload: Any, stamp: float) -> None:
         """Record the CKM ``payload`` of ``topic`` at ``stamp`` seconds (since the UNIX epoch)."""

@@ -14,6 +14,8 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 from ruamel.yaml import YAML
 
+from ckmconf.model import Topic
+from runtime.network.api import Sample
 from runtime.ros.bag import BagError, BagRecorder, BagSource, offered_qos
 from runtime.ros.types import RosTypes
 
@@ -196,3 +198,24 @@ def test_recorder_errors(tmp_path: Path) -> None:
         BagRecorder(tmp_path / "b").open()
     with pytest.raises(BagError, match="not a rosbag2 bag"):
         list(BagSource(tmp_path).messages())
+
+
+def test_configured_topics_and_received_samples_are_recorded(tmp_path: Path) -> None:
+    topics = [
+        Topic(name="/robot1/scan", type="sensor_msgs/msg/LaserScan", reliability="best-effort", history=3,
+              deadline=0.5),
+        Topic(name="/nav/pose", type="Pose2D"),  # a CKM MessageType: not a ROS type, left out
+        Topic(name="/cmd_vel", type="geometry_msgs/msg/Twist"),
+    ]
+    with BagRecorder(tmp_path / "run", storage="sqlite3") as bag:
+        assert bag.add_topics(topics) == ["/robot1/scan", "/cmd_vel"]
+        assert bag.add_topics(topics) == []  # declared already
+        sample = Sample("/cmd_vel", {"linear": {"x": 0.25}}, stamp=START + 2.0, source=7, seq=1, received=START + 2.1,
+                        offset=0.5)
+        bag.write_sample(sample)
+    info = YAML(typ="safe").load((tmp_path / "run" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    qos = info["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"][0]
+    assert (qos["reliability"], qos["depth"], qos["deadline"]) == ("best_effort", 3, {"sec": 0, "nsec": 500_000_000})
+    (message,) = list(BagSource(tmp_path / "run").messages())
+    assert (message.topic, message.time) == ("/cmd_vel", START + 1.5)  # publisher clock minus its offset
+    assert message.payload["linear"]["x"] == 0.25
