@@ -17,13 +17,12 @@ Rolling); ``docs/ros.md`` says more. Everything here is text and bytes; no Zenoh
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import hashlib
 import struct
 from dataclasses import dataclass
 from enum import Enum
 from typing import Literal
+
+import xxhash
 
 from .types import dds_type_name, is_ros_type_name, ros_type_name
 
@@ -289,39 +288,13 @@ def parse_liveliness_token(keyexpr: str) -> ParsedToken:
 # ---------------------------------------------------------------------- GID and attachments
 
 
-def _xxh3_128() -> ctypes.CDLL | None:
-    path = ctypes.util.find_library("xxhash")
-    if path is None:
-        return None
-    try:
-        library = ctypes.CDLL(path)
-        library.XXH3_128bits.restype = _XXH128
-        library.XXH3_128bits.argtypes = [ctypes.c_char_p, ctypes.c_size_t]
-    except (OSError, AttributeError):
-        return None
-    return library
-
-
-class _XXH128(ctypes.Structure):
-    _fields_ = [("low64", ctypes.c_uint64), ("high64", ctypes.c_uint64)]
-
-
-_XXHASH = _xxh3_128()
-
-
 def entity_gid(token: str) -> bytes:
     """The 16-byte GID of the entity with liveliness token ``token``.
 
-    rmw_zenoh hashes the token with XXH3-128 and stores the low then the high 64 bits (little
-    endian). That is done here with the system's libxxhash when it is installed; without it the
-    GID is the first 16 bytes of BLAKE2b of the token — still unique and stable, but not the
-    value rmw_zenoh would compute (decision D96).
+    rmw_zenoh hashes the token with XXH3-128 and stores the low then the high 64 bits, each
+    little endian: the 128-bit digest as one little-endian integer.
     """
-    raw = token.encode("utf-8")
-    if _XXHASH is not None:
-        digest = _XXHASH.XXH3_128bits(raw, len(raw))
-        return struct.pack("<QQ", digest.low64, digest.high64)
-    return hashlib.blake2b(raw, digest_size=GID_SIZE).digest()
+    return xxhash.xxh3_128_intdigest(token.encode("utf-8")).to_bytes(GID_SIZE, "little")
 
 
 @dataclass(frozen=True)

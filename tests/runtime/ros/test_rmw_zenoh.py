@@ -7,12 +7,9 @@ and labelled attachments are cross-checked with eclipse-zenoh's own serializer (
 
 from __future__ import annotations
 
-import ctypes.util
-
 import pytest
 from zenoh.ext import Int64, UInt8, z_serialize
 
-from runtime.ros import rmw_zenoh
 from runtime.ros.rmw_zenoh import (
     DEFAULT_QOS,
     Attachment,
@@ -164,19 +161,11 @@ def test_bad_attachments_are_refused() -> None:
         encode_attachment(Attachment(1, 2, bytes(16)), "json")  # type: ignore[arg-type]
 
 
-@pytest.mark.skipif(ctypes.util.find_library("xxhash") is None, reason="needs the system's libxxhash")
 def test_the_gid_is_the_xxh3_128_of_the_token_low_half_first() -> None:
     # XXH3-128 of the empty input is 99aa06d3014798d8 6001c324468d497f (high, low): the xxHash test vector.
     assert entity_gid("") == bytes.fromhex("7f498d4624c30160d8984701d306aa99")
     token = "@ros2_lv/2/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener"
     assert entity_gid(token) == entity_gid(token) != entity_gid(token + "2")
-
-
-def test_without_libxxhash_the_gid_is_blake2b(monkeypatch: pytest.MonkeyPatch) -> None:
-    import hashlib
-
-    monkeypatch.setattr(rmw_zenoh, "_XXHASH", None)
-    assert entity_gid("x") == hashlib.blake2b(b"x", digest_size=16).digest()
 
 
 def test_bad_names_and_tokens_are_refused(string_hash: str) -> None:
