@@ -38,9 +38,6 @@ EXAMPLES = sorted((REPO / "configs" / "examples").glob("*.xml"))
 # Examples that describe what no code runs yet (kinds of the simulation issue, off-line-only
 # services): verify must say so. Fixing one means moving it out of this set.
 NOT_RUNNABLE = {
-    "behavior_services.xml",  # services without scenarios; behavior kind 'spot-object'
-    "composition_matrix.xml",  # services without scenarios; behavior kind 'follow-path'
-    "mission_nested.xml",  # behavior kinds 'plan-path', 'follow-path', 'spot-object', 'pick-object'
     "ros_resource.xml",  # a ROS-kernel resource; a service without scenarios
     "service_api.xml",  # a service without scenarios
     "split_system.xml",  # behavior kinds 'follow-path', 'wait-for-pickup'; services without scenarios
