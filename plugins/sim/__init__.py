@@ -1,0 +1,3 @@
+"""The simulated laboratory of thesis §7.1: a pybullet world built from the Environment model,
+the mobile manipulator (Turtlebot role) and the humanoid (Nao role), their sensors, and the
+devices the ``hardware.sim`` backend serves channels from. See docs/simulation.md."""

@@ -1,0 +1,154 @@
+"""Simulated sensors: a 2D lidar (``rayTestBatch``), an RGB-D camera (``getCameraImage``: colour and
+depth from one render, only when asked, at the asked resolution), an IMU and a contact bumper."""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pybullet as p
+
+from .robots import Robot
+
+Array = npt.NDArray[np.float64]
+
+
+def _rotation(orientation: tuple[float, ...]) -> Array:
+    return np.array(p.getMatrixFromQuaternion(orientation), dtype=float).reshape(3, 3)
+
+
+class Lidar:
+    """A planar scanner on a link (Hokuyo URG-04LX by default: 683 beams over 240°, 0.02–5.6 m).
+
+    Beams sweep counter-clockwise from -fov/2 to +fov/2 about the link's z axis, starting at the
+    link's x axis; a beam that hits nothing reads ``range_max``. ``noise`` is the standard
+    deviation (m) added to each hit.
+    """
+
+    def __init__(
+        self, robot: Robot, link: str, *, beams: int = 683, fov: float = 4.1888, range_min: float = 0.02,
+        range_max: float = 5.6, noise: float = 0.0, seed: int = 0,
+    ) -> None:
+        self.robot, self.link = robot, robot.link(link)
+        self.beams, self.fov, self.range_min, self.range_max = beams, fov, range_min, range_max
+        self.noise = noise
+        self._rng = np.random.default_rng(seed)
+        angles = np.linspace(-fov / 2, fov / 2, beams)
+        self.angles = angles
+        self._directions = np.stack([np.cos(angles), np.sin(angles), np.zeros(beams)], axis=1)
+
+    def scan(self) -> Array:
+        """Ranges (m) of every beam, in beam order."""
+        position, orientation = self.robot.link_pose(self.link)
+        origin = np.asarray(position)
+        directions = self._directions @ _rotation(orientation).T
+        starts = origin + directions * self.range_min
+        ends = origin + directions * self.range_max
+        hits = p.rayTestBatch(starts.tolist(), ends.tolist(), physicsClientId=self.robot.world.client)
+        fractions = np.array([hit[2] if hit[0] != self.robot.body else 1.0 for hit in hits])
+        ranges = self.range_min + fractions * (self.range_max - self.range_min)
+        if self.noise > 0.0:
+            hit = fractions < 1.0
+            ranges[hit] += self._rng.normal(0.0, self.noise, int(hit.sum()))
+        return np.clip(ranges, self.range_min, self.range_max)
+
+
+@dataclass
+class Frame:
+    """One render: colour (H×W×3 uint8), depth (H×W metres) and the intrinsics it was taken with."""
+
+    rgb: npt.NDArray[np.uint8]
+    depth: Array
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+
+class Camera:
+    """A pinhole camera on a link whose frame is optical (ROS convention: z forward, y down).
+
+    ``fov`` is the horizontal field of view (rad). ``render(width, height)`` makes one TinyRenderer
+    image giving colour and depth together; nothing is rendered until asked.
+    """
+
+    def __init__(self, robot: Robot, link: str, *, fov: float = 1.0123, near: float = 0.05, far: float = 10.0) -> None:
+        self.robot, self.link = robot, robot.link(link)
+        self.fov, self.near, self.far = fov, near, far
+        self.renders = 0
+
+    def matrices(self, width: int, height: int) -> tuple[list[float], list[float], float]:
+        """View and projection matrices for a ``width``×``height`` image, and the focal length (px)."""
+        position, orientation = self.robot.link_pose(self.link)
+        rotation = _rotation(orientation)
+        forward, up = rotation[:, 2], -rotation[:, 1]
+        eye = np.asarray(position)
+        view = p.computeViewMatrix(eye.tolist(), (eye + forward).tolist(), up.tolist())
+        focal = (width / 2) / math.tan(self.fov / 2)
+        fov_y = math.degrees(2 * math.atan((height / 2) / focal))
+        projection = p.computeProjectionMatrixFOV(fov_y, width / height, self.near, self.far)
+        return list(view), list(projection), focal
+
+    def render(self, width: int = 640, height: int = 480) -> Frame:
+        """Render one frame (colour and depth from the same render)."""
+        view, projection, focal = self.matrices(width, height)
+        _, _, pixels, zbuffer, _ = p.getCameraImage(
+            width, height, view, projection, renderer=p.ER_TINY_RENDERER,
+            flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.robot.world.client,
+        )
+        self.renders += 1
+        rgba = np.asarray(pixels, dtype=np.uint8).reshape(height, width, 4)
+        z = np.asarray(zbuffer, dtype=float).reshape(height, width)
+        depth = self.far * self.near / (self.far - (self.far - self.near) * z)
+        return Frame(np.ascontiguousarray(rgba[:, :, :3]), depth, focal, focal, (width - 1) / 2, (height - 1) / 2)
+
+    def project(self, point: tuple[float, float, float]) -> tuple[float, float, float]:
+        """Pixel (u, v) and depth (m) where a world point appears, by the pinhole model."""
+        position, orientation = self.robot.link_pose(self.link)
+        local = _rotation(orientation).T @ (np.asarray(point) - np.asarray(position))
+        return float(local[0] / local[2]), float(local[1] / local[2]), float(local[2])
+
+
+class Imu:
+    """Angular velocity (rad/s, body frame) and linear acceleration (m/s², with gravity) of a link."""
+
+    def __init__(self, robot: Robot, link: str, *, noise: float = 0.0, seed: int = 0) -> None:
+        self.robot, self.link = robot, robot.link(link)
+        self.noise = noise
+        self._rng = random.Random(seed)
+        self._velocity: Array | None = None
+        self._time = 0.0
+
+    def read(self) -> tuple[float, ...]:
+        """(wx, wy, wz, ax, ay, az) in the link frame."""
+        cid = self.robot.world.client
+        if self.link < 0:
+            linear, angular = p.getBaseVelocity(self.robot.body, physicsClientId=cid)
+        else:
+            state = p.getLinkState(self.robot.body, self.link, computeLinkVelocity=True, physicsClientId=cid)
+            linear, angular = state[6], state[7]
+        rotation = _rotation(self.robot.link_pose(self.link)[1])
+        now = self.robot.world.time
+        velocity = np.asarray(linear, dtype=float)
+        accel = np.zeros(3)
+        if self._velocity is not None and now > self._time:
+            accel = (velocity - self._velocity) / (now - self._time)
+        self._velocity, self._time = velocity, now
+        values = [*(rotation.T @ np.asarray(angular)), *(rotation.T @ (accel + np.array([0.0, 0.0, 9.81])))]
+        return tuple(float(v) + (self._rng.gauss(0.0, self.noise) if self.noise else 0.0) for v in values)
+
+
+class Bumper:
+    """1 while a link of the robot touches a body other than the floor and itself, else 0."""
+
+    def __init__(self, robot: Robot, link: str, floor: int) -> None:
+        self.robot, self.link, self.floor = robot, robot.link(link), floor
+
+    def pressed(self) -> bool:
+        """Whether the link is in contact with an obstacle now."""
+        contacts = p.getContactPoints(bodyA=self.robot.body, linkIndexA=self.link,
+                                      physicsClientId=self.robot.world.client)
+        return any(c[2] not in (self.floor, self.robot.body) for c in contacts)
