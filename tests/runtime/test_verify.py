@@ -39,9 +39,7 @@ EXAMPLES = sorted((REPO / "configs" / "examples").glob("*.xml"))
 # services): verify must say so. Fixing one means moving it out of this set.
 NOT_RUNNABLE = {
     "ros_resource.xml",  # a ROS-kernel resource; a service without scenarios
-    "service_api.xml",  # a service without scenarios
     "split_system.xml",  # behavior kinds 'follow-path', 'wait-for-pickup'; services without scenarios
-    "validation.xml",  # a service without scenarios; behavior kind 'follow-path'
 }
 
 
