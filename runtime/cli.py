@@ -15,6 +15,13 @@ every local agent's mission has ended.
 ``ckm-run --await-config [NETWORK.xml] --name AGENT`` runs no configuration: it joins the network
 of NETWORK.xml (a System or Part holding a <Network>; the default Network without it), announces
 itself and runs whatever node the editor pushes it (runtime.distribution).
+
+Exit codes (docs/exit-codes.md): 0 the run went as configured; 1 the configuration was refused
+(load, ``verify``, build), each problem printed as ``FILE:LINE:COL: …``; 2 a usage error; 3 a
+partition over its memory budget (partition processes only); 4 the network could not be joined;
+5 something failed while running (a partition crashed or could not build, a task raised); 6 a
+plan's agent did not end in its mission's success final (gave up, crashed, stopped). Each
+failure's first error is printed on stderr; with several, the lowest code wins.
 """
 
 from __future__ import annotations
@@ -38,12 +45,19 @@ from ckmconf.model import Network, Node, Partition, System
 
 from .kernel.node import NodeRuntime
 from .kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor, enter_partition
+from .kernel.runlog import RunLog
 from .missions.agent import AgentRunner
 from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
+from .verification.verify import verify_or_report
 
 LOG = logging.getLogger("ckm.run")
+EXIT_CONFIG = 1  # the configuration was refused (load, verify, build)
+EXIT_NETWORK = 4  # the network could not be joined
+EXIT_FAILED = 5  # a partition, node task or agent thread failed while running
+EXIT_AGENTS = 6  # a plan's agent did not end in its success final
+STATS_EVERY = 2.0  # seconds between rewrites of the statistics file while running
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -93,6 +107,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{args.config}: no partition {args.partition!r} (partitions: {names})", file=sys.stderr)
             return 1
         enter_partition(partition)  # first: tie this process to its supervisor
+    if partition is None:  # a partition's supervisor verified the system before starting it
+        refused = verify_or_report(system, args.config)
+        if refused is not None:
+            return refused
     if args.plan is not None and system.plan(args.plan) is None:
         names = ", ".join(p.name for p in system.plans) or "none"
         print(f"{args.config}: no plan {args.plan!r} (plans: {names})", file=sys.stderr)
@@ -100,7 +118,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     run_dir = args.log_dir or Path("runs") / f"{system.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     with _logging_to(run_dir):
         name = f"{args.node}.{args.partition}" if partition is not None else args.node or system.name
-        return _run(system, Path(args.config), nodes, args.duration, run_dir, name, partition, args.plan)
+        # Several `--node` processes may share a run directory: each keeps its own files (D64).
+        run_log = RunLog(run_dir, shared_as=args.node if args.node is not None and partition is None else None)
+        try:
+            return _run(system, Path(args.config), nodes, args.duration, run_log, name, partition, args.plan)
+        finally:
+            run_log.close()
 
 
 @contextlib.contextmanager
@@ -150,19 +173,21 @@ def _run(
     config: Path,
     nodes: list[Node],
     duration: float | None,
-    run_dir: Path,
+    run_log: RunLog,
     name: str,
     partition: Partition | None,
     plan: str | None = None,
 ) -> int:
+    run_dir = run_log.run_dir
     network = system.network or Network()
     try:
         key = read_group_key(network, config.parent)
         transport = open_transport(network, name=name, key=key)
+        transport.on_event(lambda event: _network_event(run_log, event))
         transport.setup()
     except (GroupKeyError, NetworkError, OSError, ValueError) as exc:
         print(f"{config}: cannot join the network: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_NETWORK
     stop = threading.Event()
     code = 0
 
@@ -173,8 +198,13 @@ def _run(
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     runtimes: list[NodeRuntime] = []
     supervisors: list[PartitionSupervisor] = []
+    agents: list[_Agent] = []
     memory: MemoryWatch | None = None
     started = time.time()
+
+    def extra() -> dict[str, Any]:
+        return {"partition": partition.name, "memory": memory.statistics() if memory else None} if partition else {}
+
     try:
         transport.start()
         for node in nodes:
@@ -182,6 +212,7 @@ def _run(
                 runtime = NodeRuntime(node, system, transport, partition=partition.name)
             else:
                 runtime = _runtime(node, system, transport, config, run_dir, len(nodes) > 1)
+            runtime.event_sinks.append(run_log.event)
             runtime.setup()
             runtimes.append(runtime)
         for runtime in runtimes:
@@ -201,33 +232,108 @@ def _run(
         LOG.info("running %s (%d node(s)) for %s", system.name, len(runtimes), duration or "ever")
         agents = _start_agents(system, plan, nodes, transport, run_dir) if plan and partition is None else []
         deadline = None if duration is None else time.monotonic() + duration
-        while not stop.is_set() and not (agents and all(not t.is_alive() for _, t in agents)):
+        next_stats = time.monotonic() + STATS_EVERY
+        while not stop.is_set() and not (agents and all(not a.thread.is_alive() for a in agents)):
             remaining = None if deadline is None else deadline - time.monotonic()
             if remaining is not None and remaining <= 0:
                 break
             stop.wait(0.1 if remaining is None else min(0.1, remaining))
-        for runner, thread in agents:
-            runner.stop()
-            thread.join(5.0)
+            if time.monotonic() >= next_stats:  # kept current: a SIGKILL loses at most STATS_EVERY
+                next_stats = time.monotonic() + STATS_EVERY
+                _keep_statistics(run_log, config, system, runtimes, started, extra())
+        for agent in agents:
+            agent.runner.stop()
+            agent.thread.join(5.0)
     except ConfigError as error:
         print(error, file=sys.stderr)
-        return 1
+        return EXIT_CONFIG
+    except Exception as exc:  # a backend's own failure at set-up: reported, never a traceback
+        LOG.exception("%s: the run failed", name)
+        print(f"{config}: {name}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     finally:
         for supervisor in supervisors:  # the partitions stop first, their actuators safe
-            supervisor.stop()
+            _isolated(f"stop the partitions of {supervisor.node.name}", supervisor.stop)
         for runtime in reversed(runtimes):
-            runtime.stop()
-        transport.stop()
+            _isolated(f"stop node {runtime.node.name}", runtime.stop)
+        _isolated("stop the transport", transport.stop)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-        extra = {"partition": partition.name, "memory": memory.statistics() if memory else None} if partition else {}
-        _write_run(run_dir, config, system, runtimes, started, extra)
-    return code
+        _keep_statistics(run_log, config, system, runtimes, started, extra())
+    return _verdict(code, runtimes, agents)
 
 
-def _start_agents(
-    system: System, plan: str, nodes: list[Node], transport: Transport, run_dir: Path
-) -> list[tuple[AgentRunner, threading.Thread]]:
+def _isolated(what: str, action: Any) -> None:
+    """One stop step: a failure is logged, and the next step still runs."""
+    try:
+        action()
+    except Exception:
+        LOG.exception("could not %s", what)
+
+
+def _network_event(run_log: RunLog, event: Any) -> None:
+    """A network event (peer found, lost, linked, unlinked; deadline missed…), written as it happens."""
+    record = {"kind": f"network-{event.kind}", "time": time.time(), "peer": event.peer}
+    if event.topic is not None:
+        record["topic"] = event.topic
+    if event.detail:
+        record["detail"] = event.detail
+    run_log.event(record)
+    if event.kind in ("found", "lost", "linked", "unlinked"):
+        LOG.info("network: %s %s %s", event.kind, event.peer, event.detail)
+
+
+def _keep_statistics(
+    run_log: RunLog, config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
+) -> None:
+    try:
+        run_log.statistics(_summary(config, system, runtimes, started, extra))
+    except Exception:
+        LOG.exception("cannot write the statistics to %s", run_log.stats_path)
+
+
+def _verdict(code: int, runtimes: list[NodeRuntime], agents: list[_Agent]) -> int:
+    """The exit code, with the first error of everything that failed printed on stderr (issue G)."""
+    codes = [code] if code else []
+    for runtime in runtimes:
+        for partition, error in runtime.partitions.failures() if runtime.partitions is not None else []:
+            print(f"{error}  [node {runtime.node.name}, partition {partition}]", file=sys.stderr)
+            LOG.error("node %s: partition %s failed: %s", runtime.node.name, partition, error)
+            codes.append(EXIT_FAILED)
+        for task, figures in (runtime.statistics().get("tasks") or {}).items():
+            if figures.get("failures"):
+                message = f"task {task} failed {figures['failures']} time(s), first: {figures.get('first_failure')}"
+                print(f"{runtime.node.name}: {message}", file=sys.stderr)
+                codes.append(EXIT_FAILED)
+    for agent in agents:
+        outcome = agent.outcome or "stopped"
+        succeeded = agent.error is None and agent.runner.succeeded
+        LOG.log(logging.INFO if succeeded else logging.ERROR, "agent %s: outcome %s", agent.name, outcome)
+        if not succeeded:
+            detail = f": {type(agent.error).__name__}: {agent.error}" if agent.error is not None else ""
+            print(f"agent {agent.name}: mission ended {outcome}{detail}", file=sys.stderr)
+            codes.append(EXIT_FAILED if agent.error is not None else EXIT_AGENTS)
+    return min(codes) if codes else 0
+
+
+class _Agent:
+    """A plan's agent running its mission in a thread; the outcome (or exception) kept for the verdict."""
+
+    def __init__(self, runner: AgentRunner, name: str) -> None:
+        self.runner = runner
+        self.name = name
+        self.outcome: str | None = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name=f"agent-{name}", daemon=True)
+
+    def _run(self) -> None:
+        try:
+            self.outcome = self.runner.run()
+        except BaseException as error:  # the runner recorded it; the run's verdict reports it
+            self.error, self.outcome = error, "crashed"
+
+
+def _start_agents(system: System, plan: str, nodes: list[Node], transport: Transport, run_dir: Path) -> list[_Agent]:
     """The plan's agents whose node runs here, each running its mission in a thread."""
     record = system.plan(plan)
     assert record is not None
@@ -235,17 +341,16 @@ def _start_agents(
     started = []
     for agent in record.agents:
         if agent.node in here:
-            runner = AgentRunner(system, plan, agent.name, transport, run_dir)
-            thread = threading.Thread(target=runner.run, name=f"agent-{agent.name}", daemon=True)
-            thread.start()
-            started.append((runner, thread))
+            running = _Agent(AgentRunner(system, plan, agent.name, transport, run_dir), agent.name)
+            running.thread.start()
+            started.append(running)
             LOG.info("plan %s: agent %s runs mission %s", plan, agent.name, agent.mission)
     return started
 
 
-def _write_run(
-    run_dir: Path, config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
-) -> None:
+def _summary(
+    config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
+) -> dict[str, Any]:
     summary = {
         "config": str(config),
         "system": system.name,
@@ -257,6 +362,14 @@ def _write_run(
     partitions = {r.node.name: r.partitions.statistics() for r in runtimes if r.partitions is not None}
     if partitions:
         summary["partitions"] = partitions
+    return summary
+
+
+def _write_run(
+    run_dir: Path, config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
+) -> None:
+    """stats.json and events.jsonl of a finished run in one go (the distribution agent's pushed nodes)."""
+    summary = _summary(config, system, runtimes, started, extra)
     (run_dir / "stats.json").write_text(json.dumps(summary, indent=2, default=str))
     with (run_dir / "events.jsonl").open("w") as events:
         for runtime in runtimes:

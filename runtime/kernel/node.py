@@ -8,6 +8,7 @@ services; ``stop()`` drives every actuator to its safe value and closes the hard
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import threading
 import time
@@ -31,6 +32,7 @@ from .scheduler import Scheduler, Task
 from .services import ActuationService, ControlService, FutureActions, SensorService
 
 LOG = logging.getLogger("ckm.node")
+EVENTS_KEPT = 10000  # recent events kept in memory; every event also goes to the event sinks
 
 
 def _only_partition(node: Node, partition: str) -> Node:
@@ -80,7 +82,8 @@ class NodeRuntime:
         self.controllers: dict[str, ControlService] = {}
         self.actuators: dict[str, ActuationService] = {}
         self.futures: dict[str, FutureActions] = {}
-        self.events: list[dict[str, Any]] = []
+        self.events: list[dict[str, Any]] = []  # the recent ones (bounded); all go to event_sinks
+        self.event_sinks: list[Callable[[dict[str, Any]], None]] = []  # e.g. the run directory's events file
         self.monitor: MonitorService | None = None
         self.delegation: Delegation | None = None
         self.partitions: PartitionSupervisor | None = None  # the partition processes (ckm-run sets it)
@@ -167,13 +170,29 @@ class NodeRuntime:
             self._setup_resources()
 
     def _setup_resources(self) -> None:
-        """The SPT services of the Smart Resources this node hosts on the CKM kernel (ROS-kernel
-        resources are bridged, not run here)."""
+        """The SPT services of the Smart Resources this node hosts on the CKM kernel.
+
+        What this runtime cannot run is refused at its element rather than skipped (issue G):
+        a resource on a ROS kernel (none runs here) and a service without scenarios (services
+        run only through their scenarios' SPT processing).
+        """
         for resource in self.system.resources:
-            if resource.node != self.node.name or resource.kernel != "ckm":
+            if resource.node != self.node.name:
                 continue
-            if not any(s.scenarios for s in resource.services):
-                continue
+            if resource.kernel != "ckm":
+                raise self._error(
+                    resource,
+                    f"Smart Resource {resource.name!r} runs on a {resource.kernel!r} kernel, "
+                    "which this runtime does not provide: it cannot run on node "
+                    f"{self.node.name!r}",
+                )
+            for service in resource.services:
+                if not service.scenarios:
+                    raise self._error(
+                        service,
+                        f"service '{resource.name}.{service.name}' has no Scenario: the runtime runs "
+                        "services only through their scenarios' SPT processing",
+                    )
             runtime = SmartResourceRuntime(resource, self.transport, node=self.node.name, registry=self.registry)
             try:
                 runtime.setup()
@@ -238,26 +257,37 @@ class NodeRuntime:
             resource.start()
 
     def stop(self) -> None:
-        """Stop the services, drive every actuator to its safe value, close the hardware."""
-        self._final_tasks = self._task_statistics()
-        self._final_resources = self._resource_statistics()
-        for resource in self.resources.values():
-            try:
-                resource.stop()
-            except Exception:
-                LOG.exception("could not stop Smart Resource %s", resource.resource.name)
+        """Drive every actuator to its safe value first, then stop the services and close the hardware.
+
+        Each step is isolated: a failure is logged and the next step still runs, so nothing in
+        statistics, resources or logging can skip the safe stop. The scheduler thread is stopped
+        before the final statistics are taken.
+        """
+        for actuation in self.actuators.values():  # latched: a later command cannot move it again
+            self._step(f"drive {actuation.record.name} to its safe value", actuation.safe_stop)
         for name in list(self.scheduler.tasks):
             if name.startswith(f"{self.node.name}."):
-                self.scheduler.remove(name)
+                self._step(f"remove task {name}", functools.partial(self.scheduler.remove, name))
         if self._own_scheduler:
-            self.scheduler.stop()
-        for actuation in self.actuators.values():
-            try:
-                actuation.safe_stop()
-            except Exception:
-                LOG.exception("could not drive %s to its safe value", actuation.record.name)
-        for backend in self.backends.values():
-            backend.stop()
+            self._step("stop the scheduler", self.scheduler.stop)
+        self._step("take the task statistics", self._keep_task_statistics)
+        self._step("take the Smart Resource statistics", self._keep_resource_statistics)
+        for resource in self.resources.values():
+            self._step(f"stop Smart Resource {resource.resource.name}", resource.stop)
+        for channel, backend in self.backends.items():
+            self._step(f"close channel {channel}", backend.stop)
+
+    def _step(self, what: str, action: Callable[[], Any]) -> None:
+        try:
+            action()
+        except Exception:
+            LOG.exception("%s: could not %s", self.node.name, what)
+
+    def _keep_task_statistics(self) -> None:
+        self._final_tasks = self._task_statistics()
+
+    def _keep_resource_statistics(self) -> None:
+        self._final_resources = self._resource_statistics()
 
     # ------------------------------------------------------------------ switching and alarms
 
@@ -408,8 +438,13 @@ class NodeRuntime:
     def _report(self, kind: str, detail: dict[str, Any]) -> None:
         event = {"node": self.node.name, "kind": kind, "time": time.time(), **detail}
         self.events.append(event)
-        if len(self.events) > 10000:
-            del self.events[:5000]
+        if len(self.events) > EVENTS_KEPT:
+            del self.events[: EVENTS_KEPT // 2]
+        for sink in self.event_sinks:
+            try:
+                sink(event)
+            except Exception:
+                LOG.exception("%s: an event sink failed", self.node.name)
         level = logging.INFO if kind == "controller-switched" else logging.WARNING
         LOG.log(level, "%s: %s %s", self.node.name, kind, detail)
         self._alarm_publisher.publish(event)

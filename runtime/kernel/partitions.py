@@ -39,6 +39,7 @@ import dataclasses
 import logging
 import os
 import queue
+import re
 import signal
 import subprocess
 import sys
@@ -86,6 +87,8 @@ class _State:
     kill_at: float | None = None  # monotonic time after which a process asked to exit is killed
     given_up: bool = False
     sampled: float = 0.0
+    console_from: int = 0  # where the current process's output starts in console.log
+    first_error: str | None = None  # the first error a crashed process of this partition printed
 
 
 class PartitionSupervisor:
@@ -188,9 +191,18 @@ class PartitionSupervisor:
                 "restarts": state.restarts,
                 "given_up": state.given_up,
                 "last_exit_code": lives[-1].exit_code if lives else None,
+                "first_error": state.first_error,
                 "pids": [dataclasses.asdict(life) for life in lives],
             }
         return stats
+
+    def failures(self) -> list[tuple[str, str]]:
+        """(partition, its first error) of every partition that crashed (ckm-run reports them)."""
+        return [
+            (name, state.first_error or f"crashed {state.crashes} time(s), no error printed")
+            for name, state in self.states.items()
+            if state.crashes
+        ]
 
     # ------------------------------------------------------------------ the watcher thread
 
@@ -248,6 +260,7 @@ class PartitionSupervisor:
         env = {**os.environ, PARENT_ENV: str(os.getpid())}
         try:
             with (folder / "console.log").open("ab") as console:
+                state.console_from = console.tell()
                 # A session of its own: a terminal's Ctrl-C reaches the supervisor only, which
                 # then stops the children itself (else an "always" child could be restarted).
                 process = subprocess.Popen(
@@ -291,6 +304,10 @@ class PartitionSupervisor:
         crashed = code != 0
         if crashed:
             state.crashes += 1
+            error = first_error(self.run_dir / state.record.name / "console.log", state.console_from)
+            if error is not None:
+                detail["error"] = error
+                state.first_error = state.first_error or error
         self.report("partition-crashed" if crashed else "partition-exited", detail)
         self._after_exit(state, crashed=crashed)
 
@@ -362,6 +379,23 @@ class PartitionSupervisor:
 
 
 # ---------------------------------------------------------------------- inside a partition process
+
+
+_LOCATED = re.compile(r"^\S+:\d+:\d+: ")
+
+
+def first_error(console: Path, start: int) -> str | None:
+    """The first error a partition process printed after byte ``start`` of its console log: the
+    first located ``FILE:LINE:COL: …`` line, else the last line (a traceback's exception)."""
+    try:
+        with console.open("rb") as file:
+            file.seek(start)
+            lines = [line.strip() for line in file.read(1 << 20).decode("utf-8", "replace").splitlines()]
+    except OSError:
+        return None
+    lines = [line for line in lines if line]
+    located = next((line for line in lines if _LOCATED.match(line)), None)
+    return located or (lines[-1] if lines else None)
 
 
 def enter_partition(partition: Partition) -> None:

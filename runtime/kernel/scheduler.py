@@ -27,6 +27,7 @@ from typing import Any
 LOG = logging.getLogger("ckm.scheduler")
 SPIN = 0.0003  # seconds spun before a release instead of sleeping
 IDLE_WINDOW = 1.0  # seconds over which the idle share is measured
+BUSY_LIMIT = 100_000  # runs kept for the idle share at most (a bound even for a stalled clock)
 
 
 @dataclass
@@ -41,8 +42,10 @@ class TaskStats:
     jitter: deque[float] = field(default_factory=lambda: deque(maxlen=20000))
     exec_time: deque[float] = field(default_factory=lambda: deque(maxlen=20000))
     max_jitter: float = 0.0
+    first_failure: str | None = None  # the first exception a part raised (ckm-run reports it)
 
     def summary(self, period: float) -> dict[str, Any]:
+        """The figures; call it where nothing appends meanwhile (the scheduler does it under its lock)."""
         jitters = sorted(abs(j) for j in self.jitter)
         execs = sorted(self.exec_time)
 
@@ -54,6 +57,7 @@ class TaskStats:
             "releases": self.releases,
             "misses": self.misses,
             "failures": self.failures,
+            "first_failure": self.first_failure,
             "optional_runs": self.optional_runs,
             "optional_skipped": self.optional_skipped,
             "jitter_p50_us": round(pct(jitters, 0.5) * 1e6, 1),
@@ -111,7 +115,8 @@ class Scheduler:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._busy: deque[tuple[float, float]] = deque()  # (end, duration) of recent runs
+        # (end, duration) of the runs of the last IDLE_WINDOW: trimmed on every run, so bounded.
+        self._busy: deque[tuple[float, float]] = deque(maxlen=BUSY_LIMIT)
 
     # ------------------------------------------------------------------ tasks
 
@@ -140,15 +145,18 @@ class Scheduler:
         """Share of the last second the scheduler spent waiting rather than running parts."""
         now = self.clock()
         with self._lock:
-            while self._busy and self._busy[0][0] < now - IDLE_WINDOW:
-                self._busy.popleft()
+            self._trim_busy(now)
             busy = sum(duration for _, duration in self._busy)
         return max(0.0, 1.0 - busy / IDLE_WINDOW)
 
+    def _trim_busy(self, now: float) -> None:
+        while self._busy and self._busy[0][0] < now - IDLE_WINDOW:
+            self._busy.popleft()
+
     def statistics(self) -> dict[str, dict[str, Any]]:
+        """Each task's figures, read under the lock the scheduler thread records them under."""
         with self._lock:
-            tasks = list(self.tasks.values())
-        return {task.name: task.stats.summary(task.period) for task in tasks}
+            return {task.name: task.stats.summary(task.period) for task in self.tasks.values()}
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -195,10 +203,7 @@ class Scheduler:
     def _execute(self, task: Task, release: float) -> None:
         start = self.clock()
         stats = task.stats
-        stats.releases += 1
         lateness = start - release
-        stats.jitter.append(lateness)
-        stats.max_jitter = max(stats.max_jitter, abs(lateness))
         try:
             task.required()
             if task.optional is not None:
@@ -209,13 +214,19 @@ class Scheduler:
                     stats.optional_skipped += 1
             if task.finish is not None:
                 task.finish()
-        except Exception:
+        except Exception as exc:
             stats.failures += 1
+            if stats.first_failure is None:
+                stats.first_failure = f"{type(exc).__name__}: {exc}"[:500]
             LOG.exception("task %s failed", task.name)
         end = self.clock()
-        stats.exec_time.append(end - start)
-        with self._lock:
+        with self._lock:  # statistics() reads these from other threads
+            stats.releases += 1
+            stats.jitter.append(lateness)
+            stats.max_jitter = max(stats.max_jitter, abs(lateness))
+            stats.exec_time.append(end - start)
             self._busy.append((end, end - start))
+            self._trim_busy(end)
             # The next release is absolute; releases already past are misses, not a burst of runs.
             task.release = release + task.period
             if task.release <= end:
