@@ -58,11 +58,12 @@ def prism_shape(prism: Prism) -> Shape:
     zc = (prism.zmin + prism.zmax) / 2
     base = prism.base
     if isinstance(base, Circle):
-        return Shape(p.GEOM_CYLINDER, {"radius": base.radius, "height": height}, (base.x, base.y, zc), 0.0,
-                     math.pi * base.radius**2 * height)
+        volume = math.pi * base.radius**2 * height
+        return Shape(p.GEOM_CYLINDER, {"radius": base.radius, "height": height}, (base.x, base.y, zc), 0.0, volume)
     if isinstance(base, Rectangle):
         half = [base.width / 2, base.depth / 2, height / 2]
-        return Shape(p.GEOM_BOX, {"halfExtents": half}, (base.x, base.y, zc), base.yaw, base.width * base.depth * height)
+        volume = base.width * base.depth * height
+        return Shape(p.GEOM_BOX, {"halfExtents": half}, (base.x, base.y, zc), base.yaw, volume)
     assert isinstance(base, Polygon)
     points = [(v.x, v.y) for v in base.vertices]
     return _polygon_shape(points, prism.zmin, prism.zmax)
@@ -75,7 +76,8 @@ def _polygon_shape(points: Sequence[tuple[float, float]], zmin: float, zmax: flo
     zc = (zmin + zmax) / 2
     h = (zmax - zmin) / 2
     vertices = [[x - cx, y - cy, z] for z in (-h, h) for x, y in points]
-    area = 0.5 * abs(sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(points, [*points[1:], points[0]])))
+    ring = zip(points, [*points[1:], points[0]], strict=True)
+    area = 0.5 * abs(sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in ring))
     return Shape(p.GEOM_MESH, {"vertices": vertices}, (cx, cy, zc), 0.0, area * 2 * h)
 
 
@@ -127,7 +129,9 @@ class World:
 
     # ------------------------------------------------------------------ construction
 
-    def _static_box(self, centre: Sequence[float], half: Sequence[float], rgba: Sequence[float], yaw: float = 0.0) -> int:
+    def _static_box(
+        self, centre: Sequence[float], half: Sequence[float], rgba: Sequence[float], yaw: float = 0.0
+    ) -> int:
         cid = self.client
         col = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=cid)
         vis = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half), rgbaColor=list(rgba), physicsClientId=cid)
@@ -202,7 +206,7 @@ class World:
             path = MODELS / f"{model}.urdf"
         if not path.is_file():
             raise FileNotFoundError(f"robot model {str(path)!r} (robot {name!r}) does not exist")
-        x, y, yaw = (list(pose) + [0.0, 0.0, 0.0])[:3]
+        x, y, yaw = ([*list(pose), 0.0, 0.0, 0.0])[:3]
         body = int(p.loadURDF(str(path), [x, y, 0.0], p.getQuaternionFromEuler([0, 0, yaw]),
                               flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=self.client))
         for link in range(-1, p.getNumJoints(body, physicsClientId=self.client)):
@@ -223,14 +227,14 @@ class World:
 
     def run_until(self, time: float) -> int:
         """Step while a whole step fits before ``time`` (simulated seconds); returns the steps taken."""
-        count = max(0, int(math.floor((time - self.time) / self.time_step + 1e-9)))
+        count = max(0, math.floor((time - self.time) / self.time_step + 1e-9))
         self.step(count)
         return count
 
     def pose(self, body: int) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """Position and orientation quaternion of a body's base."""
         position, orientation = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
-        return tuple(position), tuple(orientation)  # type: ignore[return-value]
+        return tuple(position), tuple(orientation)
 
     def close(self) -> None:
         """Disconnect from the physics server (idempotent)."""

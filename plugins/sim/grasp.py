@@ -1,0 +1,78 @@
+"""The gripper and its grasp (decision D87): the fingers close under a force limit, and a fixed
+constraint between the wrist and the object is created only while both fingers touch the object;
+the constraint's force limit lets a too-heavy or snagged object slip out, and opening releases it."""
+
+from __future__ import annotations
+
+import pybullet as p
+
+from .robots import Robot
+
+
+class Gripper:
+    """Two prismatic fingers (``gripper_joint`` and its mirror) on the wrist link."""
+
+    def __init__(
+        self, robot: Robot, *, left: str = "gripper_joint", right: str = "gripper_right_joint",
+        wrist: str = "arm_wrist_flex_link", force: float = 10.0, hold_force: float = 30.0,
+    ) -> None:
+        self.robot = robot
+        self.fingers = (robot.joint(left), robot.joint(right))
+        self.finger_links = self.fingers  # a joint's child link has the joint's index
+        self.wrist = robot.link(wrist)
+        self.force, self.hold_force = force, hold_force
+        self.held: int | None = None
+        self._constraint: int | None = None
+
+    def set_opening(self, opening: float) -> None:
+        """Drive each finger to ``opening`` (m from its closed stop)."""
+        for joint in self.fingers:
+            self.robot.command(joint, "position", opening, self.force)
+        if opening > 0.0 and self._constraint is not None:
+            self.release()
+
+    def open(self) -> None:
+        """Open fully (releases a held object)."""
+        self.set_opening(0.045)
+
+    def close(self) -> None:
+        """Close under the force limit; call :meth:`update` while closing to catch the object."""
+        for joint in self.fingers:
+            self.robot.command(joint, "position", 0.0, self.force)
+
+    def touching(self) -> int | None:
+        """The body both fingers touch now, if any."""
+        cid = self.robot.world.client
+        touched = [
+            {c[2] for c in p.getContactPoints(bodyA=self.robot.body, linkIndexA=link, physicsClientId=cid)}
+            - {self.robot.body, self.robot.world.floor}
+            for link in self.finger_links
+        ]
+        common = touched[0] & touched[1]
+        return min(common) if common else None
+
+    def update(self) -> int | None:
+        """Create the grasp constraint when both fingers touch one object; returns the held body."""
+        if self._constraint is not None:
+            return self.held
+        body = self.touching()
+        if body is None:
+            return None
+        cid = self.robot.world.client
+        wrist_pos, wrist_orn = self.robot.link_pose(self.wrist)
+        obj_pos, obj_orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+        inv_pos, inv_orn = p.invertTransform(wrist_pos, wrist_orn)
+        rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        self._constraint = p.createConstraint(
+            self.robot.body, self.wrist, body, -1, p.JOINT_FIXED, [0, 0, 0], rel_pos, [0, 0, 0],
+            parentFrameOrientation=rel_orn, physicsClientId=cid,
+        )
+        p.changeConstraint(self._constraint, maxForce=self.hold_force, physicsClientId=cid)
+        self.held = body
+        return body
+
+    def release(self) -> None:
+        """Remove the grasp constraint."""
+        if self._constraint is not None:
+            p.removeConstraint(self._constraint, physicsClientId=self.robot.world.client)
+        self._constraint, self.held = None, None
