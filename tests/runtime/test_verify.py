@@ -33,13 +33,13 @@ from tests.conftest import REPO
 CORPUS = REPO / "tests" / "data" / "verify"
 EXPECTED = CORPUS / "expected.json"
 FILES = sorted(CORPUS.glob("*.xml"))
-EXAMPLES = sorted((REPO / "configs" / "examples").glob("*.xml"))
+EXAMPLES_DIR = REPO / "configs" / "examples"
+EXAMPLES = sorted([*EXAMPLES_DIR.glob("*.xml"), *EXAMPLES_DIR.glob("split/*.xml")])
 
-# Examples that describe what no code runs yet (kinds of the simulation issue, off-line-only
-# services): verify must say so. Fixing one means moving it out of this set.
+# Examples that describe what no code runs yet: verify must say so, located, with the words
+# "not runnable" (configs/examples/README.md says why). Fixing one means moving it out of this set.
 NOT_RUNNABLE = {
-    "ros_resource.xml",  # a ROS-kernel resource; a service without scenarios
-    "split_system.xml",  # behavior kinds 'follow-path', 'wait-for-pickup'; services without scenarios
+    "ros_resource.xml",  # a ROS-kernel resource (issue L)
 }
 
 
@@ -148,14 +148,28 @@ def test_load_problems_come_first_and_verify_does_not_run_on_a_broken_file(
 # ---------------------------------------------------------------- the example configurations
 
 
-@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.relative_to(EXAMPLES_DIR).as_posix())
 def test_examples_verify_or_are_known_not_runnable(path: Path) -> None:
+    """Every example and every Part of the split system verifies, or is reported not runnable."""
     system = ckmconf.load(path)
     problems = verify(system, builtin())
-    if path.name in NOT_RUNNABLE:
-        assert problems, f"{path.name} verifies now: remove it from NOT_RUNNABLE"
+    name = path.relative_to(EXAMPLES_DIR).as_posix()
+    if name in NOT_RUNNABLE:
+        assert problems, f"{name} verifies now: remove it from NOT_RUNNABLE"
+        assert all("(not runnable)" in p.message for p in problems), [str(p) for p in problems]
     else:
         assert [str(p) for p in problems] == []
+
+
+def test_the_ros_resource_example_is_not_runnable_only_for_its_ros_kernel() -> None:
+    """Point 8: the ROS-kernel resource is reported at its line; the CKM resource beside it verifies."""
+    path = EXAMPLES_DIR / "ros_resource.xml"
+    lines = path.read_text().splitlines()
+    line = next(i for i, text in enumerate(lines, 1) if '<SmartResource name="RoboticArm"' in text)
+    [problem] = verify(ckmconf.load(path), builtin())
+    assert (problem.file, problem.line) == (str(path), line)
+    assert problem.xpath.endswith("SmartResource[@name='RoboticArm']/@kernel")
+    assert "runs on a ROS kernel" in problem.message and "(not runnable)" in problem.message
 
 
 def test_the_use_case_names_kinds_that_do_not_exist_yet() -> None:
