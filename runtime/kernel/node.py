@@ -265,12 +265,12 @@ class NodeRuntime:
         """
         for actuation in self.actuators.values():  # latched: a later command cannot move it again
             self._step(f"drive {actuation.record.name} to its safe value", actuation.safe_stop)
-        for name in list(self.scheduler.tasks):
-            if name.startswith(f"{self.node.name}."):
-                self._step(f"remove task {name}", functools.partial(self.scheduler.remove, name))
+        mine = [t for name, t in list(self.scheduler.tasks.items()) if name.startswith(f"{self.node.name}.")]
+        for task in mine:
+            self._step(f"remove task {task.name}", functools.partial(self.scheduler.remove, task.name))
         if self._own_scheduler:
             self._step("stop the scheduler", self.scheduler.stop)
-        self._step("take the task statistics", self._keep_task_statistics)
+        self._step("take the task statistics", functools.partial(self._keep_task_statistics, mine))
         self._step("take the Smart Resource statistics", self._keep_resource_statistics)
         for resource in self.resources.values():
             self._step(f"stop Smart Resource {resource.resource.name}", resource.stop)
@@ -283,8 +283,8 @@ class NodeRuntime:
         except Exception:
             LOG.exception("%s: could not %s", self.node.name, what)
 
-    def _keep_task_statistics(self) -> None:
-        self._final_tasks = self._task_statistics()
+    def _keep_task_statistics(self, tasks: list[Task]) -> None:
+        self._final_tasks = self.scheduler.statistics(tasks)
 
     def _keep_resource_statistics(self) -> None:
         self._final_resources = self._resource_statistics()

@@ -153,10 +153,12 @@ class Scheduler:
         while self._busy and self._busy[0][0] < now - IDLE_WINDOW:
             self._busy.popleft()
 
-    def statistics(self) -> dict[str, dict[str, Any]]:
-        """Each task's figures, read under the lock the scheduler thread records them under."""
+    def statistics(self, tasks: list[Task] | None = None) -> dict[str, dict[str, Any]]:
+        """The figures of ``tasks`` (default: every task it runs), read under the lock the scheduler
+        thread records them under, so a reader never walks a deque being appended to."""
         with self._lock:
-            return {task.name: task.stats.summary(task.period) for task in self.tasks.values()}
+            chosen = list(self.tasks.values()) if tasks is None else tasks
+            return {task.name: task.stats.summary(task.period) for task in chosen}
 
     # ------------------------------------------------------------------ lifecycle
 

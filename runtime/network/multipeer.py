@@ -58,6 +58,7 @@ class MultiPeer:
         self.links: dict[int, Link] = {}
         self.names: dict[int, str] = {}
         self.rejected_links = 0
+        self.evicted_links = 0  # pending handshakes closed to make room for a new connection
         self.clock = ClockSync()
         self._listeners: dict[FrameType, list[Listener]] = {}
         self._event_callbacks: list[Callable[[PeerEvent], None]] = []
@@ -256,12 +257,20 @@ class MultiPeer:
             on_frame=self._frame,
             on_close=self._closed,
         )
+        evicted: Link | None = None
         with self._lock:
-            pending = sum(1 for existing in self._all_links if existing.state != "open")
-            if self._stop.is_set() or pending >= MAX_PENDING_LINKS:
-                sock.close()  # too many connections still in their handshake: refuse, do not queue
+            if self._stop.is_set():
+                sock.close()
                 return
+            # Accept always: past the cap the oldest incoming handshake makes room, so idle or
+            # unauthenticated connections can delay a real peer by one eviction, never block it.
+            pending = [old for old in self._all_links if old.state != "open" and not old.outgoing]
+            if not outgoing and len(pending) >= MAX_PENDING_LINKS:
+                evicted = pending[0]
+                self.evicted_links += 1
             self._all_links.append(link)
+        if evicted is not None:
+            evicted.close(f"evicted: {MAX_PENDING_LINKS} connections were still in their handshake")
         try:
             link.start()
         except OSError as exc:
@@ -308,6 +317,8 @@ class MultiPeer:
 
     def _closed(self, link: Link, reason: str) -> None:
         guid = link.remote_guid if link.remote_guid is not None else link.expected
+        who = guid_text(guid) if guid is not None else "an unidentified connection"
+        LOG.info("link to %s closed: %s", who, reason)  # every closed link, handshake time-outs included
         with self._lock:
             if link in self._all_links:
                 self._all_links.remove(link)

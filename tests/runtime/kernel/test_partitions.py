@@ -25,6 +25,7 @@ import pytest
 
 import ckmconf
 from ckmconf.model import Alarm, Node, Partition
+from runtime.cli import EXIT_FAILED
 from runtime.kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor
 from runtime.network import Sample, TopicQoS, Transport, open_transport
 from tests.conftest import REPO
@@ -215,7 +216,7 @@ def test_a_killed_partition_is_restarted_alone_and_raises_an_alarm(runs: Callabl
     assert run.children()["io"].pid == children["io"].pid  # the other partition kept running
     assert run.follows(-0.3), "the restarted partition did not close the loop again"
     assert until(lambda: any(e["kind"] == "alarm" and e["alarm"] == "control-crash" for e in run.events), 10)
-    assert run.stop() == 0
+    assert run.stop() == EXIT_FAILED  # a crash, even one restarted, is a failed run (issue G)
     events = run.logged_events()
     crashed = next(e for e in events if e["kind"] == "partition-crashed")
     assert crashed["partition"] == "control" and crashed["exit_code"] == -9 and crashed["signal"] == "SIGKILL"
@@ -233,7 +234,7 @@ def test_restart_never_leaves_a_crashed_partition_down(runs: Callable[..., Run])
     assert until(lambda: "partition-given-up" in run.kinds("control"), 15)
     time.sleep(1.0)  # well past restartDelay
     assert set(run.children()) == {"io"} and run.children()["io"].pid == children["io"].pid
-    assert run.stop() == 0
+    assert run.stop() == EXIT_FAILED
     control = run.stats()["partitions"]["arm"]["control"]
     assert (control["crashes"], control["restarts"], control["given_up"]) == (1, 0, True)
     assert "partition-restarted" not in [e["kind"] for e in run.logged_events()]
@@ -249,7 +250,7 @@ def test_max_restarts_is_respected(runs: Callable[..., Run]) -> None:
     assert until(lambda: "partition-given-up" in run.kinds("control"), 15)
     time.sleep(1.0)
     assert "control" not in run.children()
-    assert run.stop() == 0
+    assert run.stop() == EXIT_FAILED
     control = run.stats()["partitions"]["arm"]["control"]
     assert (control["crashes"], control["restarts"], control["given_up"]) == (2, 1, True)
     assert [p["pid"] for p in control["pids"]] == [first.pid, second.pid]

@@ -1,0 +1,134 @@
+"""A stop always leaves the actuators safe, and a long-running node's buffers are bounded (issue G)."""
+
+from __future__ import annotations
+
+import functools
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import pytest
+
+import ckmconf
+from runtime.kernel import node as node_module
+from runtime.kernel.node import NodeRuntime
+from runtime.kernel.scheduler import BUSY_LIMIT, IDLE_WINDOW, Scheduler, Task
+from runtime.network import Transport, open_transport
+from tests.conftest import REPO
+from tests.runtime.network.conftest import private_network
+
+CLOSED_LOOP = REPO / "configs" / "examples" / "closed_loop.xml"
+
+
+@pytest.fixture
+def transport() -> Iterator[Transport]:
+    running = open_transport(private_network(), name="stop-test")
+    running.setup()
+    running.start()
+    yield running
+    running.stop()
+
+
+def ran(task: Task, times: int) -> bool:
+    return task.stats.releases > times
+
+
+def until(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return condition()
+
+
+def test_a_stop_during_heavy_statistics_traffic_leaves_every_actuator_safe(transport: Transport) -> None:
+    """The old stop walked the jitter deque while the scheduler appended to it (4 runs in 20 crashed
+    with "deque mutated during iteration" before driving the safe value); repeated to catch it."""
+    system = ckmconf.load(CLOSED_LOOP)
+    record = system.nodes[0]
+    for attempt in range(25):
+        node = NodeRuntime(record, system, transport)
+        node.setup()
+        node.start()
+        for index in range(4):  # 1 kHz tasks: the jitter deques change all the time
+            node.scheduler.add(Task(f"{record.name}.busy{index}", 0.001, lambda: None))
+        errors: list[BaseException] = []
+        done = threading.Event()
+
+        def hammer(
+            node: NodeRuntime = node, done: threading.Event = done, errors: list[BaseException] = errors
+        ) -> None:
+            while not done.is_set():
+                try:
+                    node.statistics()
+                except BaseException as error:  # any error here is the failure
+                    errors.append(error)
+                    return
+
+        readers = [threading.Thread(target=hammer, daemon=True) for _ in range(3)]
+        for reader in readers:
+            reader.start()
+        busy0 = node.scheduler.tasks[f"{record.name}.busy0"]
+        assert until(functools.partial(ran, busy0, 50))
+        node.stop()
+        done.set()
+        for reader in readers:
+            reader.join(10)
+        assert not errors, f"attempt {attempt}: {errors[0]!r}"
+        for name, actuation in node.actuators.items():
+            assert actuation.mode == "safe" and actuation.latched, f"attempt {attempt}: {name} not safe"
+            assert actuation.value == actuation.record.safe_value
+        assert node.statistics()["tasks"], "the final statistics were not kept"
+
+
+def test_a_failing_stop_step_does_not_skip_the_others(transport: Transport) -> None:
+    system = ckmconf.load(CLOSED_LOOP)
+    node = NodeRuntime(system.nodes[0], system, transport)
+    node.setup()
+    node.start()
+
+    def broken(*_: object) -> dict[str, object]:
+        raise RuntimeError("statistics broke")
+
+    node.scheduler.statistics = broken  # type: ignore[method-assign,assignment]
+    closed: list[str] = []
+    for name, backend in node.backends.items():
+        stop = backend.stop
+
+        def recording(stop: Callable[[], None] = stop, name: str = name) -> None:
+            closed.append(name)
+            stop()
+
+        backend.stop = recording  # type: ignore[method-assign]
+    node.stop()  # logs the failure, raises nothing
+    assert all(a.mode == "safe" for a in node.actuators.values())
+    assert sorted(closed) == sorted(node.backends)  # the hardware still closed
+
+
+def test_the_scheduler_keeps_only_the_last_idle_window_of_runs() -> None:
+    """Scheduler._busy used to gain an entry per run forever (only idle_share() trimmed it)."""
+    scheduler = Scheduler("bounded")
+    task = scheduler.add(Task("fast", 0.0005, lambda: None))  # no optional part: idle_share is never asked
+    scheduler.start()
+    try:
+        assert until(lambda: task.stats.releases > 3000, timeout=60)
+        with scheduler._lock:
+            busy = list(scheduler._busy)
+        assert busy and busy[0][0] >= busy[-1][0] - IDLE_WINDOW  # trimmed on every run
+        assert scheduler._busy.maxlen == BUSY_LIMIT
+    finally:
+        scheduler.stop()
+    assert task.stats.jitter.maxlen is not None and task.stats.exec_time.maxlen is not None
+    assert len(task.stats.jitter) <= task.stats.jitter.maxlen
+
+
+def test_a_node_keeps_a_bounded_number_of_events_and_sends_every_one_to_its_sinks(transport: Transport) -> None:
+    system = ckmconf.load(CLOSED_LOOP)
+    node = NodeRuntime(system.nodes[0], system, transport)
+    seen: list[int] = []
+    node.event_sinks.append(lambda event: seen.append(event["n"]))
+    for n in range(node_module.EVENTS_KEPT + 500):
+        node.report("test", {"n": n})
+    assert len(node.events) <= node_module.EVENTS_KEPT
+    assert seen == list(range(node_module.EVENTS_KEPT + 500))
