@@ -26,10 +26,11 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "pubsub": ("benchmarks.netbench", "run_pubsub", "describe_pubsub"),
     "discovery": ("benchmarks.netbench", "run_discovery", "describe_discovery"),
     "jitter": ("benchmarks.jitter", "run", "describe"),
+    "localization": ("benchmarks.localization", "run", "describe"),
     "rates": ("benchmarks.rates", "run", "describe"),
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
-TAKES_OPTIONS = {"adaptation", "zoom"}  # these take their own options: ckm-bench NAME --help lists them
+TAKES_OPTIONS = {"adaptation", "localization", "zoom"}  # these take their own options: ckm-bench NAME --help lists them
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:

@@ -1,0 +1,171 @@
+"""Test worlds and runs for the localization filters (§6.2): use-case lab, corridor, symmetric floor plan.
+
+A :class:`Run` is everything a filter consumes and is scored against: the true poses, the noisy
+odometry readings and the simulated scans at each step, generated once from a seed so that every
+filter sees the same data. A kidnapping teleports the robot between two steps while the odometry
+reports no motion (Fox et al.'s kidnapped-robot test).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+from shapely.geometry.base import BaseGeometry
+
+import ckmconf
+
+from .odometry import OdometryNoise, OdometrySimulator, wrap
+from .raster import GridMap
+from .raycast import LaserSpec, simulate_scan
+
+Array = npt.NDArray[np.float64]
+LAB = Path(__file__).resolve().parents[2] / "configs" / "usecase" / "environment.xml"
+
+LAB_WAYPOINTS = (
+    (1.5, 0.8),
+    (3.0, 2.8),
+    (6.2, 2.8),
+    (7.0, 4.6),
+    (9.4, 4.4),
+    (9.4, 2.9),
+    (6.5, 3.0),
+    (3.8, 2.6),
+    (3.0, 4.0),
+    (1.5, 5.4),
+    (2.8, 5.5),
+    (2.0, 3.2),
+    (1.8, 0.8),
+)
+"""A tour of the lab's areas (Home → Office → Workbench → Shelf → Home), every leg clear of obstacles."""
+
+
+def lab_grid(resolution: float = 0.05) -> GridMap:
+    """The use-case lab (configs/usecase/environment.xml) rasterised at laser height."""
+    env = ckmconf.load(LAB).environment
+    if env is None:
+        raise ValueError(f"{LAB} holds no <Environment>")
+    return GridMap.from_environment(env, resolution)
+
+
+def corridor_grid(length: float = 14.0, width: float = 2.0, resolution: float = 0.05) -> GridMap:
+    """A straight corridor with irregularly spaced alcoves and pillars (so a straight run is observable along it)."""
+    shapes: list[BaseGeometry] = []
+    # side walls leave alcoves (0.5 m deep) at irregular places; pillars narrow the corridor elsewhere
+    for x0, x1 in ((1.0, 2.0), (4.5, 5.0), (8.0, 9.5), (12.0, 12.4)):
+        shapes.append(shapely.box(x0, width - 0.15, x1, width))
+    for x in (3.0, 6.5, 10.5):
+        shapes.append(shapely.box(x, 0.0, x + 0.3, 0.35))
+    return GridMap.from_shapes((0.0, 0.0, length, width), shapes, resolution)
+
+
+def floor_plan_shapes(
+    rooms: int = 3, room: float = 4.0, corridor: float = 2.0
+) -> tuple[tuple[float, float, float, float], list[BaseGeometry]]:
+    """Bounds and walls of ``rooms`` identical rooms on each side of a corridor, each with the same table.
+
+    The rooms are translated and mirrored copies of one another: inside a room a scan cannot tell
+    which of the 2·rooms it is in. Only a cabinet at the corridor's west end breaks the symmetry.
+    """
+    width, depth, wall, door = room * rooms, 2 * room + corridor, 0.1, 1.0
+    shapes: list[BaseGeometry] = []
+    for side, (y_wall, y_table) in enumerate(((room, room * 0.35), (room + corridor, depth - room * 0.35))):
+        for k in range(rooms):
+            x0 = k * room
+            door_x = x0 + room / 2
+            shapes.append(shapely.box(x0, y_wall - wall / 2, door_x - door / 2, y_wall + wall / 2))
+            shapes.append(shapely.box(door_x + door / 2, y_wall - wall / 2, x0 + room, y_wall + wall / 2))
+            if k:
+                y0, y1 = (0.0, room) if side == 0 else (room + corridor, depth)
+                shapes.append(shapely.box(x0 - wall / 2, y0, x0 + wall / 2, y1))
+            shapes.append(shapely.box(x0 + room * 0.3, y_table - 0.3, x0 + room * 0.6, y_table + 0.3))
+    shapes.append(shapely.box(0.0, room + 0.05, 0.5, room + 0.6))  # the cabinet breaking the symmetry
+    return (0.0, 0.0, width, depth), shapes
+
+
+def floor_plan_grid(rooms: int = 3, resolution: float = 0.05) -> GridMap:
+    """The generated floor plan of :func:`floor_plan_shapes` rasterised."""
+    bounds, shapes = floor_plan_shapes(rooms)
+    return GridMap.from_shapes(bounds, shapes, resolution)
+
+
+def drive(
+    waypoints: Sequence[tuple[float, float]],
+    dt: float = 0.2,
+    speed: float = 0.5,
+    turn_rate: float = 1.2,
+    start_yaw: float | None = None,
+) -> Array:
+    """True poses (T, 3) every ``dt`` s: turn in place towards the next waypoint, then go straight to it."""
+    points = np.asarray(waypoints, dtype=np.float64)
+    first = np.arctan2(*(points[1] - points[0])[::-1]) if start_yaw is None else start_yaw
+    poses = [np.array([points[0, 0], points[0, 1], first])]
+    for target in points[1:]:
+        x, y, yaw = poses[-1]
+        goal_yaw = float(np.arctan2(target[1] - y, target[0] - x))
+        turn = float(wrap(goal_yaw - yaw))
+        for k in range(1, int(np.ceil(abs(turn) / (turn_rate * dt))) + 1):
+            poses.append(np.array([x, y, float(wrap(yaw + turn * min(1.0, k * turn_rate * dt / abs(turn))))]))
+        dist = float(np.hypot(target[0] - x, target[1] - y))
+        steps = max(1, int(np.ceil(dist / (speed * dt))))
+        for k in range(1, steps + 1):
+            f = k / steps
+            poses.append(np.array([x + f * (target[0] - x), y + f * (target[1] - y), goal_yaw]))
+    return np.stack(poses)
+
+
+@dataclass(frozen=True)
+class Run:
+    """One simulated run: step times (s), true poses, odometry readings and scans, and the kidnapping step."""
+
+    name: str
+    grid: GridMap
+    laser: LaserSpec
+    dt: float
+    truth: Array
+    odometry: Array
+    scans: Array
+    kidnap_step: int | None = None
+
+    @property
+    def times(self) -> Array:
+        result: Array = np.arange(len(self.truth), dtype=np.float64) * self.dt
+        return result
+
+
+def simulate(
+    name: str, grid: GridMap, legs: Sequence[Array], laser: LaserSpec, noise: OdometryNoise, seed: int, dt: float = 0.2
+) -> Run:
+    """Scans and odometry along ``legs`` (pose arrays); between two legs the robot is kidnapped (teleported)."""
+    rng = np.random.default_rng(seed)
+    truth = np.concatenate(legs)
+    odometer = OdometrySimulator(truth[0], noise, rng)
+    odometry = [odometer.reading.copy()]
+    jumps = set(np.cumsum([len(leg) for leg in legs])[:-1].tolist())
+    for k in range(1, len(truth)):
+        # a kidnapped robot's wheels did not turn: its odometry holds still across the jump
+        odometry.append(odometer.reading.copy() if k in jumps else odometer.step(truth[k - 1], truth[k]))
+    scans = np.stack([simulate_scan(grid, pose, laser, rng) for pose in truth])
+    kidnap = min(jumps) if jumps else None
+    return Run(name, grid, laser, dt, truth, np.stack(odometry), scans, kidnap)
+
+
+def standard_runs(seed: int, laser: LaserSpec | None = None, noise: OdometryNoise | None = None) -> list[Run]:
+    """The benchmark's runs: a tour and a kidnapping in the lab and in the floor plan of symmetric rooms."""
+    laser = laser or LaserSpec()
+    noise = noise or OdometryNoise()
+    lab, plan = lab_grid(), floor_plan_grid()
+    plan_tour = ((1.5, 5.0), (10.0, 5.0), (10.0, 2.4), (10.0, 5.0), (6.0, 5.0), (6.0, 7.6), (6.0, 5.0), (1.5, 5.0))
+    plan_before = ((3.0, 5.2), (10.0, 5.2), (10.0, 7.6))
+    plan_after = ((10.0, 2.4), (10.0, 4.9), (5.5, 5.0), (2.0, 5.0), (2.0, 2.2), (2.0, 5.0), (9.0, 5.0))
+    lab_after = ((2.8, 5.5), (2.0, 3.2), (1.8, 0.8), (3.0, 2.8), (6.2, 2.8), (7.0, 4.6))
+    return [
+        simulate("lab-tour", lab, [drive(LAB_WAYPOINTS)], laser, noise, seed),
+        simulate("lab-kidnap", lab, [drive(LAB_WAYPOINTS[:6]), drive(lab_after)], laser, noise, seed + 1),
+        simulate("floor-plan-tour", plan, [drive(plan_tour)], laser, noise, seed + 2),
+        simulate("floor-plan-kidnap", plan, [drive(plan_before), drive(plan_after)], laser, noise, seed + 3),
+    ]
