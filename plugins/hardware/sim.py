@@ -8,18 +8,19 @@ names; ``textures`` names the RGB recognition's model file so objects wear the t
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
 ``altimeter``) or by ``joint``/``joints``, and the channel's kind and direction:
 
-====================  ===========================================================================
-counter in, joint     wheel encoder speed, ticks/s (``ticksPerRev``), plus ``noise`` (s.d.)
-pwm out, joint        duty × ``maxVelocity`` (``mode`` velocity) or × max effort (``mode`` effort)
-analog/bus in, joint  joint position (``mode`` velocity/effort: those), raw = value / scale + offset
-bus in, joints        a tuple of the named joints' positions, each as above
-analog/bus out, joint joint target (``mode``), value = (raw − offset) × scale; ``mirror``: a second
-                      joint driven alike (the gripper's other finger)
-digital in, contact   1 while ``link`` touches an obstacle (bumper)
-stream in, lidar      ``size`` ranges (m) over ``fov`` from ``link``
-stream in, rgb/depth  one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
-analog in, imu/alt.   (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
-====================  ===========================================================================
+======================  ===========================================================================
+counter in, joint       wheel encoder speed, ticks/s (``ticksPerRev``), plus ``noise`` (s.d.)
+pwm out, joint          duty × ``maxVelocity`` (``mode`` velocity) or × max effort (``mode`` effort)
+analog/bus in, joint    joint position (``mode`` velocity/effort: those), raw = value / scale + offset
+bus in, joints          a tuple of the named joints' positions, each as above
+analog/bus out, joint   joint target (``mode``), value = (raw − offset) × scale; ``mirror``: a second
+                        joint driven alike (the gripper's other finger)
+digital in, contact     1 while ``link`` touches an obstacle (bumper)
+stream in, lidar        ``size`` ranges (m) over ``fov`` from ``link``
+stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
+analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
+out, read               the last raw value written (as ``hardware.loopback``)
+======================  ===========================================================================
 
 Time (decision D88): the world is a :class:`SimulationHook` of the channel's scope; each read or
 write first steps the physics, in fixed steps, up to the scope clock's time — real time under
@@ -143,6 +144,7 @@ class SimBackend(Backend):
         self.sim: SimWorld | None = None
         self.device: Any = None
         self._rng = np.random.default_rng(v["seed"])
+        self.last = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
 
     def _check_size(self) -> None:
         v, size, sensor = self.values, self.channel.size, self.values["sensor"]
@@ -206,6 +208,8 @@ class SimBackend(Backend):
     def read(self) -> Value:
         sim, robot = self._require()
         v, sensor = self.values, self.values["sensor"]
+        if self.channel.direction == "out":
+            return self.last
         with sim.lock:
             sim.sync()
             if sensor == "lidar":
@@ -235,6 +239,7 @@ class SimBackend(Backend):
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel")
         raw = float(value[0] if isinstance(value, tuple) else value)
+        self.last = raw
         v = self.values
         with sim.lock:
             sim.sync()

@@ -1,0 +1,149 @@
+"""The ``hardware.sim`` backend: channels read and write simulated devices through the Backend
+interface, lock-step with a ManualClock; bad Params are reported; the example system runs."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+
+import pytest
+
+import ckmconf
+from ckmconf.errors import Loc
+from ckmconf.model import HWChannel, Param
+from plugins.hardware.sim import SimBackend, find_world
+from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
+from runtime.kernel.interfaces import Backend, ParamError
+from runtime.kernel.node import NodeRuntime
+from runtime.network import Transport, open_transport
+from runtime.registry import default_registry
+from tests.conftest import REPO
+from tests.runtime.network.conftest import private_network
+
+STATION = REPO / "configs" / "examples" / "sim_station.xml"
+
+
+def channel(name: str, direction: str = "in", kind: str = "analog", size: int = 1, **params: str) -> HWChannel:
+    """A sim channel record whose world is the example's workshop."""
+    loc = Loc(str(STATION), 1, 1, "/System/Node[@name='test']/HWChannel")
+    return HWChannel(
+        name=name, direction=direction, kind=kind, backend="sim", size=size, loc=loc,  # type: ignore[arg-type]
+        params=tuple(Param(name=k, value=v) for k, v in params.items()),
+    )
+
+
+@pytest.fixture
+def clock_and_scope() -> tuple[ManualClock, PlantScope]:
+    clock = ManualClock()
+    return clock, PlantScope(clock, name="sim-test")
+
+
+def open_all(scope: PlantScope, *records: HWChannel) -> list[Backend]:
+    with plant_scope(scope):
+        backends: list[Backend] = [SimBackend(record) for record in records]
+    for backend in backends:
+        backend.setup()
+    return backends
+
+
+def test_sim_is_registered() -> None:
+    assert default_registry().resolve("hardware", "sim") is SimBackend
+
+
+def test_wheel_motor_and_encoder_in_lock_step(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
+    clock, scope = clock_and_scope
+    rover = {"body": "rover", "pose": "3.0 2.0 0"}
+    motor, encoder, other = open_all(
+        scope,
+        channel("m", "out", "pwm", joint="left_wheel_joint", mode="velocity", maxVelocity="8", **rover),
+        channel("e", "in", "counter", joint="left_wheel_joint", ticksPerRev="1024", body="rover"),
+        channel("r", "out", "pwm", joint="right_wheel_joint", mode="velocity", maxVelocity="8", body="rover"),
+    )
+    motor.write(0.5)
+    other.write(0.5)
+    clock.advance(1.0)
+    speed = encoder.read()
+    assert speed == pytest.approx(0.5 * 8 * 1024 / (2 * math.pi), rel=0.05)
+    sim = find_world(scope, str(STATION))
+    assert sim is not None and sim.world.time == pytest.approx(1.0, abs=sim.world.time_step)
+    x, _, _ = sim.robots["rover"].planar_pose()
+    assert x - 3.0 == pytest.approx(0.5 * 8 * 0.08 * 1.0, rel=0.2)  # ~ v·t, after the start-up
+    assert motor.read() == 0.5  # an out channel reads back the last value written
+
+
+def test_joint_position_lidar_bumper_camera_imu(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
+    clock, scope = clock_and_scope
+    arm = {"body": "station_arm", "pose": "1.0 1.0 0"}
+    servo, state, laser, bumper, depth, imu, height = open_all(
+        scope,
+        channel("s", "out", "bus", joint="shoulder_joint", scale="0.01", offset="100", **arm),
+        channel("j", "in", "bus", size=2, joints="turret_joint shoulder_joint", body="station_arm"),
+        channel("l", "in", "stream", size=181, body="rover", pose="3.0 2.0 0", sensor="lidar", link="laser_link",
+                fov="3.14159"),
+        channel("b", "in", "digital", body="rover", sensor="contact", link="bumper_link"),
+        channel("d", "in", "stream", size=80 * 60, body="station_arm", sensor="depth",
+                link="wrist_camera_optical_frame", width="80", height="60"),
+        channel("i", "in", "analog", size=6, body="rover", sensor="imu"),
+        channel("h", "in", "analog", body="rover", sensor="altimeter", link="laser_link"),
+    )
+    servo.write(150.0)  # (150 − 100) × 0.01 = 0.5 rad
+    clock.advance(2.0)
+    turret, shoulder = state.read()  # type: ignore[misc]
+    assert turret == pytest.approx(0.0, abs=0.01) and shoulder == pytest.approx(0.5, abs=0.02)
+    assert servo.read() == 150.0
+    ranges = laser.read()
+    assert isinstance(ranges, tuple) and len(ranges) == 181
+    assert ranges[90] == pytest.approx(6.0 - 3.25, abs=0.02)  # straight ahead: the wall at x = 6
+    assert bumper.read() == 0.0
+    image = depth.read()
+    assert isinstance(image, tuple) and len(image) == 80 * 60 and min(image) > 0.0
+    accel = imu.read()
+    assert isinstance(accel, tuple) and accel[5] == pytest.approx(9.81, abs=0.3)
+    assert height.read() == pytest.approx(0.25, abs=0.01)
+
+
+def test_bad_params_are_reported() -> None:
+    with pytest.raises(ParamError, match="body"):
+        SimBackend(channel("x", sensor="lidar"))
+    with pytest.raises(ParamError, match="size"):
+        SimBackend(channel("x", "in", "stream", size=10, body="rover", sensor="rgb", width="4", height="4"))
+    with pytest.raises(ParamError, match="mode"):
+        SimBackend(channel("x", "out", "bus", body="rover", joint="left_wheel_joint", mode="torque"))
+    backend = SimBackend(channel("x", body="rover", joint="no_such_joint"), scope=PlantScope(ManualClock()))
+    with pytest.raises(KeyError, match="no_such_joint"):
+        backend.setup()
+
+
+@pytest.fixture
+def transport() -> Iterator[Transport]:
+    running = open_transport(private_network(), name="sim-test")
+    running.setup()
+    running.start()
+    yield running
+    running.stop()
+
+
+def test_the_example_system_runs_in_the_simulator(transport: Transport) -> None:
+    system = ckmconf.load(STATION)
+    scope = PlantScope(time.monotonic, name="example")
+    runtime = NodeRuntime(system.nodes[0], system, transport)
+    with plant_scope(scope):
+        runtime.setup()
+    runtime.start()
+    try:
+        deadline = time.monotonic() + 20.0
+        sim = find_world(scope, str(STATION))
+        assert sim is not None
+        while time.monotonic() < deadline:
+            with sim.lock:
+                moved = sim.robots["rover"].planar_pose()
+                shoulder = sim.robots["station_arm"].joint_state(sim.robots["station_arm"].joint("shoulder_joint"))[0]
+            if math.dist(moved[:2], (3.5, 2.0)) > 0.3 and abs(shoulder - 0.9) < 0.05:
+                break
+            time.sleep(0.1)
+        assert math.dist(moved[:2], (3.5, 2.0)) > 0.3  # the rover drove on its constant duties
+        assert shoulder == pytest.approx(0.9, abs=0.05)  # the arm reached its set-point
+        assert sim.world.time > 0.5
+    finally:
+        runtime.stop()
