@@ -130,9 +130,9 @@ class NodeRuntime:
         for channel in node.channels:
             try:
                 backend = self._backend_classes[channel.name](channel)
+                backend.setup()  # a plant's own checks (Params shared by channels) run here
             except ParamError as exc:
                 raise self._error(channel, str(exc)) from None
-            backend.setup()
             self.backends[channel.name] = backend
         for sensor in node.sensors:
             chain = build_chain(sensor.adaptation, self.registry, inverse=False)

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+import ckmconf
+from runtime.verification.verify import verify_safely
 from tests.conftest import REPO
 
 EXAMPLES = sorted(
@@ -23,7 +25,7 @@ def ckm_run(*args: str) -> list[str]:
 
 
 @pytest.mark.parametrize("config", EXAMPLES, ids=[p.name for p in EXAMPLES])
-def test_every_example_runs_for_its_duration(config: Path, tmp_path: Path) -> None:
+def test_every_example_runs_for_its_duration_or_is_refused_before_start(config: Path, tmp_path: Path) -> None:
     done = subprocess.run(
         ckm_run(str(config), "--duration", "0.5", "--log-dir", str(tmp_path)),
         cwd=REPO,
@@ -31,6 +33,12 @@ def test_every_example_runs_for_its_duration(config: Path, tmp_path: Path) -> No
         text=True,
         timeout=60,
     )
+    problems = verify_safely(ckmconf.load(config))
+    if problems:  # what verify refuses, ckm-run refuses too, each problem located, nothing started
+        assert done.returncode == 1, done.stderr
+        assert all(str(problem) in done.stderr for problem in problems)
+        assert not (tmp_path / "stats.json").exists()
+        return
     assert done.returncode == 0, done.stderr
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert stats["nodes"], "no node ran"
