@@ -28,9 +28,11 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "jitter": ("benchmarks.jitter", "run", "describe"),
     "localization": ("benchmarks.localization", "run", "describe"),
     "rates": ("benchmarks.rates", "run", "describe"),
+    "soak": ("benchmarks.soak", "run", "describe"),
+    "sim": ("benchmarks.sim", "run", "describe"),
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
-TAKES_OPTIONS = {"adaptation", "localization", "zoom"}  # these take their own options: ckm-bench NAME --help lists them
+TAKES_OPTIONS = {"adaptation", "localization", "zoom", "soak"}  # these take their own options: ckm-bench NAME --help lists them
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:
