@@ -32,7 +32,8 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "sim": ("benchmarks.sim", "run", "describe"),
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
-TAKES_OPTIONS = {"adaptation", "localization", "zoom", "soak"}  # these take their own options: ckm-bench NAME --help lists them
+# These take their own options: ckm-bench NAME --help lists them.
+TAKES_OPTIONS = {"adaptation", "localization", "soak", "zoom"}
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:
