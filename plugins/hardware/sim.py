@@ -2,9 +2,11 @@
 
 Params (decision D86). ``body`` names the robot; its model is ``plugins/sim/models/<body>.urdf``
 unless ``model`` gives a URDF path (relative to the configuration file); ``pose`` "x y yaw" places
-it (the first channel of a body to give one wins; default: the map's centre). The world is built
-from the ``<Environment>`` of the configuration the channel comes from, or of the file ``world``
-names; ``textures`` names the RGB recognition's model file so objects wear the textures it learnt.
+it (the first channel of a body to be set up decides; default: the map's centre). One world per
+scope (:mod:`plugins.hardware.simulation`: per node under ``ckm-run``), built by the first channel
+set up from the ``<Environment>`` of the file its ``world`` Param names (default: its own
+configuration file); a later ``world`` naming another file is an error. ``textures`` names the
+RGB recognition's model file so objects wear the textures it learnt.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
 ``altimeter``) or by ``joint``/``joints``, and the channel's kind and direction:
 
@@ -76,10 +78,12 @@ _SPEC = Params(
 
 
 class SimWorld(SimulationHook):
-    """One pybullet world shared by the sim channels of a scope and world file."""
+    """The pybullet world shared by the sim channels of a scope, built from the ``<Environment>`` of
+    ``source`` (a configuration file) by the first channel set up."""
 
-    def __init__(self, clock: Clock, environment: Environment | None, seed: int, textures: str) -> None:
+    def __init__(self, clock: Clock, environment: Environment | None, seed: int, textures: str, source: str) -> None:
         super().__init__(clock)
+        self.source = source
         self.world = World(environment, seed=seed, catalog=read_model(textures) if textures else None)
         self.environment = environment
         self.robots: dict[str, Robot] = {}
@@ -108,14 +112,14 @@ class SimWorld(SimulationHook):
         self.world.close()
 
 
-_worlds: weakref.WeakValueDictionary[tuple[PlantScope, str], SimWorld] = weakref.WeakValueDictionary()
+_worlds: weakref.WeakValueDictionary[PlantScope, SimWorld] = weakref.WeakValueDictionary()
 _lock = threading.Lock()
 
 
-def find_world(scope: PlantScope, world_file: str) -> SimWorld | None:
-    """The world of ``scope`` built from ``world_file`` while a backend holds it (tests, consoles)."""
+def find_world(scope: PlantScope) -> SimWorld | None:
+    """The world of ``scope`` while a backend holds it (tests, consoles)."""
     with _lock:
-        return _worlds.get((scope, str(Path(world_file).resolve())))
+        return _worlds.get(scope)
 
 
 class SimBackend(Backend):
@@ -162,12 +166,16 @@ class SimBackend(Backend):
 
     def setup(self) -> None:
         v = self.values
-        key = (self.scope, self.world_file)
         with _lock:
-            sim = _worlds.get(key)
+            sim = _worlds.get(self.scope)
             if sim is None:
                 environment = load(self.world_file).environment if self.world_file else None
-                sim = _worlds[key] = SimWorld(self.scope.clock, environment, v["seed"], self._path(v["textures"]))
+                textures = self._path(v["textures"])
+                sim = SimWorld(self.scope.clock, environment, v["seed"], textures, self.world_file)
+                _worlds[self.scope] = sim
+            elif v["world"] and sim.source != self.world_file:
+                raise ParamError(f"{self.owner}: Param 'world' names {self.world_file}, but the simulated world of "
+                                 f"this scope was built from {sim.source}")
         with sim.lock:
             model = self._path(v["model"]) if v["model"] else ""
             robot = sim.robot(v["body"], model, v["pose"])

@@ -65,7 +65,7 @@ def test_wheel_motor_and_encoder_in_lock_step(clock_and_scope: tuple[ManualClock
     clock.advance(1.0)
     speed = encoder.read()
     assert speed == pytest.approx(0.5 * 8 * 1024 / (2 * math.pi), rel=0.05)
-    sim = find_world(scope, str(STATION))
+    sim = find_world(scope)
     assert sim is not None and sim.world.time == pytest.approx(1.0, abs=sim.world.time_step)
     x, _, _ = sim.robots["rover"].planar_pose()
     assert x - 3.0 == pytest.approx(0.5 * 8 * 0.08 * 1.0, rel=0.2)  # ~ v·t, after the start-up
@@ -133,7 +133,7 @@ def test_the_example_system_runs_in_the_simulator(transport: Transport) -> None:
     runtime.start()
     try:
         deadline = time.monotonic() + 20.0
-        sim = find_world(scope, str(STATION))
+        sim = find_world(scope)
         assert sim is not None
         while time.monotonic() < deadline:
             with sim.lock:
