@@ -83,7 +83,7 @@ class MonitorService:
             new = task.stats.misses - self._misses.get(alarm.name, 0)
             self._misses[alarm.name] = task.stats.misses
             return float(new)
-        recent = list(task.stats.jitter)[-200:] if kind == "jitter" else list(task.stats.exec_time)[-200:]
+        recent = (task.stats.jitter if kind == "jitter" else task.stats.exec_time).recent(200)
         return max((abs(v) for v in recent), default=0.0)
 
     def tick(self) -> None:

@@ -19,8 +19,9 @@ import logging
 import statistics
 import threading
 import time
+from array import array
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,6 +29,39 @@ LOG = logging.getLogger("ckm.scheduler")
 SPIN = 0.0003  # seconds spun before a release instead of sleeping
 IDLE_WINDOW = 1.0  # seconds over which the idle share is measured
 BUSY_LIMIT = 100_000  # runs kept for the idle share at most (a bound even for a stalled clock)
+
+
+SAMPLES_KEPT = 20000  # recent jitter and execution-time samples per task
+
+
+class Ring:
+    """The last ``maxlen`` floats, in one array allocated up front: a node's memory does not grow
+    while it fills (a deque of floats would add ~32 bytes per sample for minutes at slow rates)."""
+
+    def __init__(self, maxlen: int = SAMPLES_KEPT) -> None:
+        self.maxlen = maxlen
+        self._values = array("d", bytes(8 * maxlen))
+        self._next = 0
+        self._count = 0
+
+    def append(self, value: float) -> None:
+        self._values[self._next] = value
+        self._next = (self._next + 1) % self.maxlen
+        self._count = min(self._count + 1, self.maxlen)
+
+    def recent(self, count: int) -> list[float]:
+        """The last ``count`` samples, oldest first."""
+        count = min(count, self._count)
+        start = (self._next - count) % self.maxlen
+        if start + count <= self.maxlen:
+            return self._values[start : start + count].tolist()
+        return self._values[start:].tolist() + self._values[: self._next].tolist()
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __iter__(self) -> Iterator[float]:
+        return iter(self.recent(self._count))
 
 
 @dataclass
@@ -39,8 +73,8 @@ class TaskStats:
     optional_runs: int = 0
     optional_skipped: int = 0
     failures: int = 0
-    jitter: deque[float] = field(default_factory=lambda: deque(maxlen=20000))
-    exec_time: deque[float] = field(default_factory=lambda: deque(maxlen=20000))
+    jitter: Ring = field(default_factory=Ring)
+    exec_time: Ring = field(default_factory=Ring)
     max_jitter: float = 0.0
     first_failure: str | None = None  # the first exception a part raised (ckm-run reports it)
 

@@ -5,14 +5,17 @@ from __future__ import annotations
 import functools
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import ckmconf
 from runtime.kernel import node as node_module
 from runtime.kernel.node import NodeRuntime
-from runtime.kernel.scheduler import BUSY_LIMIT, IDLE_WINDOW, Scheduler, Task
+from runtime.kernel.scheduler import BUSY_LIMIT, IDLE_WINDOW, SAMPLES_KEPT, Ring, Scheduler, Task
 from runtime.network import Transport, open_transport
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
@@ -119,8 +122,20 @@ def test_the_scheduler_keeps_only_the_last_idle_window_of_runs() -> None:
         assert scheduler._busy.maxlen == BUSY_LIMIT
     finally:
         scheduler.stop()
-    assert task.stats.jitter.maxlen is not None and task.stats.exec_time.maxlen is not None
-    assert len(task.stats.jitter) <= task.stats.jitter.maxlen
+    assert len(task.stats.jitter) <= task.stats.jitter.maxlen and len(task.stats.exec_time) <= SAMPLES_KEPT
+
+
+@given(st.integers(1, 50), st.lists(st.floats(allow_nan=False), max_size=200), st.integers(0, 60))
+def test_a_ring_keeps_the_last_samples_in_memory_allocated_up_front(maxlen: int, values: list[float], n: int) -> None:
+    ring = Ring(maxlen)
+    allocated = ring._values.buffer_info()
+    reference: deque[float] = deque(maxlen=maxlen)
+    for value in values:
+        ring.append(value)
+        reference.append(value)
+    assert list(ring) == list(reference) and len(ring) == len(reference)
+    assert ring.recent(n) == (list(reference)[-n:] if n else [])
+    assert ring._values.buffer_info() == allocated  # never grown nor moved
 
 
 def test_a_node_keeps_a_bounded_number_of_events_and_sends_every_one_to_its_sinks(transport: Transport) -> None:
