@@ -80,6 +80,8 @@ class AmclFilter:
         self.particles = self.random_poses(settings.particles)
         self.weights = np.full(settings.particles, 1.0 / settings.particles)
         self.odometry: Array | None = None
+        self.injected = 0
+        """Random particles drawn at the last resampling (augmented MCL's recovery)."""
 
     def random_poses(self, count: int) -> Array:
         """``count`` poses uniform over the free cells, with uniform headings."""
@@ -121,6 +123,7 @@ class AmclFilter:
         chosen = self.particles[low_variance_indices(weights, draws, self.rng)]
         random_probability = max(0.0, 1.0 - self.w_fast / self.w_slow) if self.w_slow > 0 else 0.0
         replace = self.rng.random(draws) < random_probability
+        self.injected = int(replace.sum())
         if replace.any():
             chosen[replace] = self.random_poses(int(replace.sum()))
         if s.kld:

@@ -79,9 +79,9 @@ def floor_plan_shapes(
             door_x = x0 + room / 2
             shapes.append(shapely.box(x0, y_wall - wall / 2, door_x - door / 2, y_wall + wall / 2))
             shapes.append(shapely.box(door_x + door / 2, y_wall - wall / 2, x0 + room, y_wall + wall / 2))
-            if k:
-                y0, y1 = (0.0, room) if side == 0 else (room + corridor, depth)
-                shapes.append(shapely.box(x0 - wall / 2, y0, x0 + wall / 2, y1))
+            # every room is walled on its east side (the last one too): all interiors are [x0, x0 + room - wall]
+            y0, y1 = (0.0, room) if side == 0 else (room + corridor, depth)
+            shapes.append(shapely.box(x0 + room - wall, y0, x0 + room, y1))
             shapes.append(shapely.box(x0 + room * 0.3, y_table - 0.3, x0 + room * 0.6, y_table + 0.3))
     shapes.append(shapely.box(0.0, room + 0.05, 0.5, room + 0.6))  # the cabinet breaking the symmetry
     return (0.0, 0.0, width, depth), shapes
