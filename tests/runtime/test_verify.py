@@ -172,6 +172,47 @@ def test_the_ros_resource_example_is_not_runnable_only_for_its_ros_kernel() -> N
     assert "runs on a ROS kernel" in problem.message and "(not runnable)" in problem.message
 
 
+def test_the_examples_readme_has_a_line_for_every_example() -> None:
+    """configs/examples/README.md: each example's concept and its command, or why it is a model only."""
+    rows = {
+        line.split("|")[1].strip().split()[0].strip("`"): line
+        for line in (EXAMPLES_DIR / "README.md").read_text().splitlines()
+        if line.startswith("| `")
+    }
+    assert set(rows) == {p.name for p in EXAMPLES_DIR.glob("*.xml")}
+    for name, row in rows.items():
+        command = row.rsplit("|", 2)[-2]
+        if name in NOT_RUNNABLE:
+            assert "model only:" in command, name
+        else:
+            assert f"configs/examples/{name}" in command or "model only:" in command, name
+
+
+# Examples whose plan reaches its mission's success final on what this repository runs today.
+PLAN_RUNS = [
+    ("mission_nested.xml", "fetch", "robot", "delivered"),
+    ("split_system.xml", "delivery", "robot", "delivered"),
+]
+
+
+@pytest.mark.parametrize(("name", "plan", "agent", "outcome"), PLAN_RUNS, ids=[r[0] for r in PLAN_RUNS])
+def test_plan_examples_run_to_their_success_final(
+    name: str, plan: str, agent: str, outcome: str, tmp_path: Path
+) -> None:
+    """ckm-run FILE --plan PLAN exits 0 (verified, built, every agent succeeded) before its duration ends."""
+    command = [sys.executable, "-m", "runtime.cli", str(EXAMPLES_DIR / name), "--plan", plan]
+    done = subprocess.run(
+        [*command, "--duration", "30", "--log-dir", str(tmp_path)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=90,
+    )
+    assert done.returncode == 0, done.stderr
+    records = [json.loads(line) for line in (tmp_path / f"mission-{agent}.jsonl").read_text().splitlines()]
+    assert [r["outcome"] for r in records if r["kind"] == "end"] == [outcome]
+
+
 def test_the_use_case_names_kinds_that_do_not_exist_yet() -> None:
     """Point 11 of issue G: the simulation's kinds are reported, none is registered as a placeholder."""
     messages = [e.message for e in verify(ckmconf.load(REPO / "configs" / "usecase" / "lab.xml"), builtin())]
