@@ -25,7 +25,7 @@ from typing import Any
 
 from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import ParamError, read_params
-from runtime.verification.manifest import NUMBER, REQUIRED, P, Params, Ports
+from runtime.verification.manifest import MAPPING, NUMBER, REQUIRED, P, Params, Ports
 
 from .common import check_state, clamp
 from .multi import MultiOutputController, Row, field, role_values
@@ -51,7 +51,7 @@ class DiffDrive(MultiOutputController):
         P("output", "linear", "Wheel set points as rim speeds (linear, m/s) or wheel rates (angular, rad/s).",
           choices=("linear", "angular")),
     )
-    PORTS = Ports(inputs={"setpoint": "Twist", "*": NUMBER}, outputs={"*": NUMBER})
+    PORTS = Ports(inputs={"setpoint": MAPPING, "*": NUMBER}, outputs={"*": NUMBER})  # a Twist-like message
 
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record, outputs=2)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import ParamError, read_params
-from runtime.verification.manifest import NUMBER, REQUIRED, P, Params, Ports
+from runtime.verification.manifest import MAPPING, NUMBER, REQUIRED, P, Params, Ports
 
 from .common import check_state
 from .multi import MultiOutputController, Row, input_roles, role_values
@@ -44,7 +44,7 @@ class DiffDriveOdometry(MultiOutputController):
         P("y", 0.0, "Initial y of the pose.", unit="m"),
         P("yaw", 0.0, "Initial heading.", unit="rad"),
     )
-    PORTS = Ports(inputs={"*": NUMBER}, outputs={"*": "Odometry"})
+    PORTS = Ports(inputs={"*": NUMBER}, outputs={"*": MAPPING})  # stamp, pose, twist, dispersion
 
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record, outputs=1)

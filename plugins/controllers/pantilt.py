@@ -25,7 +25,7 @@ from typing import Any
 
 from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import ParamError, read_params
-from runtime.verification.manifest import NUMBER, P, Params, Ports
+from runtime.verification.manifest import MAPPING, NUMBER, P, Params, Ports
 
 from .common import check_state, clamp
 from .multi import MultiOutputController, Row, field, input_roles, role_values
@@ -49,7 +49,7 @@ class PanTiltPosition(MultiOutputController):
         P("imageHeight", 480, "Image height (target=image).", unit="px", min=1),
         P("fov", 1.0, "Horizontal field of view of the camera (target=image).", unit="rad", above=0.0, below=math.pi),
     )
-    PORTS = Ports(inputs={"setpoint": "PanTilt", "*": NUMBER}, outputs={"*": NUMBER})
+    PORTS = Ports(inputs={"setpoint": MAPPING, "*": NUMBER}, outputs={"*": NUMBER})  # a PanTilt-like goal
 
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record, outputs=2)

@@ -27,7 +27,7 @@ from typing import Any
 
 from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import ParamError, read_params
-from runtime.verification.manifest import ANY, NUMBER, REQUIRED, P, Params, Ports
+from runtime.verification.manifest import ANY, MAPPING, NUMBER, REQUIRED, P, Params, Ports
 
 from .common import check_state, clamp
 from .multi import MultiOutputController, Row, numbers
@@ -50,9 +50,7 @@ class JointTrajectory(MultiOutputController):
         P("tolerance", 0.01, "Largest distance from the goal at which a pose counts as reached.", unit="rad",
           above=0.0),
     )
-    PORTS = Ports(
-        inputs={"setpoint": ANY, "measure": ANY, "*": ANY}, outputs={"status": "ArmStatus", "*": NUMBER}
-    )
+    PORTS = Ports(inputs={"*": ANY}, outputs={"status": MAPPING, "*": NUMBER})  # status: an ArmStatus-like message
 
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)

@@ -120,3 +120,18 @@ def test_odometry_integrates_two_simulated_wheels(
     assert last["twist"]["angular"] == pytest.approx(0.1 / 0.25, abs=0.01)
     assert last["pose"]["yaw"] > first["pose"]["yaw"] > 0.0 and last["dispersion"] > first["dispersion"] > 0.0
     assert node.statistics()["tasks"]["base.odometry"]["failures"] == 0
+
+
+def test_verify_refuses_a_number_topic_as_diff_drives_velocity_command(tmp_path: Path) -> None:
+    text = ODOMETRY.replace(
+        '<Controller name="odometry"',
+        '<Controller name="kinematics" kind="diff-drive" period="0.02" active="false">'
+        '<Param name="wheelBase" value="0.2"/>'
+        '<Input topic="left_speed" role="setpoint"/><Output topic="left_cmd"/><Output topic="right_cmd"/>'
+        '</Controller>\n    <Controller name="odometry"',
+    )
+    path = tmp_path / "system.xml"
+    path.write_text(text)
+    (error,) = verify(ckmconf.load(path))
+    assert "controller 'kinematics' (diff-drive) reads dicts of fields as 'setpoint'" in str(error)
+    assert "of type float64" in str(error) and str(error).startswith(f"{path}:")
