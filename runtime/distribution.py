@@ -44,7 +44,7 @@ from typing import Any
 from ckmconf import ConfigError, load
 from ckmconf.model import Network, System
 
-from .cli import _write_run
+from .cli import EXIT_NETWORK, _write_run
 from .kernel.node import NodeRuntime
 from .network import open_transport, read_group_key
 from .network.api import GroupKeyError, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
@@ -477,7 +477,7 @@ def run_agent(network_file: Path | None, name: str, run_dir: Path, duration: flo
         return 1
     except (GroupKeyError, NetworkError, OSError, ValueError) as exc:
         print(f"{network_file or 'default network'}: cannot join the network: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_NETWORK
     stop = threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:

@@ -19,6 +19,7 @@ import pytest
 from ckmconf import dumps
 from ckmconf.model import Network, System
 from editor.distribution import Ack, AgentDirectory, bundle, config_hash, distribute, push
+from runtime.cli import EXIT_NETWORK
 from runtime.cli import main as ckm_run_main
 from runtime.distribution import ConfigAgent, ack_topic, bundle_hash, config_topic, parse_push
 from runtime.network import Sample, Subscription, TopicQoS, Transport, open_transport, read_group_key
@@ -312,4 +313,5 @@ def test_an_agent_without_its_key_file_cannot_start(tmp_path: Path) -> None:
         text=True,
         timeout=30,
     )
-    assert done.returncode == 2 and "cannot join the network" in done.stderr and "Traceback" not in done.stderr
+    assert done.returncode == EXIT_NETWORK, done.stderr
+    assert "cannot join the network" in done.stderr and "Traceback" not in done.stderr
