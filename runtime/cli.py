@@ -55,7 +55,7 @@ from .verification.verify import verify_or_report
 LOG = logging.getLogger("ckm.run")
 EXIT_CONFIG = 1  # the configuration was refused (load, verify, build)
 EXIT_NETWORK = 4  # the network could not be joined
-EXIT_FAILED = 5  # a partition, node task or agent thread failed while running
+EXIT_FAILED = 5  # a partition or a node task failed while running
 EXIT_AGENTS = 6  # a plan's agent did not end in its success final
 STATS_EVERY = 2.0  # seconds between rewrites of the statistics file while running
 
@@ -312,7 +312,7 @@ def _verdict(code: int, runtimes: list[NodeRuntime], agents: list[_Agent]) -> in
         if not succeeded:
             detail = f": {type(agent.error).__name__}: {agent.error}" if agent.error is not None else ""
             print(f"agent {agent.name}: mission ended {outcome}{detail}", file=sys.stderr)
-            codes.append(EXIT_FAILED if agent.error is not None else EXIT_AGENTS)
+            codes.append(EXIT_AGENTS)
     return min(codes) if codes else 0
 
 
