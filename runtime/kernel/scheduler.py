@@ -13,6 +13,7 @@ as jitter and misses rather than being hidden.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import itertools
 import logging
@@ -57,6 +58,12 @@ class Ring:
             return self._values[start : start + count].tolist()
         return self._values[start:].tolist() + self._values[: self._next].tolist()
 
+    def copy(self) -> Ring:
+        """An independent copy (one memory copy: cheap to take under a lock)."""
+        twin = Ring.__new__(Ring)
+        twin.maxlen, twin._values, twin._next, twin._count = self.maxlen, self._values[:], self._next, self._count
+        return twin
+
     def __len__(self) -> int:
         return self._count
 
@@ -78,8 +85,13 @@ class TaskStats:
     max_jitter: float = 0.0
     first_failure: str | None = None  # the first exception a part raised (ckm-run reports it)
 
+    def snapshot(self) -> TaskStats:
+        """A copy to summarise later; the scheduler takes it under its lock, so sorting the samples
+        never holds up its thread."""
+        return dataclasses.replace(self, jitter=self.jitter.copy(), exec_time=self.exec_time.copy())
+
     def summary(self, period: float) -> dict[str, Any]:
-        """The figures; call it where nothing appends meanwhile (the scheduler does it under its lock)."""
+        """The figures; call it on a snapshot, or where nothing appends meanwhile."""
         jitters = sorted(abs(j) for j in self.jitter)
         execs = sorted(self.exec_time)
 
@@ -192,7 +204,8 @@ class Scheduler:
         thread records them under, so a reader never walks a deque being appended to."""
         with self._lock:
             chosen = list(self.tasks.values()) if tasks is None else tasks
-            return {task.name: task.stats.summary(task.period) for task in chosen}
+            snapshots = [(task.name, task.period, task.stats.snapshot()) for task in chosen]
+        return {name: stats.summary(period) for name, period, stats in snapshots}
 
     # ------------------------------------------------------------------ lifecycle
 
