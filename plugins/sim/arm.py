@@ -53,23 +53,62 @@ class Arm:
         self._movable = [j for j in range(p.getNumJoints(robot.body, physicsClientId=cid))
                          if p.getJointInfo(robot.body, j, physicsClientId=cid)[2] != p.JOINT_FIXED]
         self.target: tuple[float, ...] = tuple(robot.joint_state(j)[0] for j in self.joints)
+        self.wrist = self.joints[3]  # the wrist joint's child link has the joint's index
+        self.limits = {j: p.getJointInfo(robot.body, j, physicsClientId=cid)[8:10] for j in self.joints}
+        # constant geometry from the model at its current state: wrist-to-tool length, pan axis origin
+        wrist_position, _ = robot.link_pose(self.wrist)
+        self._tool_length = float(np.linalg.norm(np.subtract(robot.link_pose(self.tool)[0], wrist_position)))
+        base_position, base_orientation = robot.link_pose(-1)
+        base_rotation = np.array(p.getMatrixFromQuaternion(base_orientation)).reshape(3, 3)
+        pan_origin = base_rotation.T @ np.subtract(robot.link_pose(self.joints[0])[0], base_position)
+        self._pan_origin = (float(pan_origin[0]), float(pan_origin[1]))
 
     def solve(self, pose: ArmPose) -> tuple[float, ...]:
-        """Joint angles for ``pose`` (IK for a tool target)."""
+        """Joint angles for ``pose``: pybullet's IK brings the wrist joint to the point behind the
+        tool target (position only: the pan, shoulder and elbow), and the wrist joint takes the
+        rest of the tool's pitch, since the three pitch joints turn about parallel axes."""
         if pose.joints is not None:
             return pose.joints
         assert pose.position is not None
         base_position, base_orientation = self.robot.link_pose(-1)
         rotation = np.array(p.getMatrixFromQuaternion(base_orientation)).reshape(3, 3)
-        target = np.asarray(base_position) + rotation @ np.asarray(pose.position)
-        yaw = p.getEulerFromQuaternion(base_orientation)[2]
-        orientation = p.getQuaternionFromEuler([0.0, pose.pitch, yaw])
-        solution = p.calculateInverseKinematics(
-            self.robot.body, self.tool, target.tolist(), orientation, maxNumIterations=200,
-            residualThreshold=1e-5, physicsClientId=self.robot.world.client,
-        )
-        by_joint = dict(zip(self._movable, solution, strict=False))
-        return tuple(float(by_joint[j]) for j in self.joints)
+        x, y, _ = pose.position
+        pan_x, pan_y = self._pan_origin
+        heading = math.atan2(y - pan_y, x - pan_x)
+        along = np.array([math.sin(pose.pitch) * math.cos(heading), math.sin(pose.pitch) * math.sin(heading),
+                          math.cos(pose.pitch)])
+        wrist = np.asarray(base_position) + rotation @ (np.asarray(pose.position) - self._tool_length * along)
+        pan, lift, elbow = self._reach(wrist)
+        low, high = self.limits[self.joints[3]]
+        return pan, lift, elbow, min(max(pose.pitch - lift - elbow, low), high)
+
+    def _reach(self, wrist: np.ndarray, iterations: int = 30) -> tuple[float, float, float]:
+        """Pan, shoulder and elbow angles putting the wrist joint at ``wrist`` (world frame).
+
+        pybullet's IK linearises about the joints' current state, so it is re-run from its own
+        answer (set on a saved copy of the world's state, restored afterwards: the simulation
+        is not disturbed) until the wrist lands within 0.5 mm.
+        """
+        cid = self.robot.world.client
+        body = self.robot.body
+        saved = p.saveState(physicsClientId=cid)
+        try:
+            angles = tuple(self.robot.joint_state(j)[0] for j in self.joints[:3])
+            for _ in range(iterations):
+                solution = p.calculateInverseKinematics(
+                    body, self.wrist, wrist.tolist(), maxNumIterations=100, residualThreshold=1e-6,
+                    physicsClientId=cid,
+                )
+                by_joint = dict(zip(self._movable, solution, strict=True))
+                angles = tuple(float(by_joint[j]) for j in self.joints[:3])
+                for joint, angle in zip(self.joints[:3], angles, strict=True):
+                    p.resetJointState(body, joint, angle, physicsClientId=cid)
+                if np.linalg.norm(np.subtract(self.robot.link_pose(self.wrist)[0], wrist)) < 5e-4:
+                    break
+        finally:
+            p.restoreState(saved, physicsClientId=cid)
+            p.removeState(saved, physicsClientId=cid)
+        return angles[0], angles[1], angles[2]
 
     def go(self, name: str) -> tuple[float, ...]:
         """Start moving to the predefined pose ``name``; returns the joint target."""

@@ -53,10 +53,10 @@ def test_sim_is_registered() -> None:
 
 def test_wheel_motor_and_encoder_in_lock_step(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
     clock, scope = clock_and_scope
-    rover = {"body": "rover", "pose": "3.0 2.0 0"}
     motor, encoder, other = open_all(
         scope,
-        channel("m", "out", "pwm", joint="left_wheel_joint", mode="velocity", maxVelocity="8", **rover),
+        channel("m", "out", "pwm", joint="left_wheel_joint", mode="velocity", maxVelocity="8", body="rover",
+                pose="3.0 2.0 0"),
         channel("e", "in", "counter", joint="left_wheel_joint", ticksPerRev="1024", body="rover"),
         channel("r", "out", "pwm", joint="right_wheel_joint", mode="velocity", maxVelocity="8", body="rover"),
     )
@@ -74,10 +74,10 @@ def test_wheel_motor_and_encoder_in_lock_step(clock_and_scope: tuple[ManualClock
 
 def test_joint_position_lidar_bumper_camera_imu(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
     clock, scope = clock_and_scope
-    arm = {"body": "station_arm", "pose": "1.0 1.0 0"}
     servo, state, laser, bumper, depth, imu, height = open_all(
         scope,
-        channel("s", "out", "bus", joint="shoulder_joint", scale="0.01", offset="100", **arm),
+        channel("s", "out", "bus", joint="shoulder_joint", scale="0.01", offset="100", body="station_arm",
+                pose="1.0 1.0 0"),
         channel("j", "in", "bus", size=2, joints="turret_joint shoulder_joint", body="station_arm"),
         channel("l", "in", "stream", size=181, body="rover", pose="3.0 2.0 0", sensor="lidar", link="laser_link",
                 fov="3.14159"),
