@@ -213,6 +213,40 @@ def test_plan_examples_run_to_their_success_final(
     assert [r["outcome"] for r in records if r["kind"] == "end"] == [outcome]
 
 
+def test_the_behavior_services_example_recognizes_what_its_spot_behavior_looks_for() -> None:
+    """behavior_services.xml's RGB service, on its real plugins and synthetic frames (no camera runs
+    under ckm-run yet, issue J), publishes objects in which SPOT's spot-objects finds its target."""
+    from plugins.behaviors.usecase import find_target
+    from plugins.processing.scenes import render_rgb_scene
+    from runtime.network import TopicQoS, open_transport
+    from runtime.resources import codec
+    from runtime.resources.resource import SmartResourceRuntime
+    from tests.runtime.network.conftest import private_network
+    from tests.runtime.resources.test_service_api import until
+
+    system = ckmconf.load(EXAMPLES_DIR / "behavior_services.xml")
+    resource, spot = system.resource("RGBD"), system.behavior("SPOT")
+    assert resource is not None and spot is not None
+    target, texture = (params_dict(spot.params)[k] for k in ("target", "targetTexture"))
+    frames = [render_rgb_scene(["cylinder_red_stripes", "box_cereal"], seed=i).image for i in range(3)]
+    counter = iter(range(10**9))
+    network = private_network()
+    server, client = open_transport(network, name="resource"), open_transport(network, name="client")
+    results: list[Any] = []
+    try:
+        for transport in (server, client):
+            transport.setup()
+            transport.start()
+        client.subscribe(
+            TopicQoS("/rgbd/rgb-objects", "ckm/service-data"), lambda s: results.append(codec.decode(s.value))
+        )
+        with SmartResourceRuntime(resource, server, sources={"grab": lambda: frames[next(counter) % 3]}):
+            assert until(lambda: any(find_target(r, target, texture) for r in results), timeout=30)
+    finally:
+        for transport in (server, client):
+            transport.stop()
+
+
 def test_the_use_case_names_kinds_that_do_not_exist_yet() -> None:
     """Point 11 of issue G: the simulation's kinds are reported, none is registered as a placeholder."""
     messages = [e.message for e in verify(ckmconf.load(REPO / "configs" / "usecase" / "lab.xml"), builtin())]
