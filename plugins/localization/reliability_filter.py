@@ -41,9 +41,9 @@ class ReliabilitySettings:
     noise: OdometryNoise = field(default_factory=OdometryNoise)
     noise_gain: float = 3.0
     """The odometry noise's standard deviations are multiplied by ``1 + noise_gain·(1 - R)``."""
-    coherent: float = 0.6
+    coherent: float = 0.85
     """p(S|x_ref) at or above which x_ref is trusted: weak particles become copies of it."""
-    lost: float = 0.35
+    lost: float = 0.6
     """p(S|x_ref) at or below which x_ref is incoherent: weak particles become random ones."""
     copy_sigma: tuple[float, float] = (0.05, 0.03)
     """Spread (m, rad) of the copies of x_ref, times ``1 + noise_gain·(1 - R)``."""

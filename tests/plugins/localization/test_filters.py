@@ -73,6 +73,7 @@ def test_mcl_injects_random_particles_after_a_kidnapping(runs: list[Run]) -> Non
     kidnap = runs[1]
     assert kidnap.kidnap_step is not None
     flt = _make("mcl", kidnap, 2500, seed=7)
+    assert isinstance(flt, AmclFilter)
     injected = []
     for k in range(kidnap.kidnap_step + 40):
         flt.update(kidnap.odometry[k], kidnap.scans[k])
@@ -84,6 +85,7 @@ def test_mcl_injects_random_particles_after_a_kidnapping(runs: list[Run]) -> Non
 def test_algorithm3_weights_reference_and_reliability(runs: list[Run]) -> None:
     run = runs[0]
     flt = _make("reliability", run, 500, seed=3)
+    assert isinstance(flt, ReliabilityFilter)
     for k in range(30):
         estimate = flt.update(run.odometry[k], run.scans[k])
     x_ref, z_ref = flt.last_reference
@@ -112,7 +114,7 @@ def test_best_cluster_keeps_the_heavier_hypothesis() -> None:
 
 
 def test_recovery_criterion_needs_more_than_ten_seconds() -> None:
-    times = np.arange(100) * 0.2
+    times = np.arange(100, dtype=np.float64) * 0.2
     errors = np.full(100, 1.0)
     errors[10:30] = 0.1  # 4 s: not recovered
     errors[40:] = 0.1  # 12 s from t = 8 s

@@ -1,0 +1,40 @@
+"""``ckm-bench localization`` (issue I point 6): the JSON contract and the plot, on a small particle count."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
+
+KEYS = {
+    "name",
+    "particles",
+    "beams",
+    "rmse_m",
+    "heading_rmse_rad",
+    "converge_s",
+    "recover_s",
+    "failure_rate",
+    "ms_per_update",
+}
+
+
+def test_bench_reports_both_filters_per_particle_count(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert "localization" in BENCHMARKS and "localization" in TAKES_OPTIONS
+    out = tmp_path / "bench"
+    assert main(["localization", "--json", "--seeds", "1", "--particles", "200", "--out", str(out)]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    rows = result["filters"]
+    assert [(r["name"], r["particles"]) for r in rows] == [("reliability", 200), ("mcl", 200)]
+    for row in rows:
+        assert set(row) >= KEYS
+        assert row["beams"] == 60
+        assert 0.0 <= row["failure_rate"] <= 1.0
+        assert row["ms_per_update"] > 0
+        assert row["recover_s"] is None or row["recover_s"] >= 0
+    assert result["runs"] == ["lab-tour", "lab-kidnap", "floor-plan-tour", "floor-plan-kidnap"]
+    assert (out / "localization-error.png").stat().st_size > 10_000
+    assert json.loads((out / "results.json").read_text())["filters"] == rows
