@@ -99,8 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     partition: Partition | None = None
     if args.partition is not None:
         if args.node is None:
-            print("ckm-run: --partition needs --node", file=sys.stderr)
-            return 1
+            parser.error("--partition needs --node")
         partition = next((p for p in nodes[0].partitions if p.name == args.partition), None)
         if partition is None:
             names = ", ".join(p.name for p in nodes[0].partitions) or "none"
