@@ -45,9 +45,12 @@ class Robot:
         return float(position), float(velocity), float(effort)
 
     def command(self, joint: int, mode: str, value: float, force: float | None = None) -> None:
-        """Drive a joint: ``position`` (rad or m), ``velocity`` (rad/s or m/s) or ``effort`` (N·m or N)."""
+        """Drive a joint: ``position`` (rad or m), ``velocity`` (rad/s or m/s) or ``effort`` (N·m or N,
+        held until the next command)."""
         cid = self.world.client
         limit = force if force is not None else p.getJointInfo(self.body, joint, physicsClientId=cid)[10] or 10.0
+        if mode in ("position", "velocity"):
+            self.world.torques.pop((self.body, joint), None)
         if mode == "position":
             p.setJointMotorControl2(self.body, joint, p.POSITION_CONTROL, targetPosition=value, force=limit,
                                     physicsClientId=cid)
@@ -57,7 +60,7 @@ class Robot:
         elif mode == "effort":
             # torque control needs the default velocity motor switched off first
             p.setJointMotorControl2(self.body, joint, p.VELOCITY_CONTROL, force=0.0, physicsClientId=cid)
-            p.setJointMotorControl2(self.body, joint, p.TORQUE_CONTROL, force=value, physicsClientId=cid)
+            self.world.torques[(self.body, joint)] = value  # applied at every step by World.step
         else:
             raise ValueError(f"joint mode {mode!r} is not position, velocity or effort")
 

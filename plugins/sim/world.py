@@ -117,6 +117,8 @@ class World:
         self.objects: dict[str, int] = {}
         """Body ids of the environment objects by name (a multi-prism static object: its first prism)."""
         self.robots: dict[str, int] = {}
+        self.torques: dict[tuple[int, int], float] = {}
+        """Joint torques held across steps (effort-mode joints), by (body, joint)."""
         cid = self.client
         p.resetSimulation(physicsClientId=cid)
         p.setPhysicsEngineParameter(
@@ -221,6 +223,9 @@ class World:
     def step(self, count: int = 1) -> None:
         """Advance the physics by ``count`` fixed steps."""
         for _ in range(count):
+            # pybullet applies a torque-control command for one step only: re-apply the held ones
+            for (body, joint), torque in self.torques.items():
+                p.setJointMotorControl2(body, joint, p.TORQUE_CONTROL, force=torque, physicsClientId=self.client)
             p.stepSimulation(physicsClientId=self.client)
         self.steps += count
         self.time = self.steps * self.time_step

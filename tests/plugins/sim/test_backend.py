@@ -147,3 +147,45 @@ def test_the_example_system_runs_in_the_simulator(transport: Transport) -> None:
         assert sim.world.time > 0.5
     finally:
         runtime.stop()
+
+
+def test_gripper_mirror_and_effort_mode(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
+    clock, scope = clock_and_scope
+    gripper, fingers, wheel, speed = open_all(
+        scope,
+        channel("g", "out", "bus", body="turtlebot", pose="3 2 0", joint="gripper_joint",
+                mirror="gripper_right_joint"),
+        channel("f", "in", "bus", size=2, body="turtlebot", joints="gripper_joint gripper_right_joint"),
+        channel("w", "out", "pwm", body="rover", pose="3 1 0", joint="left_wheel_joint", mode="effort"),
+        channel("v", "in", "analog", body="rover", joint="left_wheel_joint", mode="velocity"),
+    )
+    gripper.write(0.03)
+    wheel.write(0.5)  # half the joint's effort limit (10 N·m in rover.urdf) on one wheel
+    clock.advance(0.5)
+    left, right = fingers.read()  # type: ignore[misc]
+    assert left == pytest.approx(0.03, abs=0.002) and right == pytest.approx(0.03, abs=0.002)
+    assert speed.read() > 1.0  # the torque turned the wheel
+
+
+def _lidar_reads(seed: str) -> list[tuple[float, ...]]:
+    clock = ManualClock()
+    motor, laser = open_all(
+        PlantScope(clock),
+        channel("m", "out", "pwm", body="rover", pose="3 2 0.2", joint="left_wheel_joint", mode="velocity",
+                seed=seed),
+        channel("l", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", noise="0.01",
+                seed=seed),
+    )
+    motor.write(0.4)
+    reads = []
+    for _ in range(5):
+        clock.advance(0.2)
+        value = laser.read()
+        assert isinstance(value, tuple)
+        reads.append(value)
+    return reads
+
+
+def test_same_seed_same_channel_data() -> None:
+    assert _lidar_reads("5") == _lidar_reads("5")
+    assert _lidar_reads("5") != _lidar_reads("6")
