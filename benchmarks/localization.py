@@ -126,6 +126,7 @@ def plot(series: dict[str, dict[str, Array]], runs: list[Run], png: Path) -> Non
             ax.axvline(run.times[run.kidnap_step], color="red", lw=0.8, label="kidnapping")
         ax.axhline(RECOVERED_M, color="grey", lw=0.6, ls=":")
         ax.set_yscale("symlog", linthresh=0.1)
+        ax.set_ylim(bottom=0.0)
         ax.set_title(run.name, fontsize=9)
         ax.set_ylabel("error (m)")
         ax.legend(fontsize=7, loc="upper right")
