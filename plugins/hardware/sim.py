@@ -44,7 +44,7 @@ from ckmconf.loader import load
 from ckmconf.model import Environment, HWChannel
 from plugins.processing.textures import read_model
 from plugins.sim.robots import Robot
-from plugins.sim.sensors import Bumper, Camera, Imu, Lidar
+from plugins.sim.sensors import Bumper, Camera, Frame, Imu, Lidar
 from plugins.sim.world import World
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
@@ -88,6 +88,18 @@ class SimWorld(SimulationHook):
         self.environment = environment
         self.robots: dict[str, Robot] = {}
         self.origin = 0.0
+        self._frames: dict[tuple[int, int, float, int, int], tuple[int, Frame]] = {}
+
+    def frame(self, camera: Camera, width: int, height: int) -> Frame:
+        """A render of ``camera`` at this world step: the RGB and the depth channels of one camera
+        (same link, field of view and size) read at the same step share one render (D89)."""
+        key = (camera.robot.body, camera.link, camera.fov, width, height)
+        cached = self._frames.get(key)
+        if cached is not None and cached[0] == self.world.steps:
+            return cached[1]
+        frame = camera.render(width, height)
+        self._frames[key] = (self.world.steps, frame)
+        return frame
 
     def robot(self, name: str, model: str, pose: str) -> Robot:
         """The robot ``name``, loaded on first use."""
@@ -223,7 +235,7 @@ class SimBackend(Backend):
             if sensor == "lidar":
                 return tuple(self.device.scan().tolist())
             if sensor in ("rgb", "depth"):
-                frame = self.device.render(v["width"], v["height"])
+                frame = sim.frame(self.device, v["width"], v["height"])
                 data = frame.rgb if sensor == "rgb" else np.round(frame.depth * 1000.0)
                 return tuple(data.ravel().tolist())
             if sensor == "imu":

@@ -190,3 +190,22 @@ def _lidar_reads(seed: str) -> list[tuple[float, ...]]:
 def test_same_seed_same_channel_data() -> None:
     assert _lidar_reads("5") == _lidar_reads("5")
     assert _lidar_reads("5") != _lidar_reads("6")
+
+
+def test_rgb_and_depth_channels_of_one_camera_share_a_render(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
+    clock, scope = clock_and_scope
+    xtion = {"body": "turtlebot", "link": "camera_rgb_optical_frame", "width": "40", "height": "30"}
+    rgb, depth = open_all(
+        scope,
+        channel("c", "in", "stream", size=40 * 30 * 3, sensor="rgb", pose="3 2 0", **xtion),
+        channel("d", "in", "stream", size=40 * 30, sensor="depth", **xtion),
+    )
+    clock.advance(0.1)
+    colour, distance = rgb.read(), depth.read()
+    assert isinstance(colour, tuple) and isinstance(distance, tuple)
+    assert len(colour) == 3600 and all(0 <= c <= 255 for c in colour) and len(distance) == 1200
+    cameras = [b.device for b in (rgb, depth)]  # type: ignore[attr-defined]
+    assert sum(camera.renders for camera in cameras) == 1
+    clock.advance(0.1)
+    depth.read()
+    assert sum(camera.renders for camera in cameras) == 2  # a new step, a new render
