@@ -38,7 +38,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pybullet as p
 
 from ckmconf.loader import load
 from ckmconf.model import Environment, HWChannel
@@ -265,7 +264,7 @@ class SimBackend(Backend):
             sim.sync()
             for joint in self.device:
                 if self.channel.kind == "pwm":
-                    limit = p.getJointInfo(robot.body, joint, physicsClientId=sim.world.client)[10] or 1.0
+                    limit = robot.max_effort(joint)
                     target = raw * (v["maxVelocity"] if v["mode"] == "velocity" else limit)
                     robot.command(joint, "velocity" if v["mode"] == "velocity" else "effort", target)
                 else:

@@ -39,6 +39,10 @@ class Robot:
             raise KeyError(f"robot {self.name!r} has no link {name!r} (it has: {', '.join(sorted(self.links))})")
         return self.links[name]
 
+    def max_effort(self, joint: int) -> float:
+        """The joint's effort limit from the model (N·m or N; 10 when the model gives none)."""
+        return float(p.getJointInfo(self.body, joint, physicsClientId=self.world.client)[10] or 10.0)
+
     def joint_state(self, joint: int) -> tuple[float, float, float]:
         """Position, velocity and applied motor effort of a joint."""
         position, velocity, _, effort = p.getJointState(self.body, joint, physicsClientId=self.world.client)
@@ -48,7 +52,7 @@ class Robot:
         """Drive a joint: ``position`` (rad or m), ``velocity`` (rad/s or m/s) or ``effort`` (N·m or N,
         held until the next command)."""
         cid = self.world.client
-        limit = force if force is not None else p.getJointInfo(self.body, joint, physicsClientId=cid)[10] or 10.0
+        limit = force if force is not None else self.max_effort(joint)
         if mode in ("position", "velocity"):
             self.world.torques.pop((self.body, joint), None)
         if mode == "position":
