@@ -77,7 +77,11 @@ def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
     ("name", "message"),
     [
         ("pdi", "ckm-plugins: no kind 'pdi' is registered (see ckm-plugins list)"),
-        ("controller.pdi", "ckm-plugins: no controller kind 'pdi' (registered: constant, gpc, pid, relay)"),
+        (
+            "controller.pdi",
+            "ckm-plugins: no controller kind 'pdi' (registered: constant, diff-drive, diff-drive-odometry,"
+            " friction-feedforward, gpc, joint-trajectory, pan-tilt-position, pid, ramp-stop, relay)",
+        ),
     ],
 )
 def test_unknown_kind_is_one_line_and_exit_1(name: str, message: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -247,12 +247,16 @@ def test_the_behavior_services_example_recognizes_what_its_spot_behavior_looks_f
             transport.stop()
 
 
-def test_the_use_case_names_kinds_that_do_not_exist_yet() -> None:
-    """Point 11 of issue G: the simulation's kinds are reported, none is registered as a placeholder."""
+def test_the_use_case_is_refused_for_what_does_not_run_yet() -> None:
+    """Point 11 of issue G: what the use case names and nothing provides is reported, nothing is a placeholder.
+
+    The use case's controllers exist now (issue J); its resources on a ROS kernel and its services
+    without scenarios do not run, and are reported as such.
+    """
     messages = [e.message for e in verify(ckmconf.load(REPO / "configs" / "usecase" / "lab.xml"), builtin())]
-    for kind in ("pybullet", "diff-drive-odometry", "pan-tilt-position", "ramp-stop", "joint-trajectory"):
-        assert any(f"'{kind}' does not exist in the registry" in m for m in messages), kind
-    assert any("friction-feedforward" in m for m in messages)
+    for kind in ("diff-drive", "diff-drive-odometry", "pan-tilt-position", "ramp-stop", "joint-trajectory"):
+        assert not any(f"'{kind}' does not exist" in m for m in messages), kind
+    assert not any("friction-feedforward" in m for m in messages)
     assert any("runs on a ROS kernel" in m for m in messages)
     assert any("'MobileBase.Displacement' has no Scenario" in m for m in messages)
 
