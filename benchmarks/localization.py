@@ -80,6 +80,7 @@ def play(name: str, run: Run, particles: int, seed: int) -> dict[str, Any]:
     if converged is not None:
         tracked[times >= converged] = True
     return {
+        "run": run.name,
         "errors": errors,
         "heading": heading,
         "tracked": tracked,
@@ -108,6 +109,15 @@ def summarise(name: str, particles: int, beams: int, plays: list[dict[str, Any]]
         "failure_rate": failures / len(plays),
         "ms_per_update": float(np.mean([p["ms"] for p in plays])),
         "runs": len(plays),
+        "per_run": [
+            {
+                "run": p["run"],
+                "converge_s": p["converged"],
+                "recover_s": p["recovered"],
+                "rmse_m": float(np.sqrt(np.mean(p["errors"][p["tracked"]] ** 2))) if p["tracked"].any() else None,
+            }
+            for p in plays
+        ],
     }
 
 
