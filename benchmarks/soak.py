@@ -97,6 +97,14 @@ def _rss_mb(processes: list[psutil.Process]) -> float:
     return total / (1 << 20)
 
 
+def _per_minute(samples: list[tuple[float, float]]) -> list[float]:
+    """The first sample of each minute (MB)."""
+    firsts: dict[int, float] = {}
+    for t, rss in samples:
+        firsts.setdefault(int(t // 60), round(rss, 1))
+    return list(firsts.values())
+
+
 def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Run the soak; the figures (MB) and the processes' exit codes."""
     parser = argparse.ArgumentParser(prog="ckm-bench soak", description=__doc__.splitlines()[0])
@@ -139,6 +147,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         "rss_peak_mb": round(max(rss for _, rss in samples), 1),
         "growth_mb": round(end - start, 1),
         "samples": len(samples),
+        "rss_per_minute_mb": _per_minute(samples),  # the trend: flat, or still climbing?
         "exit_codes": dict(zip(names, codes, strict=True)),
     }
 

@@ -17,7 +17,6 @@ import dataclasses
 import heapq
 import itertools
 import logging
-import statistics
 import threading
 import time
 from array import array
@@ -25,6 +24,9 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
+import numpy.typing as npt
 
 LOG = logging.getLogger("ckm.scheduler")
 SPIN = 0.0003  # seconds spun before a release instead of sleeping
@@ -57,6 +59,10 @@ class Ring:
         if start + count <= self.maxlen:
             return self._values[start : start + count].tolist()
         return self._values[start:].tolist() + self._values[: self._next].tolist()
+
+    def values(self) -> npt.NDArray[np.float64]:
+        """The kept samples, unordered, as a view of the buffer (copy it before the ring changes)."""
+        return np.frombuffer(self._values, dtype=np.float64, count=self._count)
 
     def copy(self) -> Ring:
         """An independent copy (one memory copy: cheap to take under a lock)."""
@@ -92,11 +98,13 @@ class TaskStats:
 
     def summary(self, period: float) -> dict[str, Any]:
         """The figures; call it on a snapshot, or where nothing appends meanwhile."""
-        jitters = sorted(abs(j) for j in self.jitter)
-        execs = sorted(self.exec_time)
+        # numpy on the ring's own buffer: no Python float per sample (the statistics file is
+        # rewritten every few seconds, and transient lists of 20 000 floats show in a node's RSS).
+        jitters = np.sort(np.abs(self.jitter.values()))
+        execs = np.sort(self.exec_time.values())
 
-        def pct(values: list[float], q: float) -> float:
-            return values[min(len(values) - 1, int(q * len(values)))] if values else 0.0
+        def pct(values: npt.NDArray[np.float64], q: float) -> float:
+            return float(values[min(len(values) - 1, int(q * len(values)))]) if len(values) else 0.0
 
         return {
             "period_s": period,
@@ -109,7 +117,7 @@ class TaskStats:
             "jitter_p50_us": round(pct(jitters, 0.5) * 1e6, 1),
             "jitter_p99_us": round(pct(jitters, 0.99) * 1e6, 1),
             "jitter_max_us": round(self.max_jitter * 1e6, 1),
-            "exec_mean_us": round(statistics.fmean(execs) * 1e6, 1) if execs else 0.0,
+            "exec_mean_us": round(float(np.mean(execs)) * 1e6, 1) if len(execs) else 0.0,
             "exec_p99_us": round(pct(execs, 0.99) * 1e6, 1),
         }
 
@@ -204,8 +212,12 @@ class Scheduler:
         thread records them under, so a reader never walks a deque being appended to."""
         with self._lock:
             chosen = list(self.tasks.values()) if tasks is None else tasks
-            snapshots = [(task.name, task.period, task.stats.snapshot()) for task in chosen]
-        return {name: stats.summary(period) for name, period, stats in snapshots}
+        figures = {}
+        for task in chosen:  # one task's copy at a time: a short lock, a small transient
+            with self._lock:
+                snapshot = task.stats.snapshot()
+            figures[task.name] = snapshot.summary(task.period)
+        return figures
 
     # ------------------------------------------------------------------ lifecycle
 
