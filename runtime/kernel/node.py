@@ -215,8 +215,11 @@ class NodeRuntime:
             raise self._error(record, str(exc)) from None
         inputs = {}
         methods = {}
-        for port in record.inputs:
-            role = port.role or port.topic
+        roles = [port.role or port.topic for port in record.inputs]
+        for index, port in enumerate(record.inputs):
+            role = roles[index]
+            if roles.count(role) > 1:  # a repeated role: role[0], role[1], … in document order (D91)
+                role = f"{role}[{roles[:index].count(role)}]"
             qos = self.topic(port.topic)
             inputs[role] = self.transport.subscribe(
                 TopicQoS(qos.name, qos.type, qos.reliability, max(qos.history, 3), qos.deadline, qos.lifespan)

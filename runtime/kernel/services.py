@@ -74,12 +74,12 @@ class ControlService:
         self.extrapolation = dict(extrapolation)
         self.futures = futures
         self.active = record.active
-        self.last_output: float | None = None
+        self.last_output: Any = None  # a tuple for controllers with one value per output
         self.skipped = 0
         self.since = time.monotonic()
         self.optional: Controller | None = None  # the advanced part, run when the CPU allows (§3.1.2.8)
         self.optional_used = 0
-        self._pending: tuple[float, list[float]] | None = None
+        self._pending: tuple[Any, list[Any]] | None = None
         self._inputs: dict[str, float] | None = None
         self._optional_ran = False  # did the optional part give the previous period's output
         self._optional_now = False
@@ -88,15 +88,18 @@ class ControlService:
         """An input older than this is lost: three controller periods, or the topic's lifespan."""
         return subscription.qos.lifespan or 3 * self.record.period
 
-    def read_inputs(self) -> dict[str, float] | None:
+    def read_inputs(self) -> dict[str, Any] | None:
         now = time.time()
-        values: dict[str, float] = {}
+        values: dict[str, Any] = {}
         for role, subscription in self.inputs.items():
             history = subscription.history()
             if not history or now - (history[-1].stamp - history[-1].offset) > self.stale_after(subscription):
                 if role == "setpoint":
                     continue  # a missing setpoint means the controller's default (zero) setpoint
                 return None
+            if not isinstance(history[-1].value, int | float):  # a message (mapping) or a vector: held as is
+                values[role] = history[-1].value
+                continue
             samples = [(s.stamp - s.offset, float(s.value)) for s in history[-3:]]
             values[role] = extrapolate(samples, now, self.extrapolation.get(role, "hold"))
         return values
@@ -118,6 +121,11 @@ class ControlService:
             self.skipped += 1  # the actuation service notices the silence and plays stored actions
             return
         self._inputs = inputs
+        step_outputs = getattr(self.controller, "step_outputs", None)
+        if step_outputs is not None:  # one value per output (plugins.controllers.multi, D91)
+            row = tuple(step_outputs(inputs, self.record.period))
+            self._pending = (row, list(self.controller.future_outputs()))  # type: ignore[attr-defined]
+            return
         action = self.controller.step(inputs, self.record.period)
         self._pending = (action, list(self.controller.future()))
 
@@ -138,8 +146,14 @@ class ControlService:
             return
         action, future_values = self._pending
         self.last_output = action
-        future = FutureActions(future_values, self.record.period, time.monotonic())
-        stamp = time.time()
+        stamp, now = time.time(), time.monotonic()
+        if isinstance(action, tuple):  # one value, and one column of the future rows, per output
+            for index, publisher in enumerate(self.outputs):
+                column = [row[index] for row in future_values if isinstance(row[index], int | float)]
+                self.futures[publisher.qos.name] = FutureActions(column, self.record.period, now)
+                publisher.publish(action[index], stamp=stamp)
+            return
+        future = FutureActions(future_values, self.record.period, now)
         for publisher in self.outputs:
             self.futures[publisher.qos.name] = future
             publisher.publish(action, stamp=stamp)
