@@ -125,6 +125,15 @@ class NodeRuntime:
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
+        """Open the hardware and build the services; on failure, close what was opened, then raise."""
+        try:
+            self._setup()
+        except BaseException:
+            for channel, backend in self.backends.items():
+                self._step(f"close channel {channel} after a failed set-up", backend.stop)
+            raise
+
+    def _setup(self) -> None:
         node = self.node
         self.delegation = Delegation(self)
         for channel in node.channels:

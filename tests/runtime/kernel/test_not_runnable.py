@@ -5,13 +5,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, ClassVar
 
 import pytest
 
 import ckmconf
 from ckmconf.errors import ConfigError
+from runtime.kernel.interfaces import Backend
 from runtime.kernel.node import NodeRuntime
 from runtime.network import Transport, open_transport
+from runtime.registry import Registry
 from tests.runtime.network.conftest import private_network
 
 SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
@@ -60,3 +63,47 @@ def test_a_node_refuses_what_it_cannot_run_at_its_element(
     with pytest.raises(ConfigError) as refused:
         runtime.setup()
     assert str(refused.value).startswith(f"{path}:{line}:") and text in str(refused.value)
+
+
+class _Opened(Backend):
+    """A device that records being opened and closed; the one named 'broken' cannot open."""
+
+    log: ClassVar[list[str]] = []
+
+    def setup(self) -> None:
+        if self.channel.name == "broken":
+            raise OSError("device busy")
+        _Opened.log.append(f"open {self.channel.name}")
+
+    def read(self) -> float:
+        return 0.0
+
+    def write(self, value: Any) -> None:
+        return None
+
+    def stop(self) -> None:
+        _Opened.log.append(f"close {self.channel.name}")
+
+
+HARDWARE = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="half-open">
+  <Node name="n" kind="light">
+    <HWChannel name="first" direction="in" kind="analog" backend="opened"/>
+    <HWChannel name="second" direction="in" kind="analog" backend="opened"/>
+    <HWChannel name="broken" direction="in" kind="analog" backend="opened"/>
+  </Node>
+</System>
+"""
+
+
+def test_a_failed_set_up_closes_the_devices_it_had_opened(tmp_path: Path, transport: Transport) -> None:
+    path = tmp_path / "system.xml"
+    path.write_text(HARDWARE)
+    system = ckmconf.load(path)
+    registry = Registry(load_entry_points=False)
+    registry.register("hardware", "opened", _Opened)
+    runtime = NodeRuntime(system.nodes[0], system, transport, registry=registry)
+    _Opened.log.clear()
+    with pytest.raises(OSError, match="device busy"):
+        runtime.setup()
+    assert _Opened.log == ["open first", "open second", "close first", "close second"]
