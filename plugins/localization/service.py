@@ -19,7 +19,7 @@ import ckmconf
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import P, Params
+from runtime.verification.manifest import MAPPING, NUMBERS, P, Params, Ports
 
 from .mcl import AmclFilter, MclSettings
 from .raster import GridMap
@@ -49,6 +49,7 @@ class Localization(ProcessingPlugin):
     "reliability"}``; ``reliability`` is R of eq. 6.21 for Algorithm 3 and None for MCL.
     """
 
+    PORTS = Ports(inputs={"odometry": NUMBERS, "ranges": NUMBERS, "*": MAPPING}, outputs={"*": MAPPING})
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P(
             "filter",

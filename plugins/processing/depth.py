@@ -50,7 +50,7 @@ from plugins.processing.shapes import (
 )
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import P, Params
+from runtime.verification.manifest import ANY, ARRAY, MAPPING, P, Params, Ports
 
 Depth = npt.NDArray[np.float32]
 Points = npt.NDArray[np.float32]
@@ -137,6 +137,7 @@ class DepthAcquisition(ProcessingPlugin):
     ValueError naming the plugin and the problem.
     """
 
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": ARRAY})  # a DepthImage-like message (or array bytes)
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("topic", "", "The raw topic the frames come from (informational)."),
         P("scale", 0.001, "Metres per raw unit of unsigned depth images (0.001: millimetres).", unit="m", above=0.0),
@@ -284,6 +285,7 @@ class EuclideanClustering(ProcessingPlugin):
     ``calibrationHeight`` image (the Xtion's at VGA) and scaled to the image received.
     """
 
+    PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ANY})  # a list of Clusters: in-process objects
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("tolerance", 0.02, "Points closer than this are linked into one cluster.", unit="m", above=0.0),
         P("minPoints", 100, "Fewest points of a kept cluster.", min=1),
@@ -344,6 +346,7 @@ class KdTreeShapeClassifier(ProcessingPlugin):
     measure) is the mean over recognized objects, 0 when none: furniture in view does not drag it.
     """
 
+    PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "", "ASCII PCD file of labelled descriptors, relative to the configuration file (required)."),
         P("k", 5, "Nearest training descriptors that vote.", min=1),

@@ -49,7 +49,7 @@ from ckmconf import ConfigError, ConfigErrors, read_document
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import P, Params
+from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
 from .shapes import Camera
@@ -119,6 +119,7 @@ class FeatureFusion(ProcessingPlugin):
     ``reliability`` is the mean fused reliability, 0 with no object.
     """
 
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # one recognition result per input
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind: 'name: line|point; …'."),
         P("poses", "", "Sensor frames in the common frame: 'name: x y z roll pitch yaw; …' (default identity)."),

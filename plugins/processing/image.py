@@ -15,7 +15,7 @@ import numpy.typing as npt
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import P, Params
+from runtime.verification.manifest import ARRAY, P, Params, Ports
 
 Image = npt.NDArray[Any]
 
@@ -60,6 +60,7 @@ class Resize(ProcessingPlugin):
     factors) or ``nearest``. The resolution profiles of the recognition services use it.
     """
 
+    PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ARRAY})  # an image in, the resized image out
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("scale", 1.0, "Scale factor when neither width nor height is set.", above=0.0),
         P("width", 0, "Output width (0: unset; one of width/height alone keeps the aspect ratio).", unit="px", min=0),
@@ -102,6 +103,7 @@ class Grayscale(ProcessingPlugin):
     through; a fourth (alpha) channel is ignored.
     """
 
+    PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ARRAY})
     PARAMS: ClassVar[Mapping[str, Any]] = Params(P("order", "rgb", "Channel order of the input: 'rgb' or 'bgr'."))
     WEIGHTS = (0.299, 0.587, 0.114)
 
@@ -131,6 +133,7 @@ class Undistort(ProcessingPlugin):
     once per image size and reused, so a frame costs one ``cv2.remap``.
     """
 
+    PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ARRAY})
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("fx", 0.0, "Focal length along x at the input's resolution (0: the image width).", unit="px", min=0.0),
         P("fy", 0.0, "Focal length along y (0: the image width).", unit="px", min=0.0),

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import P, Params
+from runtime.verification.manifest import ANY, ARRAY, MAPPING, P, Params, Ports
 
 from .textures import Image, Model, Points, build_model
 
@@ -48,6 +48,7 @@ class CameraAcquisition(ProcessingPlugin):
     colour order. ``topic`` names the raw topic (the service subscribes to it; informational here).
     """
 
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": ARRAY})  # an Image-like message (or array bytes)
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("topic", "", "The raw topic the frames come from (informational)."),
         P("encoding", "rgb8", "Encoding of array frames and of messages without one: rgb8, bgr8 or mono8."),
@@ -134,6 +135,7 @@ class OrbKeypoints(ProcessingPlugin):
     (pyramid levels, ≥ 1), ``threads`` (OpenCV threads, see the module doc).
     """
 
+    PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ANY})  # Keypoints: an in-process object
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("features", 500, "Most keypoints kept.", above=0),
         P("scaleFactor", 1.2, "Scale step of the image pyramid.", above=1.0),
@@ -192,6 +194,7 @@ class KeypointMatching(ProcessingPlugin):
     objects, 0 when none is seen.
     """
 
+    PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability, keypoints, size
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "", "Texture model file, relative to the configuration file (required)."),
         P("ratio", 0.75, "Lowe's ratio test threshold, in (0, 1]."),

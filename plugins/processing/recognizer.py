@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 from ckmconf.model.resources import Plugin
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import as_params
+from runtime.verification.manifest import ARRAY, MAPPING, Ports, as_params
 
 from .recognition import KeypointMatching, OrbKeypoints
 
@@ -26,6 +26,7 @@ class OrbRecognition(ProcessingPlugin):
     """ORB keypoints and texture matching in one step: an image in, the matching result out (see
     :class:`KeypointMatching` for its fields)."""
 
+    PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": MAPPING})  # an image in, objects + reliability out
     PARAMS: ClassVar[Mapping[str, Any]] = as_params(OrbKeypoints.PARAMS) | KeypointMatching.PARAMS
 
     def __init__(self, record: Plugin) -> None:

@@ -13,7 +13,10 @@ Every registered class declares, once, at the class:
   str`` (static: no I/O, no instance). Value types are the names of ``schemas/kernel.xsd`` (built-in types
   such as ``float64`` or ``string``, or a ``MessageType``) or the shapes :data:`NUMBER`,
   :data:`NUMBERS` (a vector of numbers, one per channel element), :data:`MAPPING` (a dict of
-  fields) and :data:`ANY`.
+  fields), :data:`ARRAY` (an n-dimensional numeric array: an image, a depth frame) and :data:`ANY`.
+  Processing plugins declare what their ``process`` accepts (``inputs["*"]``; with several service
+  Inputs the value is a dict and each Input is checked against the entry of its name) and returns
+  (``outputs["*"]``; with several service Outputs, the entry of each Output's name is its field).
 
 A plain ``{name: default}`` mapping is still accepted as ``PARAMS`` (third-party plugins written
 before manifests): each entry then reads as an undocumented optional parameter of its default's type.
@@ -34,6 +37,8 @@ NUMBERS = "numbers"
 """A tuple of numbers: what a sensor of a channel of size > 1 writes."""
 MAPPING = "mapping"
 """A dict of fields: fits a topic of any MessageType (the fields are not checked), no built-in type."""
+ARRAY = "array"
+"""An n-dimensional numeric array (an image, a depth frame): travels only as ``bytes`` (the codec's encoding)."""
 ANY = "any"
 """Not declared: any value (nothing to check)."""
 
@@ -266,6 +271,7 @@ def read_params(
 
 __all__ = [
     "ANY",
+    "ARRAY",
     "MAPPING",
     "NUMBER",
     "NUMBERS",

@@ -5,7 +5,8 @@ MessageType name, or one of the shapes ``number``, ``numbers``, ``mapping``, ``a
 that carries one type; a consumer reads one from it. Built-in numeric types are interchangeable
 (a float64 sensor may feed a float32 topic), ``bool`` and ``time`` count as numbers (digital
 channels and clocks read as numbers), and a vector of numbers fits a numeric topic or a MessageType
-made only of numbers. A string fits only ``string``; a dict of fields only a MessageType.
+made only of numbers. A string fits only ``string``; a dict of fields only a MessageType; an array
+(image) only ``bytes``.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from collections.abc import Mapping
 
 from ckmconf.model import BUILTIN_TYPES, MessageType
 
-from .manifest import ANY, MAPPING, NUMBER, NUMBERS
+from .manifest import ANY, ARRAY, MAPPING, NUMBER, NUMBERS
 
 NUMERIC = frozenset(BUILTIN_TYPES - {"string", "bytes"})
 """Built-in types a number fits (bool and time included)."""
@@ -28,6 +29,8 @@ def describe(value_type: str, size: int = 1) -> str:
         return f"vectors of {size} numbers" if size > 1 else "vectors of numbers"
     if value_type == MAPPING:
         return "dicts of fields"
+    if value_type == ARRAY:
+        return "arrays"
     if value_type in BUILTIN_TYPES:
         return f"{value_type} values"
     return f"{value_type} messages"
@@ -61,6 +64,8 @@ def fits(written: str, carried: str, types: Mapping[str, MessageType]) -> bool:
         return _numeric_only(carried, types)
     if written == MAPPING:
         return carried in types
+    if written == ARRAY:
+        return carried == "bytes"
     if written in NUMERIC and carried in NUMERIC:
         return True
     return written == carried

@@ -11,6 +11,11 @@ single node; ``verify`` does the same for a loaded System:
 - the value types of producers, topics and consumers agree: what a sensor writes (one number, or a
   vector of ``size`` numbers) and what controllers, actuators and behaviors read and write, against
   the ``type`` of the topic or plan signal (:mod:`runtime.verification.types`);
+- the topics of each Smart Resource service against its processing plugins: every ``<Output>``
+  against what the output plugin of each of its scenarios' profiles returns (one Output: the whole
+  result; several: the field of the Output's name), every ``<Input>`` of a stream against what its
+  acquisition (root) plugin accepts (one Input: the value itself; several: the dict's entry of the
+  Input's name). A ``bytes`` topic carries the codec's encoding of any value (D98);
 - channel sizes are ones the backend serves (a loopback plant has one output);
 - what the runtime would silently not run is refused: Smart Resources on a ROS kernel (no ROS
   kernel runs here), services without scenarios (only SPT scenarios are executed), services whose
@@ -38,6 +43,8 @@ from ckmconf.model import (
     MessageType,
     Node,
     Param,
+    Plugin,
+    Profile,
     Sensor,
     Service,
     SmartResource,
@@ -47,7 +54,7 @@ from ckmconf.model import (
 from ckmconf.source import Limits, SourceFile, read_source
 
 from ..registry import NOUNS, Registry, RegistryError, default_registry
-from .manifest import NUMBER, NUMBERS, ParamError, params_of, ports_of
+from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ParamError, params_of, ports_of
 from .types import describe, fits
 
 
@@ -259,9 +266,11 @@ class _Verifier:
                 "kernel",
             )
             return
+        kinds: dict[str, tuple[Plugin, type[Any] | None]] = {}
         for plugin in resource.plugins:
-            self._checked(plugin, "plugin", plugin.kind, plugin.params)
+            kinds[plugin.name] = (plugin, self._checked(plugin, "plugin", plugin.kind, plugin.params))
         profiles = {p.name: p for p in resource.profiles}
+        node = next((n for n in self.system.nodes if n.name == resource.node), None)
         streams: dict[str, list[Service]] = {}  # acquisition (root) plugin → the services it feeds
         for service in resource.services:
             ref = f"'{resource.name}.{service.name}'"
@@ -281,7 +290,10 @@ class _Verifier:
                 )
             elif roots:
                 streams.setdefault(roots[0], []).append(service)
+            used = [profiles[s.profile] for s in service.scenarios if s.profile in profiles]
+            self._service_outputs(resource, service, used, kinds, node)
         for root, services in streams.items():
+            self._stream_inputs(resource, root, services, kinds, node)
             if not any(service.inputs for service in services):
                 for service in services:
                     self.report.error(
@@ -289,6 +301,79 @@ class _Verifier:
                         f"service '{resource.name}.{service.name}' has no Input: its stream (acquisition plugin "
                         f"{root!r}) would have nothing to process (not runnable)",
                     )
+
+    def _service_outputs(
+        self,
+        resource: SmartResource,
+        service: Service,
+        used: list[Profile],
+        kinds: dict[str, tuple[Plugin, type[Any] | None]],
+        node: Node | None,
+    ) -> None:
+        """Each ``<Output>`` against what each profile's output plugin returns (runtime.resources.instance.deliver).
+
+        One problem per Output and value type, naming every plugin that writes it (one per profile).
+        """
+        ref = f"service '{resource.name}.{service.name}'"
+        for profile in {p.name: p for p in used}.values():
+            plugin, cls = kinds.get(profile.output_plugin(), (None, None))
+            if plugin is not None and cls is not None and len(service.outputs) > 1:
+                result = ports_of(cls).output("*")
+                if result not in (MAPPING, ANY):
+                    self.report.error(
+                        service,
+                        f"{ref}: plugin {plugin.name!r} ({plugin.kind}, profile {profile.name!r}) returns "
+                        f"{describe(result)}, but its {len(service.outputs)} Outputs each take a field of a dict: "
+                        "nothing would be published (not runnable)",
+                    )
+        for out in service.outputs:
+            carried = self._topic_type(out.topic, node)
+            if carried is None or carried == "bytes":  # bytes: the codec's encoding of any value (D98)
+                continue
+            writers: dict[str, dict[str, str]] = {}  # value type → plugin name → kind
+            for profile in {p.name: p for p in used}.values():
+                plugin, cls = kinds.get(profile.output_plugin(), (None, None))
+                if plugin is None or cls is None:
+                    continue
+                ports = ports_of(cls)
+                value = ports.output("*") if len(service.outputs) == 1 else ports.outputs.get(out.name, ANY)
+                if not fits(value, carried, self.types):
+                    writers.setdefault(value, {})[plugin.name] = plugin.kind
+            for value, plugins in writers.items():
+                names = ", ".join(repr(name) for name in plugins)
+                self.report.error(
+                    out,
+                    f"{ref} publishes {describe(value)} onto topic {out.topic!r} of type {carried} "
+                    f"(the result of plugin {names}: {', '.join(dict.fromkeys(plugins.values()))})",
+                    "topic",
+                )
+
+    def _stream_inputs(
+        self,
+        resource: SmartResource,
+        root: str,
+        services: list[Service],
+        kinds: dict[str, tuple[Plugin, type[Any] | None]],
+        node: Node | None,
+    ) -> None:
+        """The Inputs of one stream against what its acquisition plugin accepts (resource._source_for)."""
+        plugin, cls = kinds.get(root, (None, None))
+        if plugin is None or cls is None:
+            return
+        ports = ports_of(cls)
+        inputs = {i.name: i for s in services for i in s.inputs}  # the runtime keys the stream's inputs by name
+        for name, source in inputs.items():
+            accepted = ports.input("*") if len(inputs) == 1 else ports.input(name)
+            carried = self._topic_type(source.topic, node)
+            if carried != "bytes":
+                self._flow(
+                    source,
+                    "topic",
+                    accepted,
+                    carried,
+                    f"acquisition plugin {plugin.name!r} ({plugin.kind}) of resource {resource.name!r} "
+                    f"reads {{}} from Input {name!r}, but topic {source.topic!r} is",
+                )
 
     def _behavior(self, behavior: Behavior) -> None:
         cls = self._checked(behavior, "behavior", behavior.kind, behavior.params)

@@ -420,3 +420,80 @@ if __name__ == "__main__":  # regenerate expected.json (see tests/data/verify/RE
 
     os.chdir(REPO)
     EXPECTED.write_text(json.dumps(generate(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+
+
+# ---------------------------------------------------------------- service topics against processing plugins
+
+SERVICE = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="ports">
+  <MessageType name="Detections"><Field name="reliability" type="float64"/></MessageType>
+  {topics}
+  <Node name="pc"/>
+  <SmartResource name="R" node="pc">
+    <Plugin name="first" kind="{first}"/>
+    <Plugin name="last" kind="{last}"/>
+    <Profile name="p"><Use plugin="first"><Use plugin="last"/></Use></Profile>
+    <Service name="S">
+      {ports}
+      <QualityMeasure name="latency" kind="qos" domain="temporal" source="latency" unit="s"/>
+      <Scenario name="p" profile="p"><Policy measure="latency" upper="0.1"/></Scenario>
+    </Service>
+  </SmartResource>
+</System>
+"""
+
+
+def service_problems(tmp_path: Path, first: str, last: str, topics: dict[str, str], ports: str) -> list[str]:
+    """verify's messages for one service whose profile is first → last (the output plugin)."""
+    path = tmp_path / "service.xml"
+    declared = "\n  ".join(f'<Topic name="{name}" type="{kind}"/>' for name, kind in topics.items())
+    path.write_text(SERVICE.format(topics=declared, first=first, last=last, ports=ports))
+    return [f"{e.line}: {e.message}" for e in verify(ckmconf.load(path), builtin())]
+
+
+def test_a_service_output_that_fits_its_plugin_or_is_bytes_is_accepted(tmp_path: Path) -> None:
+    topics = {"/raw": "bytes", "/objects": "Detections", "/blob": "bytes"}
+    ports = '<Input name="image" topic="/raw"/><Output name="objects" topic="/objects"/>'
+    assert service_problems(tmp_path, "camera-acquisition", "orb-recognition", topics, ports) == []
+    ports = '<Input name="image" topic="/raw"/><Output name="image" topic="/blob"/>'
+    assert service_problems(tmp_path, "camera-acquisition", "resize", topics, ports) == []
+
+
+def test_an_image_output_on_a_structured_topic_is_reported(tmp_path: Path) -> None:
+    topics = {"/raw": "bytes", "/objects": "Detections"}
+    ports = '<Input name="image" topic="/raw"/><Output name="image" topic="/objects"/>'
+    assert service_problems(tmp_path, "camera-acquisition", "grayscale", topics, ports) == [
+        "12: service 'R.S' publishes arrays onto topic '/objects' of type Detections "
+        "(the result of plugin 'last': grayscale)"
+    ]
+
+
+def test_an_acquisition_input_on_a_number_topic_is_reported(tmp_path: Path) -> None:
+    topics = {"/raw": "float64", "/out": "bytes"}
+    ports = '<Input name="image" topic="/raw"/><Output name="objects" topic="/out"/>'
+    assert service_problems(tmp_path, "camera-acquisition", "orb-recognition", topics, ports) == [
+        "12: acquisition plugin 'first' (camera-acquisition) of resource 'R' reads dicts of fields "
+        "from Input 'image', but topic '/raw' is of type float64"
+    ]
+
+
+def test_several_outputs_take_fields_of_a_dict_result(tmp_path: Path) -> None:
+    topics = {"/raw": "bytes", "/a": "bytes", "/b": "bytes"}
+    ports = '<Input name="image" topic="/raw"/><Output name="a" topic="/a"/><Output name="b" topic="/b"/>'
+    [problem] = service_problems(tmp_path, "camera-acquisition", "resize", topics, ports)
+    assert problem.startswith("12: service 'R.S': plugin 'last' (resize, profile 'p') returns arrays")
+    assert problem.endswith("nothing would be published (not runnable)")
+    assert service_problems(tmp_path, "camera-acquisition", "orb-recognition", topics, ports) == []
+
+
+def test_several_inputs_are_checked_by_name_against_the_acquisition_plugin(tmp_path: Path) -> None:
+    topics = {"/odom": "float64", "/ranges": "string", "/pose": "Detections"}
+    ports = (
+        '<Input name="odometry" topic="/odom"/><Input name="ranges" topic="/ranges"/>'
+        '<Output name="pose" topic="/pose"/>'
+    )
+    problems = service_problems(tmp_path, "localization", "localization", topics, ports)
+    assert problems == [
+        "13: acquisition plugin 'first' (localization) of resource 'R' reads vectors of numbers "
+        "from Input 'ranges', but topic '/ranges' is of type string"
+    ]
