@@ -125,7 +125,8 @@ def markdown(registry: Registry, package: str | None = None) -> str:
         "",
         "Value types of ports: a built-in or MessageType name, `number` (one float), `numbers` "
         "(one float per channel element), `mapping` (a dict of fields, fits any MessageType), "
-        "`any` (not checked). Ranges: `[a, b]` inclusive, `(a, b)` exclusive.",
+        "`array` (an n-dimensional array such as an image, fits only `bytes`), `any` (not checked). "
+        "Ranges: `[a, b]` inclusive, `(a, b)` exclusive.",
     ]
     for category in CATEGORIES:
         kinds = [k for k in registry.kinds(category) if package is None or registry.origin(category, k) == package]
