@@ -100,8 +100,7 @@ def test_out_of_range_commands_never_reach_the_channel(
     before = node.backends["motor"].read()
     for value in (5.0, -7.0, float("nan"), 0.81):
         command.publish(value)
-    time.sleep(0.05)
-    assert motor.out_of_range == 4
+    assert until(lambda: motor.out_of_range == 4)  # a loaded machine may take longer than a few periods
     written = float(node.backends["motor"].read())  # type: ignore[arg-type]
     assert -0.8 <= written <= 0.8  # onOutOfRange="reject": the previous value holds
     assert written == before
