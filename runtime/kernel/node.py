@@ -30,6 +30,7 @@ from .monitor import MonitorService
 from .partitions import PartitionSupervisor
 from .scheduler import Scheduler, Task
 from .services import ActuationService, ControlService, FutureActions, SensorService
+from .vectors import chain_refusal, is_vector, shaper
 
 LOG = logging.getLogger("ckm.node")
 EVENTS_KEPT = 10000  # recent events kept in memory; every event also goes to the event sinks
@@ -143,10 +144,29 @@ class NodeRuntime:
             except ParamError as exc:
                 raise self._error(channel, str(exc)) from None
             self.backends[channel.name] = backend
+        channels = {c.name: c for c in node.channels}
+        types = {m.name: m for m in self.system.message_types}
         for sensor in node.sensors:
             chain = build_chain(sensor.adaptation, self.registry, inverse=False)
-            publisher = self.transport.publisher(self.topic(sensor.topic))
-            self.sensors[sensor.name] = SensorService(sensor, self.backends[sensor.channel], chain, publisher)
+            qos = self.topic(sensor.topic)
+            publisher = self.transport.publisher(qos)
+            channel = channels[sensor.channel]
+            if not is_vector(channel, self._backend_classes[channel.name]):
+                self.sensors[sensor.name] = SensorService(sensor, self.backends[sensor.channel], chain, publisher)
+                continue
+            # decision D99: the whole read, shaped for the topic; a chain adapts each element apart
+            refusal = chain_refusal(channel, self._backend_classes[channel.name]) if sensor.adaptation else None
+            if refusal is not None:
+                raise self._error(sensor, f"sensor {sensor.name!r}: {refusal}")
+            try:
+                shape = shaper(qos.type, channel, types, f"sensor {sensor.name!r}")
+            except ValueError as exc:
+                raise self._error(sensor, str(exc)) from None
+            chains = [build_chain(sensor.adaptation, self.registry, inverse=False) for _ in range(channel.size)]
+            self.sensors[sensor.name] = SensorService(
+                sensor, self.backends[sensor.channel], chain, publisher,
+                shape=shape, chains=chains if sensor.adaptation is not None else None,
+            )
         for actuator in node.actuators:
             # kernel.xsd: an actuator's steps are applied in order, engineering units → raw.
             inverse = build_chain(actuator.adaptation, self.registry, inverse=False)

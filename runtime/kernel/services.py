@@ -12,7 +12,7 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,25 +22,51 @@ from ckmconf.model.kernel import Controller as ControllerRecord
 from ..network.api import Publisher, Subscription
 from .extrapolate import extrapolate
 from .interfaces import Backend, Controller
+from .vectors import Shaper
 
 LOG = logging.getLogger("ckm.kernel")
 Chain = Callable[[float, float], float]
 
 
 class SensorService:
-    """Samples a channel, adapts the raw value, publishes it timestamped, keeps recent samples."""
+    """Samples a channel, adapts the raw value, publishes it timestamped, keeps recent samples.
 
-    def __init__(self, record: Sensor, backend: Backend, chain: Chain, publisher: Publisher) -> None:
+    A scalar sensor publishes the adapted number. A vector sensor (``shape`` given, decision D99)
+    publishes the whole read shaped for its topic (:mod:`runtime.kernel.vectors`); its ``chains``,
+    one per element, adapt each element with its own state (``verify`` refuses chains on frames).
+    """
+
+    def __init__(
+        self,
+        record: Sensor,
+        backend: Backend,
+        chain: Chain,
+        publisher: Publisher,
+        *,
+        shape: Shaper | None = None,
+        chains: Sequence[Chain] | None = None,
+    ) -> None:
         self.record = record
         self.backend = backend
         self.chain = chain
         self.publisher = publisher
-        self.samples: deque[tuple[float, float]] = deque(maxlen=8)  # (wall time, engineering value)
+        self.shape = shape
+        self.chains = list(chains or [])
+        self.samples: deque[tuple[float, Any]] = deque(maxlen=8)  # (wall time, engineering value)
 
     def tick(self) -> None:
         raw = self.backend.read()
-        value = self.chain(float(raw if not isinstance(raw, tuple) else raw[0]), time.monotonic())
+        if self.shape is None:
+            value: Any = self.chain(float(raw if not isinstance(raw, tuple) else raw[0]), time.monotonic())
+        elif self.chains:
+            now = time.monotonic()
+            elements = raw if isinstance(raw, tuple) else (raw,)
+            value = [chain(float(x), now) for chain, x in zip(self.chains, elements, strict=True)]
+        else:
+            value = raw
         stamp = time.time()
+        if self.shape is not None:
+            value = self.shape(value, stamp)
         self.samples.append((stamp, value))
         self.publisher.publish(value, stamp=stamp)
 

@@ -35,6 +35,7 @@ from ckmconf.binding import Record, walk
 from ckmconf.checks.report import Reporter
 from ckmconf.errors import ConfigError
 from ckmconf.model import (
+    BUILTIN_TYPES,
     Actuator,
     Behavior,
     Controller,
@@ -53,9 +54,13 @@ from ckmconf.model import (
 )
 from ckmconf.source import Limits, SourceFile, read_source
 
+from ..kernel.vectors import chain_refusal, is_vector, shape_of
 from ..registry import NOUNS, Registry, RegistryError, default_registry
 from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ParamError, params_of, ports_of
 from .types import describe, fits
+
+_ChannelRead = tuple[HWChannel, str | None, type[Any] | None]
+"""A channel, what its sensor reads (None if unknown) and its backend class."""
 
 
 def verify(system: System, registry: Registry | None = None) -> list[ConfigError]:
@@ -167,9 +172,9 @@ class _Verifier:
     # ------------------------------------------------------------------ nodes
 
     def _node(self, node: Node) -> None:
-        channels: dict[str, tuple[HWChannel, str | None]] = {}
+        channels: dict[str, _ChannelRead] = {}
         for channel in node.channels:
-            channels[channel.name] = (channel, self._channel(channel))
+            channels[channel.name] = (channel, *self._channel(channel))
         for sensor in node.sensors:
             self._sensor(node, sensor, channels.get(sensor.channel))
         for controller in node.controllers:
@@ -177,11 +182,11 @@ class _Verifier:
         for actuator in node.actuators:
             self._actuator(node, actuator)
 
-    def _channel(self, channel: HWChannel) -> str | None:
-        """Checks one channel; returns what its sensor reads (None when the backend is unknown)."""
+    def _channel(self, channel: HWChannel) -> tuple[str | None, type[Any] | None]:
+        """Checks one channel; returns what its sensor reads (None when the backend is unknown), and the backend."""
         cls = self._checked(channel, "hardware", channel.backend, channel.params, "backend")
         if cls is None:
-            return None
+            return None, None
         ports = ports_of(cls)
         if ports.sizes and channel.size not in ports.sizes:
             sizes = ", ".join(map(str, ports.sizes))
@@ -191,21 +196,24 @@ class _Verifier:
         typed = getattr(cls, "value_type", None)  # a backend whose reads depend on its Params
         read = typed(channel) if callable(typed) else ports.output("*")
         if read == NUMBERS:
-            return NUMBER if channel.size == 1 else NUMBERS
-        return read
+            return (NUMBER if channel.size == 1 else NUMBERS), cls
+        return read, cls
 
     def _functions(self, steps: Iterable[Record]) -> None:
         for step in steps:
             if isinstance(step, Function):
                 self._checked(step, "function", step.plugin, step.params, "plugin")
 
-    def _sensor(self, node: Node, sensor: Sensor, channel: tuple[HWChannel, str | None] | None) -> None:
+    def _sensor(self, node: Node, sensor: Sensor, channel: _ChannelRead | None) -> None:
         if sensor.adaptation is not None:
             self._functions(sensor.adaptation.steps)
         if channel is None:
             return
-        record, value = channel
-        if value is None:
+        record, value, cls = channel
+        if value is None or cls is None:
+            return
+        if is_vector(record, cls):  # decision D99: the whole read, shaped for the topic's type
+            self._vector_sensor(node, sensor, record, cls)
             return
         self._flow(
             sensor,
@@ -216,6 +224,23 @@ class _Verifier:
             f"onto topic {sensor.topic!r}",
             record.size,
         )
+
+    def _vector_sensor(self, node: Node, sensor: Sensor, record: HWChannel, cls: type[Any]) -> None:
+        """A vector sensor: its chain must apply per element, its topic must carry the read (D99)."""
+        refusal = chain_refusal(record, cls) if sensor.adaptation is not None else None
+        if refusal is not None:
+            self.report.error(sensor.adaptation or sensor, f"sensor {sensor.name!r}: {refusal}")
+        carried = self._topic_type(sensor.topic, node)
+        known = carried is not None and (carried in BUILTIN_TYPES or carried in self.types)
+        if known and carried is not None and shape_of(carried, record.size, self.types) is None:
+            self.report.error(
+                sensor,
+                f"sensor {sensor.name!r} writes whole reads of channel {record.name!r} (size {record.size}) "
+                f"onto topic {sensor.topic!r} of type {carried}, which has no field to carry them: a numeric "
+                f"or bytes topic, a MessageType with a count=\"0\" number field or a bytes field, or one of "
+                f"{record.size} scalar numbers",
+                "topic",
+            )
 
     def _controller(self, node: Node, controller: Controller) -> None:
         cls = self._checked(controller, "controller", controller.kind, controller.params)

@@ -250,8 +250,8 @@ def test_the_behavior_services_example_recognizes_what_its_spot_behavior_looks_f
 def test_the_use_case_is_refused_for_what_does_not_run_yet() -> None:
     """Point 11 of issue G: what the use case names and nothing provides is reported, nothing is a placeholder.
 
-    The use case's controllers exist now (issue J); its resources on a ROS kernel and its services
-    without scenarios do not run, and are reported as such.
+    The use case's controllers and its hardware backend (``sim``) exist now (issue J); its resources
+    on a ROS kernel and its services without scenarios do not run, and are reported as such.
     """
     messages = [e.message for e in verify(ckmconf.load(REPO / "configs" / "usecase" / "lab.xml"), builtin())]
     for kind in ("diff-drive", "diff-drive-odometry", "pan-tilt-position", "ramp-stop", "joint-trajectory"):
@@ -259,6 +259,10 @@ def test_the_use_case_is_refused_for_what_does_not_run_yet() -> None:
     assert not any("friction-feedforward" in m for m in messages)
     assert any("runs on a ROS kernel" in m for m in messages)
     assert any("'MobileBase.Displacement' has no Scenario" in m for m in messages)
+    # the hardware runs on the generic sim backend, and whole frames, scans and joint vectors fit
+    # their Image, DepthImage, LaserScan and JointState topics (D99): only what cannot run is left
+    assert not any("pybullet" in m for m in messages)
+    assert all(m.endswith("(not runnable)") for m in messages), messages
 
 
 # ---------------------------------------------------------------- verify itself

@@ -63,5 +63,7 @@ def test_each_new_kind_steps_with_one_value_per_output(system: System) -> None:
         assert isinstance(controller, MultiOutputController)
         row = controller.step_outputs(inputs, controller.record.period)
         assert len(row) == len(controller.record.outputs), name
-    # The use case's <Optional> gives only 'coulomb', so it runs with pid's default gains (kp 1, ki 0, D93).
-    assert built["left_pid.optional"].step({"measure": 0.1, "setpoint": 0.2}, 0.01) == pytest.approx(0.1 + 0.02)
+    # The use case's <Optional> repeats the required PID's gains (kp 1.2, ki 6.0, kd 0.01 on the measure)
+    # and adds 'coulomb' 0.02: error 0.1 gives 1.2·0.1 + 6.0·0.1·0.01 + 0.02 on the first step.
+    expected = 1.2 * 0.1 + 6.0 * 0.1 * 0.01 + 0.02
+    assert built["left_pid.optional"].step({"measure": 0.1, "setpoint": 0.2}, 0.01) == pytest.approx(expected)
