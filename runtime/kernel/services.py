@@ -95,6 +95,11 @@ class ControlService:
     ) -> None:
         self.record = record
         self.controller = controller
+        # Controllers with one value per output (plugins.controllers.multi, D91): looked up once, not per period.
+        self._step_outputs: Callable[[Mapping[str, Any], float], Sequence[Any]] | None = getattr(
+            controller, "step_outputs", None
+        )
+        self._future_outputs: Callable[[], Sequence[Any]] | None = getattr(controller, "future_outputs", None)
         self.inputs = dict(inputs)
         self.outputs = outputs
         self.extrapolation = dict(extrapolation)
@@ -147,10 +152,9 @@ class ControlService:
             self.skipped += 1  # the actuation service notices the silence and plays stored actions
             return
         self._inputs = inputs
-        step_outputs = getattr(self.controller, "step_outputs", None)
-        if step_outputs is not None:  # one value per output (plugins.controllers.multi, D91)
-            row = tuple(step_outputs(inputs, self.record.period))
-            self._pending = (row, list(self.controller.future_outputs()))  # type: ignore[attr-defined]
+        if self._step_outputs is not None and self._future_outputs is not None:
+            row = tuple(self._step_outputs(inputs, self.record.period))
+            self._pending = (row, list(self._future_outputs()))
             return
         action = self.controller.step(inputs, self.record.period)
         self._pending = (action, list(self.controller.future()))
