@@ -7,7 +7,6 @@ example's own service, on real plugins and synthetic frames, publishes the combi
 from __future__ import annotations
 
 import random
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -15,12 +14,11 @@ import pytest
 
 from ckmconf.loader import load
 from ckmconf.model.resources import Service, SmartResource
-from runtime.network import TopicQoS, Transport, open_transport
+from runtime.network import TopicQoS, Transport
 from runtime.resources.quality import combined_distribution
 from runtime.resources.resource import SmartResourceRuntime
 from runtime.resources.tcm import TaskConfiguringModule, ThresholdSelector
 from tests.conftest import CONFIGS
-from tests.runtime.network.conftest import private_network
 from tests.runtime.resources.test_service_api import until
 
 EXAMPLE = CONFIGS / "examples" / "combined_measure.xml"
@@ -81,20 +79,6 @@ def test_the_threshold_baseline_sums_the_latest_samples(service: Service) -> Non
     blind = ThresholdSelector(service.scenarios, service.tcm)  # without the combination the bound is never seen
     feed(blind, [0.07], [0.06])
     assert blind.evaluate(1.0).active == "fine"
-
-
-@pytest.fixture
-def pair() -> Iterator[tuple[Transport, Transport]]:
-    network = private_network()
-    made = [open_transport(network, name="resource"), open_transport(network, name="client")]
-    try:
-        for transport in made:
-            transport.setup()
-            transport.start()
-        yield made[0], made[1]
-    finally:
-        for transport in made:
-            transport.stop()
 
 
 def test_the_example_service_publishes_its_combined_measure(

@@ -7,7 +7,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -15,13 +15,12 @@ import pytest
 
 from ckmconf.loader import load
 from ckmconf.model.resources import SmartResource
-from runtime.network import Transport, open_transport
+from runtime.network import Transport
 from runtime.registry import Registry
 from runtime.resources.api import Bounds, parse_request
 from runtime.resources.client import ServiceClient, ServiceDirectory, ServiceError
 from runtime.resources.resource import SmartResourceRuntime
 from runtime.resources.spt import Context, ProcessingPlugin
-from tests.runtime.network.conftest import private_network
 
 SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
 <System xmlns="urn:ckm:1" version="1.0" name="service-api-test">
@@ -98,20 +97,6 @@ def registry() -> Registry:
     Load.unit = 0.001
     Load.calls.clear()
     return registry
-
-
-@pytest.fixture
-def pair() -> Iterator[tuple[Transport, Transport]]:
-    network = private_network()
-    made = [open_transport(network, name="resource"), open_transport(network, name="client")]
-    try:
-        for transport in made:
-            transport.setup()
-            transport.start()
-        yield made[0], made[1]
-    finally:
-        for transport in made:
-            transport.stop()
 
 
 def frames() -> Callable[[], int]:

@@ -4,7 +4,6 @@ configuration at run time, over a real transport on loopback with the real fusio
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -13,12 +12,11 @@ import pytest
 from ckmconf.loader import load
 from ckmconf.model.resources import SmartResource
 from plugins.processing.fusion import FeatureFusion
-from runtime.network import Transport, open_transport
+from runtime.network import Transport
 from runtime.registry import Registry
 from runtime.resources.client import ServiceClient, ServiceDirectory, ServiceError
 from runtime.resources.resource import SmartResourceRuntime
 from tests.plugins.processing.test_fusion import three_lines_and_a_point
-from tests.runtime.network.conftest import private_network
 from tests.runtime.resources.test_service_api import until
 
 POSE = "pantilt: 0.9 0.05 1.2 0 -1.5707963267948966 0"
@@ -50,20 +48,6 @@ def resource(tmp_path: Path) -> SmartResource:
     record = load(path).resource("GlobalRecog")
     assert record is not None
     return record
-
-
-@pytest.fixture
-def pair() -> Iterator[tuple[Transport, Transport]]:
-    network = private_network()
-    made = [open_transport(network, name="resource"), open_transport(network, name="client")]
-    try:
-        for transport in made:
-            transport.setup()
-            transport.start()
-        yield made[0], made[1]
-    finally:
-        for transport in made:
-            transport.stop()
 
 
 def test_max_sensors_reaches_the_fusion_plugin(resource: SmartResource, pair: tuple[Transport, Transport]) -> None:
