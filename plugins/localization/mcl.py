@@ -16,7 +16,7 @@ import numpy.typing as npt
 from .estimate import Estimate, publish
 from .likelihood import FieldModel, amcl_weights
 from .odometry import OdometryNoise, sample_motion
-from .raster import GridMap
+from .raster import GridMap, random_poses
 
 Array = npt.NDArray[np.float64]
 
@@ -85,9 +85,7 @@ class AmclFilter:
 
     def random_poses(self, count: int) -> Array:
         """``count`` poses uniform over the free cells, with uniform headings."""
-        picked = self.free[self.rng.integers(0, len(self.free), count)]
-        jitter = self.rng.uniform(-0.5, 0.5, (count, 2)) * self.grid.resolution
-        return np.column_stack([picked + jitter, self.rng.uniform(-np.pi, np.pi, count)])
+        return random_poses(self.free, self.grid.resolution, self.rng, count)
 
     def reset(self, pose: Array | None = None, sigma: tuple[float, float] = (0.3, 0.2)) -> None:
         """A uniform prior (``pose`` None: global localization) or a Gaussian one around ``pose``."""

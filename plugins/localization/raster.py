@@ -150,3 +150,13 @@ class GridMap:
         return np.stack(
             [self.origin[0] + (cols + 0.5) * self.resolution, self.origin[1] + (rows + 0.5) * self.resolution], axis=1
         )
+
+
+def random_poses(free: Array, resolution: float, rng: np.random.Generator, count: int) -> Array:
+    """``count`` poses uniform over the ``free`` cell centres (jittered within their cell), uniform headings.
+
+    Both filters draw their uniform prior and their random particles with it.
+    """
+    picked = free[rng.integers(0, len(free), count)]
+    jitter = rng.uniform(-0.5, 0.5, (count, 2)) * resolution
+    return np.column_stack([picked + jitter, rng.uniform(-np.pi, np.pi, count)])
