@@ -38,8 +38,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -51,8 +50,12 @@ from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
+from .fusion_model import Observation, entries, fused_object, number, numbers, reinforce, share_at_bound
 from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
+from .placement import Placement
 from .shapes import Camera
+
+__all__ = ["FeatureFusion", "Observation", "reinforce", "share_at_bound"]
 
 KINDS = ("line", "point")
 MAGNITUDE = {"line": "texture", "point": "shape"}
@@ -61,42 +64,6 @@ MAX_OBJECTS = 1000
 """Most objects an input may report per result: matching is quadratic, and a recognizer reports a few."""
 UNKNOWN = "unknown"
 """The depth classifier's name for a cluster below its threshold: no feature model, not fused."""
-
-
-@dataclass
-class Observation:
-    """S(θ)ᵢ of eq. 6.35: one recognised object of one input, placed in the common frame."""
-
-    source: str
-    index: int
-    model: str
-    reliability: float
-    geometry: Geometry
-    magnitude: str
-    knowledge: dict[str, str] = field(default_factory=dict)
-
-
-def _entries(text: str, param: str, owner: str) -> dict[str, list[str]]:
-    """``"name: v1 v2; name: v…"`` as {name: [values]} (the per-input Params)."""
-    found: dict[str, list[str]] = {}
-    for entry in (e.strip() for e in text.split(";")):
-        if not entry:
-            continue
-        name, colon, values = entry.partition(":")
-        if not colon or not name.strip() or name.strip() in found:
-            raise ParamError(f"{owner}: parameter {param!r} entry {entry!r} is not 'name: values' with a new name")
-        found[name.strip()] = values.split()
-    return found
-
-
-def _numbers(values: list[str], count: int, param: str, name: str, owner: str) -> list[float]:
-    try:
-        numbers = [float(v) for v in values]
-    except ValueError:
-        numbers = []
-    if len(numbers) != count or not all(math.isfinite(v) for v in numbers):
-        raise ParamError(f"{owner}: parameter {param!r} for {name!r} needs {count} finite numbers, got {values}")
-    return numbers
 
 
 class FeatureFusion(ProcessingPlugin):
@@ -139,6 +106,11 @@ class FeatureFusion(ProcessingPlugin):
         P("objects", "", "Known objects: 'name: shape [texture]; …' (win over the environment's)."),
         P("environment", "", "Environment XML file, relative to the configuration file, read in setup()."),
         P("maxSensors", 8, "Most observations fused into one object (Table 7.1 Max_sensors).", min=1),
+        P("mounts", "", "Inputs on a robot: 'name: MODEL LINK; …' (URDF, sensor link): the frame is the map."),
+        P("bases", "", "Fixed map poses of mounted inputs' robots: 'name: x y yaw; …' (others follow poseInput)."),
+        P("poseInput", "pose", "The input carrying the moving robot's PoseEstimate in the map."),
+        P("headInput", "head", "The input carrying the head angles {pan, tilt}."),
+        P("headJoints", "HeadYaw HeadPitch", "The URDF joints the head input's pan and tilt drive."),
     )
 
     def __init__(self, record: Plugin) -> None:
@@ -156,44 +128,51 @@ class FeatureFusion(ProcessingPlugin):
             raise ParamError(f"{owner}: parameter 'minReliability' = {p['minReliability']} is not in [0, 1]")
         self.max_sensors = self._max_sensors(p["maxSensors"], "parameter 'maxSensors'")
         self.kinds: dict[str, str] = {}
-        for name, values in _entries(p["inputs"], "inputs", owner).items():
+        for name, values in entries(p["inputs"], "inputs", owner).items():
             if len(values) != 1 or values[0] not in KINDS:
                 raise ParamError(f"{owner}: parameter 'inputs' for {name!r} must be 'line' or 'point', got {values}")
             self.kinds[name] = values[0]
         default = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
         self.cameras = {name: default for name, kind in self.kinds.items() if kind == "line"}
         for name, values in self._declared("cameras", "line").items():
-            fx, fy, cx, cy, width, height = _numbers(values, 6, "cameras", name, owner)
+            fx, fy, cx, cy, width, height = numbers(values, 6, "cameras", name, owner)
             if min(fx, fy, width, height) <= 0 or width != int(width) or height != int(height):
                 raise ParamError(f"{owner}: parameter 'cameras' for {name!r} needs fx, fy > 0 and a whole size")
             self.cameras[name] = Camera(fx, fy, cx, cy, int(width), int(height))
         self.sigmas = {name: p[f"{kind}Sigma"] for name, kind in self.kinds.items()}
         for name, values in self._declared("sigmas").items():
-            (sigma,) = _numbers(values, 1, "sigmas", name, owner)
+            (sigma,) = numbers(values, 1, "sigmas", name, owner)
             if not sigma > 0:
                 raise ParamError(f"{owner}: parameter 'sigmas' for {name!r} = {sigma} must be greater than 0")
             self.sigmas[name] = sigma
         self.poses: dict[str, Pose] = {
-            name: Pose.from_xyzrpy(*_numbers(values, 6, "poses", name, owner))
+            name: Pose.from_xyzrpy(*numbers(values, 6, "poses", name, owner))
             for name, values in self._declared("poses").items()
         }
         """Sensor poses by input (missing: identity); the hook for live poses, see ``sensor_pose``."""
         self.catalog: dict[str, tuple[str, str | None]] = {}
-        for name, values in _entries(p["objects"], "objects", owner).items():
+        for name, values in entries(p["objects"], "objects", owner).items():
             if len(values) not in (1, 2):
                 raise ParamError(f"{owner}: parameter 'objects' for {name!r} needs a shape and maybe a texture")
             self.catalog[name] = (values[0], values[1] if len(values) == 2 else None)
         base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
         self.environment = base / p["environment"] if p["environment"] else None
         self._loaded = self.environment is None
+        self.placement = Placement(p, self.kinds, base, owner)
+        for name in self.placement.mounts:
+            if name in self.poses:
+                raise ParamError(f"{owner}: input {name!r} has both a static 'poses' entry and a 'mounts' entry")
+        self.frame = "map" if self.placement.active else "sensor"
+        """The common frame: the map when inputs are mounted on robots, else the sensors' (``poses``)."""
+        self.unplaced = 0
 
     def _declared(self, param: str, kind: str | None = None) -> dict[str, list[str]]:
-        entries = _entries(self.params[param], param, self.owner)
-        for name in entries:
+        found = entries(self.params[param], param, self.owner)
+        for name in found:
             if name not in self.kinds or (kind is not None and self.kinds[name] != kind):
                 wanted = f"a {kind} input" if kind else "an input"
                 raise ParamError(f"{self.owner}: parameter {param!r} names {name!r}, not {wanted} of 'inputs'")
-        return entries
+        return found
 
     def _max_sensors(self, value: Any, where: str) -> int:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value) or value < 1:
@@ -226,12 +205,15 @@ class FeatureFusion(ProcessingPlugin):
         self.catalog = known | self.catalog
         self._loaded = True
 
-    def sensor_pose(self, source: str) -> Pose:
-        """The pose of input ``source``'s sensor in the common frame (f' of eq. 6.34).
+    def sensor_pose(self, source: str) -> Pose | None:
+        """The pose of input ``source``'s sensor in the common frame (f' of eq. 6.34), None while unknown.
 
-        Static Params for now; live poses (a robot moving its camera) replace ``self.poses``
-        entries or override this method.
+        A mounted input's pose is live (the robot's pose estimate and head angles composed with
+        its URDF mount, :class:`~plugins.processing.placement.Placement`); another's is the
+        static ``poses`` entry (default identity).
         """
+        if source in self.placement.mounts:
+            return self.placement.sensor_pose(source)
         return self.poses.get(source, IDENTITY)
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
@@ -239,14 +221,21 @@ class FeatureFusion(ProcessingPlugin):
             raise RuntimeError(f"{self.owner} is not set up")
         if not isinstance(data, Mapping):
             raise ValueError(f"{self.owner} expects a mapping of input name to result, got {type(data).__name__}")
+        self.placement.update(data)
+        self.unplaced = 0
         observations: dict[str, list[Observation]] = {}
         for source in sorted(data, key=str):
+            if source in (self.placement.pose_input, self.placement.head_input):
+                continue
             for obs in self._observations(source, data[source]):
                 observations.setdefault(obs.model, []).append(obs)
         fused = [obj for model in sorted(observations) for obj in self._fuse(model, observations[model])]
         fused.sort(key=lambda o: (-o["reliability"], o["name"]))
         mean = sum(o["reliability"] for o in fused) / len(fused) if fused else 0.0
-        return {"objects": fused, "reliability": mean}
+        out: dict[str, Any] = {"objects": fused, "reliability": mean}
+        if self.placement.active:  # observations left out for want of a sensor pose (a quality measure)
+            out["unplaced"] = self.unplaced
+        return out
 
     # ------------------------------------------------------------------ inputs → observations (eq. 6.31–6.34)
 
@@ -268,12 +257,15 @@ class FeatureFusion(ProcessingPlugin):
         size: tuple[float, float] = (camera.width, camera.height) if camera is not None else (1, 1)
         if kind == "line" and ("width" in result or "height" in result):
             size = (
-                _number(result.get("width"), bad, "field 'width'"),
-                _number(result.get("height"), bad, "field 'height'"),
+                number(result.get("width"), bad, "field 'width'"),
+                number(result.get("height"), bad, "field 'height'"),
             )
             if not all(v >= 1 and v == int(v) for v in size):
                 raise bad("fields 'width'/'height'", f"are not a whole image size: {size}")
         pose, sigma, found = self.sensor_pose(source), self.sigmas[source], []
+        if pose is None:  # a mounted sensor before its robot's pose (or head state) is known
+            self.unplaced += len(result["objects"])
+            return []
         for index, item in enumerate(result["objects"]):
             where = f"objects[{index}]"
             if not isinstance(item, Mapping):
@@ -281,11 +273,11 @@ class FeatureFusion(ProcessingPlugin):
             name = item.get("name")
             if not isinstance(name, str) or not name:
                 raise bad(f"{where} field 'name'", "is not a non-empty string")
-            r = _number(item.get("reliability"), bad, f"{where} field 'reliability'")
+            r = number(item.get("reliability"), bad, f"{where} field 'reliability'")
             if not 0 <= r <= 1:
                 raise bad(f"{where} field 'reliability'", f"= {r} is not in [0, 1]")
             coords = [
-                _number(item.get(axis), bad, f"{where} field {axis!r}") for axis in "xyz"[: 2 + (kind == "point")]
+                number(item.get(axis), bad, f"{where} field {axis!r}") for axis in "xyz"[: 2 + (kind == "point")]
             ]
             if name == UNKNOWN or r < self.params["minReliability"]:
                 continue
@@ -343,53 +335,6 @@ class FeatureFusion(ProcessingPlugin):
                     knowledge.setdefault(key, value)
                 members.append(obs)
                 theta = estimate([m.geometry for m in members])  # θ̂' (eq. 6.36)
-            fused.append(_fused_object(model, knowledge, theta, r_hat, raw, members))
+            fused.append(fused_object(model, knowledge, theta, r_hat, raw, members, self.frame))
             pending = left
         return fused
-
-
-def _number(value: Any, bad: Callable[[str, str], ValueError], where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise bad(where, f"is not a number: {value!r}")
-    if not math.isfinite(float(value)):
-        raise bad(where, f"is not finite: {value!r}")
-    return float(value)
-
-
-def reinforce(reliability: float, support: float) -> float:
-    """Eq. 6.41 kept in [0, 1] (D74): the support adds as a probabilistic sum, r + s·(1 − r)."""
-    return reliability + support * (1.0 - reliability)
-
-
-def share_at_bound(reliabilities: Iterable[float], bound: float = 1.0, tolerance: float = 1e-9) -> float:
-    """The share of fused reliabilities at the upper bound (within ``tolerance``); 0 for none.
-
-    A fused reliability that saturates says nothing about the observations any more: Fig. 7.18
-    compares spreads, which a value stuck at the bound hides (``ckm-bench fusion`` reports it).
-    """
-    values = np.asarray(list(reliabilities), dtype=np.float64)
-    if values.size == 0:
-        return 0.0
-    return float(np.count_nonzero(values >= bound - tolerance)) / values.size
-
-
-def _fused_object(
-    model: str, knowledge: dict[str, str], theta: Geometry, r_hat: float, raw: float, members: list[Observation]
-) -> dict[str, Any]:
-    """f̂ and r̂ of eq. 6.39 as a msgpack-able dict."""
-    place: dict[str, Any] = dict.fromkeys(("x", "y", "z", "sigma", "origin", "direction"))
-    if isinstance(theta, Point):
-        x, y, z = (float(v) for v in theta.mean)
-        place |= {"x": x, "y": y, "z": z, "sigma": math.sqrt(float(np.trace(theta.cov)) / 3.0)}
-    else:
-        place |= {"origin": [float(v) for v in theta.origin], "direction": [float(v) for v in theta.direction]}
-    return {
-        "name": knowledge.get("object", model),
-        "shape": knowledge.get("shape"),
-        "texture": knowledge.get("texture"),
-        **place,
-        "reliability": r_hat,
-        "reinforcement": raw,
-        "sources": [m.source for m in members],
-        "observations": len(members),
-    }

@@ -454,7 +454,7 @@ def test_bad_params_are_refused(params: Mapping[str, object], message: str) -> N
 
 
 def test_unknown_param_lists_the_accepted_ones() -> None:
-    with pytest.raises(ParamError, match=r"takes no parameter 'sigma' \(accepted: calibrationHeight, calibrationWidth"):
+    with pytest.raises(ParamError, match=r"takes no parameter 'sigma' \(accepted: bases, calibrationHeight, calibrationWidth"):
         fusion({"sigma": 1})
 
 

@@ -1,0 +1,108 @@
+"""Pieces of the feature fusion (thesis §6.3.2–6.3.3) shared by ``plugin.feature-fusion`` and its benchmark.
+
+- :class:`Observation`: S(θ)ᵢ of eq. 6.35, one recognised object of one input in the common frame;
+- :func:`reinforce`: eq. 6.41's reinforcement of the reliability by one matched observation;
+- :func:`share_at_bound`: how many fused reliabilities sit at the upper bound;
+- :func:`fused_object`: f̂ and r̂ of eq. 6.39 as the service's output record;
+- the per-input Param mini-language (``"name: v1 v2; name: v…"``) of the fusion's Params.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from runtime.kernel.interfaces import ParamError
+
+from .geometry import Geometry, Point
+
+
+@dataclass
+class Observation:
+    """S(θ)ᵢ of eq. 6.35: one recognised object of one input, placed in the common frame."""
+
+    source: str
+    index: int
+    model: str
+    reliability: float
+    geometry: Geometry
+    magnitude: str
+    knowledge: dict[str, str] = field(default_factory=dict)
+
+
+def entries(text: str, param: str, owner: str) -> dict[str, list[str]]:
+    """``"name: v1 v2; name: v…"`` as {name: [values]} (the per-input Params)."""
+    found: dict[str, list[str]] = {}
+    for entry in (e.strip() for e in text.split(";")):
+        if not entry:
+            continue
+        name, colon, values = entry.partition(":")
+        if not colon or not name.strip() or name.strip() in found:
+            raise ParamError(f"{owner}: parameter {param!r} entry {entry!r} is not 'name: values' with a new name")
+        found[name.strip()] = values.split()
+    return found
+
+
+def numbers(values: list[str], count: int, param: str, name: str, owner: str) -> list[float]:
+    """``count`` finite numbers of one Param entry, or a ParamError naming the Param and entry."""
+    try:
+        found = [float(v) for v in values]
+    except ValueError:
+        found = []
+    if len(found) != count or not all(math.isfinite(v) for v in found):
+        raise ParamError(f"{owner}: parameter {param!r} for {name!r} needs {count} finite numbers, got {values}")
+    return found
+
+
+def number(value: Any, bad: Callable[[str, str], ValueError], where: str) -> float:
+    """A finite number of an input message (not a bool), or ``bad(where, why)``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise bad(where, f"is not a number: {value!r}")
+    if not math.isfinite(float(value)):
+        raise bad(where, f"is not finite: {value!r}")
+    return float(value)
+
+
+def reinforce(reliability: float, support: float) -> float:
+    """Eq. 6.41 kept in [0, 1] (D74): the support adds as a probabilistic sum, r + s·(1 − r)."""
+    return reliability + support * (1.0 - reliability)
+
+
+def share_at_bound(reliabilities: Iterable[float], bound: float = 1.0, tolerance: float = 1e-9) -> float:
+    """The share of fused reliabilities at the upper bound (within ``tolerance``); 0 for none.
+
+    A fused reliability that saturates says nothing about the observations any more: Fig. 7.18
+    compares spreads, which a value stuck at the bound hides (``ckm-bench fusion`` reports it).
+    """
+    values = np.asarray(list(reliabilities), dtype=np.float64)
+    if values.size == 0:
+        return 0.0
+    return float(np.count_nonzero(values >= bound - tolerance)) / values.size
+
+
+def fused_object(
+    model: str, knowledge: dict[str, str], theta: Geometry, r_hat: float, raw: float, members: list[Observation],
+    frame: str,
+) -> dict[str, Any]:
+    """f̂ and r̂ of eq. 6.39 as a msgpack-able dict, placed in ``frame``."""
+    place: dict[str, Any] = dict.fromkeys(("x", "y", "z", "sigma", "origin", "direction"))
+    if isinstance(theta, Point):
+        x, y, z = (float(v) for v in theta.mean)
+        place |= {"x": x, "y": y, "z": z, "sigma": math.sqrt(float(np.trace(theta.cov)) / 3.0)}
+    else:
+        place |= {"origin": [float(v) for v in theta.origin], "direction": [float(v) for v in theta.direction]}
+    return {
+        "name": knowledge.get("object", model),
+        "shape": knowledge.get("shape"),
+        "texture": knowledge.get("texture"),
+        **place,
+        "frame": frame,
+        "reliability": r_hat,
+        "reinforcement": raw,
+        "sources": [m.source for m in members],
+        "observations": len(members),
+    }

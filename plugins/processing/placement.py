@@ -1,0 +1,121 @@
+"""Live sensor poses of the GlobalRecog.Fusion service: observations placed in the MAP frame (§6.3.1).
+
+The Turtlebot moves, so its Xtion's RGB and depth observations are placed with the robot's
+current pose estimate (the service's ``pose`` input, a PoseEstimate ``{"pose": {"x", "y",
+"yaw"}, …}`` fed by ``/nav/pose``) composed with the camera's mount in the robot's URDF. The Nao
+stands still at a known map pose (Param ``bases``) but turns its head: its camera's pose
+composes that base pose with the mount at the head angles last reported (the ``head`` input,
+``{"pan", "tilt"}`` fed by ``/nao/head_state``, driving the URDF joints named in
+``headJoints``). An observation whose sensor pose is not known yet (no pose estimate, no head
+state) cannot be placed: it is left out and counted (the service's ``unplaced`` measure).
+
+Params (owned by ``plugin.feature-fusion``, parsed here): ``mounts`` (``"input: MODEL LINK; …"``,
+MODEL a shipped robot model name or a URDF file relative to the configuration file), ``bases``
+(``"input: x y yaw; …"``, a fixed base pose in the map; mounted inputs without one follow the
+pose input), ``poseInput``, ``headInput`` (the names of those two inputs), ``headJoints`` (the
+URDF joints the head message's pan and tilt drive).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from runtime.kernel.interfaces import ParamError
+
+from .fusion_model import entries, number, numbers
+from .geometry import Pose
+from .mounts import Mount, compose, model_path, planar, read_mount
+
+
+class Placement:
+    """Sensor poses in the map of the mounted inputs, from the latest pose estimate and head angles."""
+
+    def __init__(self, params: Mapping[str, Any], inputs: Mapping[str, str], base: Path, owner: str) -> None:
+        self.owner = owner
+        self.pose_input: str = params["poseInput"]
+        self.head_input: str = params["headInput"]
+        for param in ("poseInput", "headInput"):
+            if not params[param] or params[param] in inputs:
+                raise ParamError(f"{owner}: parameter {param!r} = {params[param]!r} must name an input not in 'inputs'")
+        if self.pose_input == self.head_input:
+            raise ParamError(f"{owner}: parameters 'poseInput' and 'headInput' name the same input")
+        joints = params["headJoints"].split()
+        if len(joints) != 2:
+            raise ParamError(f"{owner}: parameter 'headJoints' needs the pan and the tilt joint names, got {joints}")
+        self.head_joints = (joints[0], joints[1])
+        self.mounts: dict[str, Mount] = {}
+        for name, values in self._declared(params, "mounts", inputs).items():
+            if len(values) != 2:
+                raise ParamError(f"{owner}: parameter 'mounts' for {name!r} needs a robot model and a link")
+            try:
+                self.mounts[name] = read_mount(model_path(values[0], base), values[1])
+            except ValueError as exc:
+                raise ParamError(f"{owner}: parameter 'mounts' for {name!r}: {exc}") from None
+        self.bases: dict[str, Pose] = {}
+        for name, values in self._declared(params, "bases", inputs).items():
+            if name not in self.mounts:
+                raise ParamError(f"{owner}: parameter 'bases' names {name!r}, which has no entry in 'mounts'")
+            self.bases[name] = planar(*numbers(values, 3, "bases", name, owner))
+        self.robot: Pose | None = None
+        """The moving robot's latest base pose in the map (from the pose input)."""
+        self.angles: dict[str, float] | None = None
+        """The head joints' latest angles (from the head input)."""
+
+    def _declared(self, params: Mapping[str, Any], param: str, inputs: Mapping[str, str]) -> dict[str, list[str]]:
+        found = entries(params[param], param, self.owner)
+        for name in found:
+            if name not in inputs:
+                raise ParamError(f"{self.owner}: parameter {param!r} names {name!r}, not an input of 'inputs'")
+        return found
+
+    @property
+    def active(self) -> bool:
+        """Whether any input is mounted on a robot: the common frame is then the map."""
+        return bool(self.mounts)
+
+    def update(self, data: Mapping[str, Any]) -> None:
+        """Take the newest pose estimate and head state in ``data`` (None: keep the last ones)."""
+        if data.get(self.pose_input) is not None:
+            self.robot = self._pose(data[self.pose_input])
+        if data.get(self.head_input) is not None:
+            self.angles = self._head(data[self.head_input])
+
+    def _bad(self, source: str) -> Callable[[str, str], ValueError]:
+        return lambda where, why: ValueError(f"{self.owner}: input {source!r} {where} {why}")
+
+    def _pose(self, message: Any) -> Pose:
+        bad = self._bad(self.pose_input)
+        pose = message.get("pose") if isinstance(message, Mapping) else None
+        if not isinstance(pose, Mapping):
+            raise bad("field 'pose'", "is missing or not a mapping of x, y, yaw")
+        x, y, yaw = (number(pose.get(k), bad, f"field 'pose.{k}'") for k in ("x", "y", "yaw"))
+        return planar(x, y, yaw)
+
+    def _head(self, message: Any) -> dict[str, float]:
+        bad = self._bad(self.head_input)
+        if not isinstance(message, Mapping):
+            raise bad("message", "is not a mapping of pan and tilt")
+        pan, tilt = (number(message.get(k), bad, f"field {k!r}") for k in ("pan", "tilt"))
+        if not (abs(pan) <= 2 * math.pi and abs(tilt) <= 2 * math.pi):
+            raise bad("fields 'pan'/'tilt'", f"= {pan}, {tilt} are not angles in radians")
+        return {self.head_joints[0]: pan, self.head_joints[1]: tilt}
+
+    def sensor_pose(self, source: str) -> Pose | None:
+        """The map pose of mounted input ``source``'s sensor; None while it is unknown."""
+        mount = self.mounts[source]
+        base = self.bases.get(source, self.robot)
+        if base is None:
+            return None
+        if mount.joints:
+            if self.angles is None:
+                return None
+            missing = [j for j in mount.joints if j not in self.angles]
+            if missing:
+                raise ValueError(
+                    f"{self.owner}: input {source!r}'s mount moves joint {missing[0]!r}, which parameter "
+                    f"'headJoints' ({' '.join(self.head_joints)}) does not name"
+                )
+        return compose(base, mount.pose(self.angles))
