@@ -17,6 +17,11 @@ services' outputs, and publish goals on their ``<Output>`` topics. The messages 
 
 A goal is matched to its status by ``id`` (fresh per behavior run), so a status left over from an
 earlier state never ends this one.
+
+Frames (docs/decisions.md D125): an object position whose ``frame`` is ``map`` (the fused
+recognition, the Nao's tracked target) is turned into the robot frame with the robot's pose
+estimate (``/nav/pose``: the ``nav`` service's ``pose`` output or a ``pose`` input); any other frame
+is taken as already relative to the robot.
 """
 
 from __future__ import annotations
@@ -83,6 +88,27 @@ def find_target(result: Any, shape: str, texture: str, min_sources: int = 1) -> 
     return best
 
 
+def robot_pose(message: Any) -> tuple[float, float, float] | None:
+    """(x, y, yaw) of a ``PoseEstimate`` (``{"pose": {"x", "y", "yaw"}}``) or a bare pose, else None."""
+    pose = message.get("pose", message) if isinstance(message, Mapping) else None
+    if not isinstance(pose, Mapping) or not all(isinstance(pose.get(k), int | float) for k in ("x", "y", "yaw")):
+        return None
+    return float(pose["x"]), float(pose["y"]), float(pose["yaw"])
+
+
+def in_robot_frame(position: Mapping[str, Any], pose: tuple[float, float, float] | None) -> tuple[float, float] | None:
+    """The (x, y) of an object position relative to the robot; None when it is in the map frame
+    and the robot's pose is unknown."""
+    x, y = float(position.get("x") or 0.0), float(position.get("y") or 0.0)
+    if position.get("frame") != "map":
+        return x, y
+    if pose is None:
+        return None
+    px, py, yaw = pose
+    dx, dy = x - px, y - py
+    return math.cos(yaw) * dx + math.sin(yaw) * dy, -math.sin(yaw) * dx + math.cos(yaw) * dy
+
+
 def object_position(found: Mapping[str, Any], stamp: float) -> dict[str, Any]:
     """A recognised object as an ``ObjectPosition`` message (configs/usecase/network.xml)."""
 
@@ -121,7 +147,8 @@ class SetNavGoal(Behavior):
     """NAV, NAV_HOME, NAV_COOP: sets AMCL's goal and waits until a path to it is established.
 
     With an input (NAV_COOP's ``spotted`` signal) the goal is the object's position there, moved
-    ``approachDistance`` towards the robot; the behavior waits for it (untraceable), logs it, and
+    ``approachDistance`` towards the robot and facing the object (a ``map`` position needs the
+    ``nav`` service's pose estimate); the behavior waits for it (untraceable), logs it, and
     also writes it on a ``goal`` output when it has one. Without a ``nav`` service it is done once
     the goal is set (the goal is handed over on its output only).
     """
@@ -144,9 +171,16 @@ class SetNavGoal(Behavior):
         if not isinstance(value, Mapping) or not all(isinstance(value.get(k), int | float) for k in ("x", "y")):
             return None
         x, y = float(value["x"]), float(value["y"])
-        distance = math.hypot(x, y)
+        ox, oy = 0.0, 0.0  # the robot, in the frame of the position
+        if value.get("frame") == "map":
+            pose = robot_pose(self.service("nav").output("pose")) if "nav" in self.context.services else None
+            if pose is None:
+                return None
+            ox, oy = pose[0], pose[1]
+        dx, dy = x - ox, y - oy
+        distance = math.hypot(dx, dy)
         keep = max(0.0, distance - self.params["approachDistance"]) / distance if distance > 0 else 0.0
-        return f"{x * keep:.3f} {y * keep:.3f} {math.atan2(y, x):.3f}"
+        return f"{ox + dx * keep:.3f} {oy + dy * keep:.3f} {math.atan2(dy, dx):.3f}"
 
     def step(self) -> BehaviorStatus:
         if self.goal is None and self.record.inputs:
@@ -211,7 +245,8 @@ class _Goals(Behavior):
 
 
 class Approach(_Goals):
-    """APPR: the arm to ``armPose`` and the base to ``standoff`` metres from the target."""
+    """APPR: the arm to ``armPose`` and the base to ``standoff`` metres from the target (a ``map``
+    target is placed relative to the robot with the ``pose`` input)."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("standoff", 0.2, "Distance kept from the target.", unit="m"),
@@ -229,7 +264,11 @@ class Approach(_Goals):
             target = self.read("target")
             if not isinstance(target, Mapping) or not isinstance(target.get("x"), int | float):
                 return BehaviorStatus(progress=0.0, detail="no target")
-            x, y = float(target["x"]), float(target.get("y") or 0.0)
+            pose = robot_pose(self.read("pose")) if "pose" in self.context.inputs else None
+            relative = in_robot_frame(target, pose)
+            if relative is None:
+                return BehaviorStatus(progress=0.0, detail="waiting for the pose estimate")
+            x, y = relative
             distance = math.hypot(x, y)
             keep = max(0.0, distance - self.params["standoff"]) / distance if distance > 0 else 0.0
             goal = {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)}
@@ -315,7 +354,8 @@ class TrackObject(Behavior):
 class FixObject(Behavior):
     """OBJ_FIX: holds the camera on the target until the recognition has been reliable for
     ``holdTime`` seconds, then writes the target's position (an ``ObjectPosition``) on its
-    outputs: the payload of the plan signal (``<Output signal=…>``) or a topic."""
+    outputs: the payload of the plan signal (``<Output signal=…>``) or a topic. With a ``track``
+    service the position is the tracked target it places on the map; else the recognition's."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("holdTime", 2.0, "How long the recognition must stay reliable.", unit="s"),
@@ -338,7 +378,13 @@ class FixObject(Behavior):
         self.since = now if self.since is None else self.since
         held = now - self.since
         if held >= p["holdTime"]:
+            position = object_position(found, now)
+            if "track" in self.context.services:
+                target = self.service("track").output("target")
+                if not isinstance(target, Mapping) or target.get("frame") != "map":
+                    return BehaviorStatus(progress=0.99, detail="waiting for the tracked target's map position")
+                position = object_position({**target, "name": target.get("label", found.get("name"))}, now)
             for port in self.record.outputs:
-                self.write(port.name, object_position(found, now))
+                self.write(port.name, position)
             return BehaviorStatus(progress=1.0, done=True)
         return BehaviorStatus(progress=held / p["holdTime"])

@@ -4,6 +4,7 @@ configure, what goals they send, how their progress follows the services, when t
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -161,12 +162,38 @@ def test_fix_holds_a_reliable_recognition_then_signals_the_position(lab: System)
         rig.time = t
         assert not rig.behavior.step().done
     rig.time = 2.0
+    assert not rig.behavior.step().done  # held long enough, but Track has not placed it on the map
+    rig.services["track"].outputs["target"] = {"stamp": 1.9, "label": "cylinder_red_stripes", "frame": "map",
+                                               "x": 2.5, "y": 1.5, "z": 0.8, "reliability": 0.85}  # fmt: skip
     assert rig.behavior.step().done
     spotted = rig.last("spotted")
-    assert spotted == {"stamp": 2.0, "label": "cylinder_red_stripes", "frame": "camera", "x": 2.0, "y": 1.0,
-                       "z": 0.3, "reliability": 0.9}  # fmt: skip
+    assert spotted == {"stamp": 2.0, "label": "cylinder_red_stripes", "frame": "map", "x": 2.5, "y": 1.5,
+                       "z": 0.8, "reliability": 0.85}  # fmt: skip
     types = {t.name: t for t in lab.message_types}
     assert check_payload(spotted, "ObjectPosition", types) is None  # what the signal's type asks for
+
+
+def test_nav_coop_aims_short_of_a_map_position_from_where_the_robot_is(lab: System) -> None:
+    rig = Rig(lab, "NAV_COOP")
+    rig.inputs["spotted"] = {"frame": "map", "x": 4.0, "y": 5.0, "z": 0.8}
+    assert rig.behavior.step().progress == 0.0  # no pose estimate yet: it cannot aim
+    rig.services["nav"].outputs["pose"] = {"pose": {"x": 1.0, "y": 1.0, "yaw": 2.0}, "dispersion": 0.1}
+    rig.behavior.step()
+    parameters, _ = rig.services["nav"].configured[-1]
+    x, y, yaw = map(float, parameters["goal"].split())
+    assert (x, y) == pytest.approx((1.0 + 3.0 * 4.2 / 5, 1.0 + 4.0 * 4.2 / 5), abs=1e-3)  # 0.8 m short
+    assert yaw == pytest.approx(math.atan2(4.0, 3.0), abs=1e-3)  # facing the object
+
+
+def test_approach_places_a_map_target_relative_to_the_robot(lab: System) -> None:
+    target = {"frame": "map", "x": 2.0, "y": 3.0, "z": 0.8}
+    rig = Rig(lab, "APPR", {"target": target})
+    assert rig.behavior.step().detail == "waiting for the pose estimate"
+    rig.inputs["pose"] = {"pose": {"x": 2.0, "y": 2.0, "yaw": math.pi / 2}}  # facing +y, 1 m short of it
+    rig.behavior.step()
+    move = rig.last("move")
+    assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.22, 0.0), abs=1e-6)
+    assert move["yaw"] == pytest.approx(0.0, abs=1e-6)
 
 
 def test_bad_params_are_refused_naming_the_behavior(lab: System) -> None:

@@ -342,10 +342,13 @@ def test_usecase_missions_pass(usecase: System) -> None:
 
 
 def test_usecase_strict_only_adds_unproven_requirements(usecase: System) -> None:
-    """Every requirement of the lab is on a measure no scenario bounds (only deadline and CPU are)."""
+    """The lab's unproven requirements are the recognisers' reliability ones: no scenario bounds a
+    recognition's reliability (their policies bound deadline and CPU); the mobile base's, the arm's
+    and the Nao's services bound the measures the behaviors require."""
     findings = check_mission(usecase, "Agent1FetchCoop", strict=True)
     assert {f.kind for f in findings} == {"unproven-requirement"}
-    assert len(findings) == 13
+    assert len(findings) == 4
+    assert all("reliability in" in f.message for f in findings)
 
 
 def test_top_missions(usecase: System) -> None:
