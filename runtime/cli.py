@@ -50,6 +50,7 @@ from .missions.agent import AgentRunner
 from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
+from .sessions import HardwareSessions
 from .verification.verify import verify_or_report
 
 LOG = logging.getLogger("ckm.run")
@@ -204,7 +205,16 @@ def _run(
     def extra() -> dict[str, Any]:
         return {"partition": partition.name, "memory": memory.statistics() if memory else None} if partition else {}
 
+    def session_failed(message: str) -> None:  # a backend's run-wide session (the sim world server) broke
+        nonlocal code
+        print(f"{config}: {message}", file=sys.stderr)
+        LOG.error("%s", message)
+        code = EXIT_FAILED
+        stop.set()
+
+    sessions = HardwareSessions(system, config, run_dir, nodes, session_failed)
     try:
+        sessions.start()  # before any node or partition is built (runtime.sessions)
         transport.start()
         for node in nodes:
             if partition is not None:
@@ -256,6 +266,7 @@ def _run(
         for runtime in reversed(runtimes):
             _isolated(f"stop node {runtime.node.name}", runtime.stop)
         _isolated("stop the transport", transport.stop)
+        _isolated("end the hardware sessions", sessions.stop)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         _keep_statistics(run_log, config, system, runtimes, started, extra())
