@@ -1,0 +1,356 @@
+"""``plugin.amcl-navigation``: the Navigation resource's AMCL service (thesis §6.2, §7.4; Tables 7.1, 7.8).
+
+Inputs (a mapping): ``scan`` (LaserScan of LaserSensor.Scan) and ``odom`` (Odometry of
+MobileBase.Displacement). Each frame (0.8 s in the use case, Table 7.8):
+
+1. localize: one step of Algorithm 3 (``filter=reliability``) or of the AMCL-like baseline
+   (``filter=mcl``) on the odometry increment and the scan (plugins/navigation/localizer.py);
+2. plan on the Environment's map with the A* planner of plugins/environment (§6.1.2), the robot's
+   footprint inflated by ``inflation``: when the goal is set, when the robot strays more than
+   ``strayDistance`` from the path, or when scan points fall on the path ahead (they become
+   obstacles of a new plan; the map's own obstacles are at least the inflated radius away);
+3. publish ``pose`` (PoseEstimate: pose, covariance, dispersion), ``status`` (NavStatus) and
+   ``path`` (Path2D: the rest of the plan in the odom frame through the current map→odom
+   correction, which MobileBase.Displacement follows on odometry until the next frame).
+
+The goal is the service Parameter ``goal`` (Table 7.1 "Goal", via :meth:`apply_service_parameters`):
+an Area of the Environment (its centroid, any heading) or ``"x y yaw"`` in the map frame. States:
+``planning`` (no plan yet, or waiting for a localization within ``maxDispersion``), ``active``,
+``arrived`` (within ``tolerance``, and ``yawTolerance`` for a pose goal: the path is then empty,
+which stops the base), ``failed`` with a ``reason``: the planner's (unreachable goal: it collides
+with an obstacle, lies outside the map, or no free path joins it) or no localization for
+``localizeTimeout`` seconds. A start inside an inflated obstacle (after a close approach) is left
+by the nearest free point within ``escape`` metres (decision D107). Top-level ``dispersion`` is the
+"Localization Dispersion" measure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import shapely
+from shapely.geometry import MultiPoint, Polygon
+
+from ckmconf import ConfigError, ConfigErrors, read_document
+from ckmconf.model.environment import AvoidedArea, Environment, Vertex
+from ckmconf.model.resources import Plugin
+from plugins.environment.geometry import Footprint
+from plugins.environment.map_model import MapModel
+from plugins.environment.planner import Planner, Unreachable
+from plugins.localization.raster import GridMap
+from plugins.localization.trajectories import LAB
+from runtime.kernel.interfaces import ParamError
+from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import MAPPING, P, Params, Ports
+
+from .frames import (
+    Point,
+    Pose,
+    inverse,
+    mapping,
+    parse_pose,
+    polyline_length,
+    pose_message,
+    pose_of,
+    project,
+    remaining_length,
+    transform_point,
+    wrap,
+)
+from .localizer import FILTERS, Localizer
+
+INPUTS = ("scan", "odom")
+
+
+def _numbers(text: str, count: int, name: str, owner: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        values = []
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise ParamError(f"{owner}: parameter {name!r} = {text!r} is not {count} numbers")
+    return values
+
+
+class AmclNavigation(ProcessingPlugin):
+    """``plugin.amcl-navigation``: localization, planning and the path of the Navigation.AMCL service."""
+
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("environment", "", "Environment XML file, relative to the configuration file (empty: the use-case lab)."),
+        P("filter", "reliability", "Algorithm 3 ('reliability') or the AMCL-like baseline ('mcl').", choices=FILTERS),
+        P("particles", 2000, "Number of particles.", min=10),
+        P("beams", 60, "Beams of each scan used by the filter, evenly spread.", min=3),
+        P("resolution", 0.05, "Cell size of the localization grid.", unit="m", above=0.0),
+        P("laserPose", "0.10 0 0", "The laser's 'x y yaw' in the robot frame."),
+        P("laserHeight", 0.14, "Height of the scan plane: the map obstacles it cuts.", unit="m", min=0.0),
+        P("initialPose", "", "Start: 'x y yaw' or an Area name (its centroid); empty: global localization."),
+        P("initialSpread", "0.3 0.2", "Standard deviations 'metres radians' of the initial particles."),
+        P("goal", "", "Goal until the service Parameter 'goal' sets one: an Area name or 'x y yaw'."),
+        P("robotRadius", 0.18, "Radius of the robot's footprint.", unit="m", above=0.0),
+        P("robotHeight", 0.45, "Height of the robot: objects above it do not obstruct it.", unit="m", above=0.0),
+        P("inflation", 0.02, "Clearance added to the footprint when planning.", unit="m", min=0.0),
+        P("planResolution", 0.1, "Cell size of the A* grid.", unit="m", above=0.0),
+        P("speed", 0.3, "Speed asked of the Mobile Base along the path.", unit="m/s", above=0.0),
+        P("tolerance", 0.15, "Arrived within this distance of the goal.", unit="m", above=0.0),
+        P("yawTolerance", 0.2, "And within this heading of a pose goal.", unit="rad", above=0.0),
+        P("maxDispersion", 0.5, "Localization dispersion above which the robot does not drive.", unit="m", above=0.0),
+        P("localizeTimeout", 10.0, "Fail after this long without a good localization.", unit="s", above=0.0),
+        P("strayDistance", 0.5, "Replan when the robot is this far from the path.", unit="m", above=0.0),
+        P("blockLookahead", 1.5, "Scan points on this much of the path ahead block it.", unit="m", above=0.0),
+        P("blockPoints", 3, "Scan points on the path ahead that make it blocked.", min=1),
+        P("escape", 0.6, "How far a start inside an inflated obstacle looks for free space.", unit="m", min=0.0),
+        P("seed", 0, "Random seed of the filter.", min=0),
+    )
+
+    def __init__(self, record: Plugin) -> None:
+        super().__init__(record)
+        p, owner = self.params, self.owner
+        x, y, yaw = _numbers(p["laserPose"], 3, "laserPose", owner)
+        self.laser: Pose = (x, y, yaw)
+        sigma_xy, sigma_yaw = _numbers(p["initialSpread"], 2, "initialSpread", owner)
+        if sigma_xy < 0 or sigma_yaw < 0:
+            raise ParamError(f"{owner}: parameter 'initialSpread' = {p['initialSpread']!r} must not be negative")
+        self.spread = (sigma_xy, sigma_yaw)
+        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        self.environment_file = base / p["environment"] if p["environment"] else LAB
+        self.env: Environment | None = None
+        self.localizer: Localizer | None = None
+        self.goal_text = ""
+        self.goal: tuple[float, float, float | None] | None = None
+        self._pending_goal: str | None = p["goal"] or None
+        self.phase, self.reason = "planning", ""
+        self.plan: list[Point] | None = None
+        self.segment = 0
+        self.path_id = 0
+        self.plan_length = 0.0
+        self.extra: list[AvoidedArea] = []
+        self.unlocalized_since: float | None = None
+
+    # ------------------------------------------------------------------ set-up and goals
+
+    def setup(self) -> None:
+        """Read the Environment, rasterise it for the filter, build the planner, place the prior."""
+        if self.env is not None:
+            return
+        try:
+            document = read_document(self.environment_file)
+        except ConfigError as exc:
+            raise ValueError(f"{self.owner}: cannot use environment file: {exc}") from None
+        except ConfigErrors as exc:
+            raise ValueError(f"{self.owner}: cannot use environment file: {exc.errors[0]}") from None
+        if document.environment is None:
+            raise ValueError(f"{self.owner}: environment file {self.environment_file} has no Environment")
+        self.env = env = document.environment
+        self.model = MapModel.from_environment(env)
+        p = self.params
+        self.footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
+        self.static_planner = self.planner = Planner(self.model, self.footprint, resolution=p["planResolution"])
+        grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
+        self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
+                                   range_max=8.0, seed=p["seed"], owner=self.owner)
+        initial = self._place(p["initialPose"], "parameter 'initialPose'") if p["initialPose"].strip() else None
+        self.localizer.reset(None if initial is None else (initial[0], initial[1], initial[2] or 0.0),
+                             self.spread if initial is None or initial[2] is not None else (self.spread[0], math.pi))
+        if self._pending_goal is not None:
+            self.apply_service_parameters({"goal": self._pending_goal})
+
+    def _place(self, text: str, where: str) -> tuple[float, float, float | None]:
+        """An Area name (its centroid, no heading) or 'x y yaw'; ValueError naming the areas otherwise."""
+        assert self.env is not None
+        pose = parse_pose(text)
+        if pose is not None:
+            return pose
+        name = text.strip()
+        if name in self.model.areas:
+            centre = self.model.areas[name].centroid
+            return float(centre.x), float(centre.y), None
+        areas = ", ".join(sorted(self.model.areas)) or "none"
+        raise ValueError(f"{self.owner}: {where} = {text!r} is neither an Area of environment "
+                         f"{self.env.name!r} ({areas}) nor 'x y yaw' in the map frame")
+
+    def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
+        """The service's ``goal`` Parameter (Table 7.1 "Goal"): navigate there from the next frame.
+
+        Setting a goal again, even the same one, starts a new navigation (the robot may have moved).
+        """
+        if "goal" not in parameters:
+            return
+        text = parameters["goal"]
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError(f"{self.owner}: service parameter 'goal' = {text!r} must be an Area name or 'x y yaw'")
+        if self.env is None:
+            self.setup()
+        self.goal = self._place(text, "service parameter 'goal'")
+        self.goal_text = text
+        self._pending_goal = None
+        self.phase, self.reason, self.plan, self.extra = "planning", "", None, []
+        self.planner = self.static_planner
+        self.unlocalized_since = None
+
+    # ------------------------------------------------------------------ planning
+
+    def _replan(self, start: Pose) -> None:
+        """A new plan from ``start`` to the goal; an unreachable goal fails with the planner's reason."""
+        assert self.goal is not None
+        here, goal = (start[0], start[1]), (self.goal[0], self.goal[1])
+        try:
+            points = self._plan_from(here, goal)
+        except Unreachable as refused:
+            self.phase, self.reason, self.plan = "failed", str(refused), None
+            return
+        self.plan, self.segment, self.path_id = points, 0, self.path_id + 1
+        self.plan_length = polyline_length(points)
+        self.phase = "active"
+
+    def _plan_from(self, here: Point, goal: Point) -> list[Point]:
+        try:
+            return list(self.planner.plan(here, goal).waypoints)
+        except Unreachable as refused:
+            if "the start collides" not in refused.reason or not self.params["escape"] > 0:
+                raise
+        # the start is inside an inflated obstacle (a close approach): leave by the nearest free cell
+        cells = np.argwhere(self.planner.free)
+        xy = np.stack([self.planner.xs[cells[:, 0]], self.planner.ys[cells[:, 1]]], axis=1)
+        near = np.hypot(xy[:, 0] - here[0], xy[:, 1] - here[1])
+        for k in np.argsort(near)[:20]:
+            if near[k] > self.params["escape"]:
+                break
+            exit_point = (float(xy[k, 0]), float(xy[k, 1]))
+            try:
+                return [here, *self.planner.plan(exit_point, goal).waypoints]
+            except Unreachable:
+                continue
+        return list(self.planner.plan(here, goal).waypoints)  # raises with the start's obstacle
+
+    def _blocked(self, pose: Pose, scan: Mapping[str, Any] | None) -> list[Point]:
+        """Scan points within the robot's radius of the next ``blockLookahead`` m of the path."""
+        if scan is None or self.plan is None or self.localizer is None:
+            return []
+        ahead, left = [], self.params["blockLookahead"]
+        self.segment, near, _ = project(self.plan, (pose[0], pose[1]), self.segment)
+        ahead.append(near)
+        for point in self.plan[self.segment + 1 :]:
+            step = math.dist(ahead[-1], point)
+            ahead.append(point)
+            left -= step
+            if left <= 0:
+                break
+        line = shapely.LineString(ahead) if len(ahead) > 1 else shapely.Point(ahead[0])
+        hits = self.localizer.endpoints(scan, pose)
+        if not len(hits):
+            return []
+        distance = shapely.distance(line, shapely.points(hits))
+        close = hits[distance < self.params["robotRadius"]]
+        return [(float(x), float(y)) for x, y in close] if len(close) >= self.params["blockPoints"] else []
+
+    def _avoid(self, points: list[Point]) -> None:
+        """Plan around ``points`` (scan hits on the path) from now on: they join the map as avoided areas."""
+        assert self.env is not None
+        blob = MultiPoint(points).buffer(0.05, quad_segs=4)
+        parts = [blob] if isinstance(blob, Polygon) else list(getattr(blob, "geoms", []))
+        for part in parts:
+            vertices = tuple(Vertex(x=float(x), y=float(y)) for x, y in list(part.exterior.coords)[:-1])
+            self.extra.append(AvoidedArea(name=f"scan obstacle {len(self.extra) + 1}", vertices=vertices))
+        env = dataclasses.replace(self.env, avoided=self.env.avoided + tuple(self.extra))
+        self.planner = Planner(MapModel.from_environment(env), self.footprint, resolution=self.params["planResolution"])
+
+    # ------------------------------------------------------------------ frames
+
+    def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """One Navigation frame: localize, (re)plan, publish pose, status and path (module docstring)."""
+        inputs = mapping(data, self.owner, "the input")
+        unknown = sorted(set(map(str, inputs)) - set(INPUTS))
+        if unknown:
+            raise ValueError(f"{self.owner}: unknown inputs {unknown}; the service's Inputs must be named scan, odom")
+        if self.localizer is None:
+            self.setup()
+        assert self.localizer is not None
+        now = context.stamp
+        scan = None if inputs.get("scan") is None else mapping(inputs["scan"], self.owner, "input 'scan'")
+        odom_message = inputs.get("odom")
+        result: dict[str, Any] = {}
+        estimate = None
+        if odom_message is not None:
+            odom = pose_of(mapping(odom_message, self.owner, "input 'odom'"), self.owner, "input 'odom'")
+            estimate = self.localizer.update(odom, scan)
+        if estimate is not None:
+            pose: Pose = (float(estimate.pose[0]), float(estimate.pose[1]), float(wrap(float(estimate.pose[2]))))
+            result["pose"] = {"stamp": now, "pose": pose_message(pose),
+                              "covariance": [float(v) for v in np.asarray(estimate.covariance).ravel()],
+                              "dispersion": float(estimate.dispersion)}
+            result["dispersion"] = float(estimate.dispersion)
+        if self.goal is None:
+            return result
+        localized = estimate is not None and estimate.dispersion <= self.params["maxDispersion"]
+        if self.phase in ("planning", "active"):
+            if not localized or estimate is None:
+                self._unlocalized(now, None if estimate is None else float(estimate.dispersion))
+            else:
+                self.unlocalized_since = None
+                self._navigate(pose, scan)
+        result["status"] = self._status(pose if localized else None)
+        result["path"] = self._path()
+        return result
+
+    def _unlocalized(self, now: float, dispersion: float | None) -> None:
+        """Wait (stopped) for a localization; fail after ``localizeTimeout``."""
+        self.unlocalized_since = now if self.unlocalized_since is None else self.unlocalized_since
+        self.plan = None
+        self.phase = "planning"
+        if now - self.unlocalized_since > self.params["localizeTimeout"]:
+            why = "no odometry received" if dispersion is None else (
+                f"dispersion {dispersion:.2f} m above {self.params['maxDispersion']:g} m")
+            self.phase, self.reason = "failed", f"no localization for {self.params['localizeTimeout']:g} s ({why})"
+
+    def _navigate(self, pose: Pose, scan: Mapping[str, Any] | None) -> None:
+        assert self.goal is not None
+        gx, gy, gyaw = self.goal
+        if math.dist(pose[:2], (gx, gy)) <= self.params["tolerance"] and (
+            gyaw is None or abs(wrap(gyaw - pose[2])) <= self.params["yawTolerance"]
+        ):
+            self.phase, self.plan = "arrived", None
+            return
+        if self.plan is not None:
+            self.segment, _, off = project(self.plan, (pose[0], pose[1]), self.segment)
+            blocking = self._blocked(pose, scan)
+            if blocking:
+                self._avoid(blocking)
+                self.plan = None
+            elif off > self.params["strayDistance"]:
+                self.plan = None
+        if self.plan is None:
+            self._replan(pose)
+
+    def _status(self, pose: Pose | None) -> dict[str, Any]:
+        remaining = 0.0
+        if self.plan is not None and pose is not None:
+            self.segment, near, _ = project(self.plan, (pose[0], pose[1]), self.segment)
+            remaining = remaining_length(self.plan, self.segment, near)
+        elif self.phase in ("planning", "active") and self.goal is not None and pose is not None:
+            remaining = math.dist(pose[:2], self.goal[:2])
+        return {"goal": self.goal_text, "state": self.phase, "path_length": float(self.plan_length),
+                "remaining": float(remaining), "reason": self.reason}
+
+    def _path(self) -> dict[str, Any]:
+        """The rest of the plan in the odom frame (no points: stop)."""
+        assert self.localizer is not None and self.goal is not None
+        correction = self.localizer.correction
+        points: list[list[float]] = []
+        yaw = None
+        if self.phase == "active" and self.plan is not None and correction is not None:
+            to_odom = inverse(correction)
+            odom_pose = self.localizer.odom
+            rest = self.plan[self.segment + 1 :]
+            start = [] if odom_pose is None else [[odom_pose[0], odom_pose[1]]]  # from the robot, in odom
+            points = start + [list(transform_point(to_odom, p)) for p in rest]
+            if self.goal[2] is not None:
+                yaw = wrap(self.goal[2] - correction[2])
+        return {"id": self.path_id, "goal": self.goal_text, "frame": "odom", "points": points, "yaw": yaw,
+                "speed": float(self.params["speed"])}

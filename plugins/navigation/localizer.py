@@ -1,0 +1,109 @@
+"""Localization of the Navigation service on its map (thesis §6.2.1, Algorithm 3; Table 7.1 AMCL).
+
+Wraps the two filters of ``plugins/localization`` — Algorithm 3 (``reliability``) or the AMCL-like
+baseline (``mcl``) — for LaserScan and Odometry messages:
+
+- the scan's beams are thinned to ``beams`` evenly spread ones (AMCL's ``laser_max_beams``), the
+  invalid ones (REP 117: not finite, or outside [range_min, range_max)) become +inf, which both
+  filters drop, and the valid ones are moved from the laser's frame to the robot's (the Hokuyo is
+  mounted ``laser_pose`` off the base's centre: each endpoint is re-expressed as a range and a
+  bearing from the centre, so the filters' "beams from the pose" model stays exact);
+- the filter moves its particles by the odometry increment and weighs them by the scan;
+- the map→odom correction is E ⊕ odom⁻¹ (E the estimate in the map frame): what re-anchors a
+  map-frame path in the odometry frame, and what dead-reckons the estimate between scans.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from plugins.localization.estimate import Estimate
+from plugins.localization.likelihood import FieldModel
+from plugins.localization.mcl import AmclFilter, MclSettings
+from plugins.localization.raster import GridMap
+from plugins.localization.reliability_filter import ReliabilityFilter, ReliabilitySettings
+
+from .frames import Pose, compose, inverse, wrap
+from .laser_scan import valid_beams
+
+Array = npt.NDArray[np.float64]
+FILTERS = ("reliability", "mcl")
+
+
+class Localizer:
+    """One filter on one map, fed with Odometry poses and LaserScan messages."""
+
+    def __init__(
+        self, grid: GridMap, kind: str, *, particles: int, beams: int, laser: Pose, range_max: float, seed: int,
+        owner: str = "localizer",
+    ) -> None:
+        if kind not in FILTERS:
+            raise ValueError(f"{owner}: filter {kind!r} is not one of {', '.join(FILTERS)}")
+        self.grid, self.kind, self.beams, self.laser, self.owner = grid, kind, beams, laser, owner
+        rng = np.random.default_rng(seed)
+        reach = range_max + float(np.hypot(laser[0], laser[1])) + 0.05  # a valid beam, seen from the centre
+        self.filter: AmclFilter | ReliabilityFilter
+        if kind == "mcl":
+            settings = MclSettings(particles=particles, min_particles=min(500, particles),
+                                   field=FieldModel(max_range=reach))
+            self.filter = AmclFilter(grid, np.zeros(1), settings, rng)
+        else:
+            self.filter = ReliabilityFilter(
+                grid, np.zeros(1), ReliabilitySettings(particles=particles, max_range=reach), rng
+            )
+        self.estimate: Estimate | None = None
+        self.correction: Pose | None = None
+        """map→odom: the map-frame pose of the odometry frame's origin."""
+        self.odom: Pose | None = None
+
+    def reset(self, pose: Pose | None, spread: tuple[float, float]) -> None:
+        """A Gaussian prior of ``spread`` (m, rad) around ``pose``, or a uniform one (global localization)."""
+        self.filter.reset(None if pose is None else np.array(pose, dtype=np.float64), spread)
+        self.estimate, self.correction = None, None
+
+    def robot_beams(self, scan: Mapping[str, Any]) -> tuple[Array, Array]:
+        """(ranges, bearings) from the robot's centre of ``beams`` evenly spread beams; invalid ones +inf."""
+        ranges = np.asarray(scan.get("ranges"), dtype=np.float64)
+        valid_beams(scan, self.owner)  # checks the message's fields and geometry
+        start, step = float(scan["angle_min"]), float(scan["angle_increment"])
+        index = np.unique(np.linspace(0, ranges.size - 1, min(self.beams, ranges.size)).round().astype(int))
+        r = ranges[index]
+        lo, hi = float(scan["range_min"]), float(scan["range_max"])
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r >= lo) & (r < hi)
+        angles = start + step * index + self.laser[2]
+        x = self.laser[0] + np.where(valid, r, 0.0) * np.cos(angles)
+        y = self.laser[1] + np.where(valid, r, 0.0) * np.sin(angles)
+        return np.where(valid, np.hypot(x, y), np.inf), np.where(valid, np.arctan2(y, x), angles)
+
+    def endpoints(self, scan: Mapping[str, Any], pose: Pose) -> Array:
+        """Map-frame points (k, 2) where the scan's valid beams hit, the robot at ``pose``."""
+        r, a = valid_beams(scan, self.owner)
+        laser = compose(pose, self.laser)
+        theta = laser[2] + a
+        return np.stack([laser[0] + r * np.cos(theta), laser[1] + r * np.sin(theta)], axis=1)
+
+    def update(self, odom: Pose, scan: Mapping[str, Any] | None) -> Estimate | None:
+        """One step: the filter on the odometry increment and ``scan``; without a scan, dead reckoning."""
+        if scan is None:
+            if self.correction is not None and self.estimate is not None:
+                moved = compose(self.correction, odom)
+                self.estimate = Estimate(np.array(moved), self.estimate.covariance, self.estimate.dispersion)
+            self.odom = odom
+            return self.estimate
+        ranges, bearings = self.robot_beams(scan)
+        self.filter.angles = bearings  # this scan's beams (both filters read them at each update)
+        self.estimate = self.filter.update(np.array(odom, dtype=np.float64), ranges)
+        pose = self.estimate.pose
+        self.correction = compose((float(pose[0]), float(pose[1]), float(wrap(float(pose[2])))), inverse(odom))
+        self.odom = odom
+        return self.estimate
+
+    @property
+    def reliability(self) -> float | None:
+        """R of eq. 6.21 (Algorithm 3), None for the baseline."""
+        return self.filter.reliability if isinstance(self.filter, ReliabilityFilter) else None
