@@ -27,28 +27,31 @@ out, read               the last raw value written (as ``hardware.loopback``)
 Time (decision D88): the world is a :class:`SimulationHook` of the channel's scope; each read or
 write first steps the physics, in fixed steps, up to the scope clock's time — real time under
 ``ckm-run``, lock-step with a :class:`ManualClock` in tests.
+
+One world per run (decisions D100–D102): when the environment names a world server
+(``CKM_SIM_SERVER``, set by ``ckm-run`` for every process of a run, partitions included) a channel
+is a client of it (:class:`plugins.sim.client.RemoteDevice`): the same device code
+(:mod:`plugins.sim.devices`) runs there, on the server's real-time clock, and every node and
+partition sees the same robots. Without it the world is in-process, as above.
 """
 
 from __future__ import annotations
 
-import math
 import threading
 import weakref
+from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ckmconf.loader import load
-from ckmconf.model import Environment, HWChannel
-from plugins.processing.textures import read_model
-from plugins.sim.robots import Robot
-from plugins.sim.sensors import Bumper, Camera, Frame, Imu, Lidar
-from plugins.sim.world import World
+from ckmconf.model import HWChannel, Node, System
+from plugins.sim.client import RemoteDevice, server_address
+from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
-from .simulation import Clock, PlantScope, SimulationHook, scope_for
+from .simulation import PlantScope, scope_for
 
 SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter")
 _SPEC = Params(
@@ -74,53 +77,6 @@ _SPEC = Params(
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
 )
-
-
-class SimWorld(SimulationHook):
-    """The pybullet world shared by the sim channels of a scope, built from the ``<Environment>`` of
-    ``source`` (a configuration file) by the first channel set up."""
-
-    def __init__(self, clock: Clock, environment: Environment | None, seed: int, textures: str, source: str) -> None:
-        super().__init__(clock)
-        self.source = source
-        self.world = World(environment, seed=seed, catalog=read_model(textures) if textures else None)
-        self.environment = environment
-        self.robots: dict[str, Robot] = {}
-        self.origin = 0.0
-        self._frames: dict[tuple[int, int, float, int, int], tuple[int, Frame]] = {}
-
-    def frame(self, camera: Camera, width: int, height: int) -> Frame:
-        """A render of ``camera`` at this world step: the RGB and the depth channels of one camera
-        (same link, field of view and size) read at the same step share one render (D89)."""
-        key = (camera.robot.body, camera.link, camera.fov, width, height)
-        cached = self._frames.get(key)
-        if cached is not None and cached[0] == self.world.steps:
-            return cached[1]
-        frame = camera.render(width, height)
-        self._frames[key] = (self.world.steps, frame)
-        return frame
-
-    def robot(self, name: str, model: str, pose: str) -> Robot:
-        """The robot ``name``, loaded on first use."""
-        if name not in self.robots:
-            if pose:
-                at = [float(v) for v in pose.split()]
-            elif self.environment is not None:
-                bounds = self.environment.map
-                at = [(bounds.xmin + bounds.xmax) / 2 + len(self.robots), (bounds.ymin + bounds.ymax) / 2, 0.0]
-            else:
-                at = [float(len(self.robots)), 0.0, 0.0]
-            self.robots[name] = Robot(self.world, name, self.world.load_robot(name, model or name, at))
-        return self.robots[name]
-
-    def start(self, now: float) -> None:
-        self.origin = now
-
-    def advance(self, start: float, end: float) -> None:
-        self.world.run_until(end - self.origin)
-
-    def __del__(self) -> None:
-        self.world.close()
 
 
 _worlds: weakref.WeakValueDictionary[PlantScope, SimWorld] = weakref.WeakValueDictionary()
@@ -157,8 +113,9 @@ class SimBackend(Backend):
         self._check_size()
         self.scope = scope if scope is not None else scope_for(channel)
         self.sim: SimWorld | None = None
-        self.device: Any = None
-        self._rng = np.random.default_rng(v["seed"])
+        self._device: ChannelDevice | None = None
+        self.device: Any = None  # in-process: the simulated device itself (a Camera, a Lidar, joints…)
+        self.remote: RemoteDevice | None = None  # client mode: the device in the world server
         self.last = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
 
     def _check_size(self) -> None:
@@ -177,6 +134,10 @@ class SimBackend(Backend):
 
     def setup(self) -> None:
         v = self.values
+        address = server_address()
+        if address is not None:  # client mode (D100): the run's world server holds the world
+            self.remote = RemoteDevice(address, self.spec())
+            return
         with _lock:
             sim = _worlds.get(self.scope)
             if sim is None:
@@ -188,87 +149,57 @@ class SimBackend(Backend):
                 raise ParamError(f"{self.owner}: Param 'world' names {self.world_file}, but the simulated world of "
                                  f"this scope was built from {sim.source}")
         with sim.lock:
-            model = self._path(v["model"]) if v["model"] else ""
-            robot = sim.robot(v["body"], model, v["pose"])
-            self.device = self._device(sim, robot)
-        self.sim = sim
+            self._device = ChannelDevice(sim, self.spec())
+        self.sim, self.device = sim, self._device.device
 
-    def _device(self, sim: SimWorld, robot: Robot) -> Any:
-        v, sensor = self.values, self.values["sensor"]
-        if sensor == "lidar":
-            return Lidar(robot, v["link"], beams=self.channel.size, fov=v["fov"], range_min=v["rangeMin"],
-                         range_max=self.channel.max or 5.6, noise=v["noise"], seed=v["seed"])
-        if sensor in ("rgb", "depth"):
-            return Camera(robot, v["link"], fov=v["fov"])
-        if sensor == "imu":
-            return Imu(robot, v["link"], noise=v["noise"], seed=v["seed"])
-        if sensor == "contact":
-            return Bumper(robot, v["link"], sim.world.floor)
-        if sensor == "altimeter":
-            return robot.link(v["link"])
-        if v["joints"]:
-            return [robot.joint(name) for name in v["joints"].split()]
-        joints = [robot.joint(v["joint"])] + ([robot.joint(v["mirror"])] if v["mirror"] else [])
-        return joints
+    def spec(self) -> Spec:
+        """What the device needs of this channel (sent to the world server in client mode)."""
+        values = dict(self.values)
+        values["model"] = self._path(values["model"]) if values["model"] else ""
+        values["world"] = self.world_file if values["world"] else ""  # the server refuses another world
+        ch = self.channel
+        return Spec(ch.name, ch.kind, ch.direction, ch.size, None if ch.max is None else float(ch.max), values)
 
-    def _require(self) -> tuple[SimWorld, Robot]:
-        if self.sim is None:
+    def _require(self) -> tuple[SimWorld, ChannelDevice]:
+        if self.sim is None or self._device is None:
             raise RuntimeError(f"{self.owner} is used before setup() or after stop()")
-        return self.sim, self.sim.robots[self.values["body"]]
-
-    def _joint_value(self, robot: Robot, joint: int) -> float:
-        v = self.values
-        position, velocity, effort = robot.joint_state(joint)
-        if self.channel.kind == "counter":
-            return float(velocity * v["ticksPerRev"] / (2 * math.pi))
-        value = {"position": position, "velocity": velocity, "effort": effort}[v["mode"]]
-        return float(value / v["scale"] + v["offset"])
+        return self.sim, self._device
 
     def read(self) -> Value:
-        sim, robot = self._require()
-        v, sensor = self.values, self.values["sensor"]
         if self.channel.direction == "out":
             return self.last
+        if self.remote is not None:
+            return to_value(self.remote.read())
+        sim, device = self._require()
         with sim.lock:
             sim.sync()
-            if sensor == "lidar":
-                return tuple(self.device.scan().tolist())
-            if sensor in ("rgb", "depth"):
-                frame = sim.frame(self.device, v["width"], v["height"])
-                data = frame.rgb if sensor == "rgb" else np.round(frame.depth * 1000.0)
-                return tuple(data.ravel().tolist())
-            if sensor == "imu":
-                return self.device.read()  # type: ignore[no-any-return]
-            if sensor == "contact":
-                return 1.0 if self.device.pressed() else 0.0
-            if sensor == "altimeter":
-                value = robot.link_pose(self.device)[0][2]
-            elif self.channel.direction == "in" and v["joints"]:
-                return tuple(self._noisy(self._joint_value(robot, j)) for j in self.device)
-            else:
-                value = self._joint_value(robot, self.device[0])
-            return self._noisy(value)
-
-    def _noisy(self, value: float) -> float:
-        noise = self.values["noise"]
-        return float(value + self._rng.normal(0.0, noise)) if noise > 0.0 else float(value)
+            return to_value(device.read())
 
     def write(self, value: Value) -> None:
-        sim, robot = self._require()
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel")
         raw = float(value[0] if isinstance(value, tuple) else value)
+        if self.remote is not None:
+            self.remote.write(raw)
+            self.last = raw
+            return
+        sim, device = self._require()
         self.last = raw
-        v = self.values
         with sim.lock:
             sim.sync()
-            for joint in self.device:
-                if self.channel.kind == "pwm":
-                    limit = robot.max_effort(joint)
-                    target = raw * (v["maxVelocity"] if v["mode"] == "velocity" else limit)
-                    robot.command(joint, "velocity" if v["mode"] == "velocity" else "effort", target)
-                else:
-                    robot.command(joint, v["mode"], (raw - v["offset"]) * v["scale"])
+            device.write(raw)
+
+    @classmethod
+    def run_session(
+        cls, system: System, config: Path, run_dir: Path, nodes: Sequence[Node], failed: Callable[[str], None]
+    ) -> AbstractContextManager[None]:
+        """ckm-run's hook around a run (runtime.sessions): the world server every sim channel of the
+        run's processes talks to (D102)."""
+        from plugins.sim.session import world_session  # the launcher is loaded only by ckm-run
+
+        return world_session(system, config, run_dir, nodes, failed)
 
     def stop(self) -> None:
-        self.sim, self.device = None, None
+        if self.remote is not None:
+            self.remote.close()
+        self.sim, self._device, self.device, self.remote = None, None, None, None
