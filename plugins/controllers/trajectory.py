@@ -136,7 +136,10 @@ class JointTrajectory(MultiOutputController):
     def measured(self, measure: Any) -> list[float]:
         """Joint positions, in ``joints`` order, from a JointState or a list."""
         if isinstance(measure, Mapping):
-            by_name = dict(zip(measure["name"], measure["position"], strict=True))
+            names, positions = list(measure.get("name") or []), list(measure["position"])
+            if not names:  # a sensor's JointState names nothing: its positions are in ``joints`` order
+                return [float(q) for q in positions[: len(self.joints)]]
+            by_name = dict(zip(names, positions, strict=True))
             return [float(by_name[j]) for j in self.joints]
         return [float(q) for q in measure]
 

@@ -106,3 +106,10 @@ def test_future_samples_the_rest_of_the_plan_and_state_round_trips() -> None:
 def test_param_errors(params: dict[str, str], message: str) -> None:
     with pytest.raises(ParamError, match=message):
         arm(**params)
+
+
+def test_a_joint_state_naming_no_joint_is_read_in_joints_order() -> None:
+    """The arm_joints sensor's JointState carries positions only (D99): ``joints`` orders them."""
+    c = arm()
+    assert c.measured({"name": [], "position": [0.1, 0.2, 0.3]}) == [0.1, 0.2, 0.3]
+    assert c.measured({"name": ["gripper_joint", "elbow", "shoulder"], "position": [3, 2, 1]}) == [1, 2, 3]
