@@ -3,7 +3,7 @@
 ``AgentDirectory`` lists the agents (``ckm-run --await-config``) heard on the network;
 ``bundle`` gathers a configuration's main file and every file it includes; ``push`` sends one
 agent one node of it and waits for the acknowledgement; ``distribute`` does that for a whole
-mapping of nodes to agents at once. The protocol is described in :mod:`runtime.distribution`.
+mapping of nodes to agents at once. The protocol is described in :mod:`runtime.distribution_protocol`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ckmconf import load
-from runtime.distribution import (
+from runtime.distribution_protocol import (
     AGENTS_TOPIC,
     MAX_BUNDLE,
     ack_topic,
@@ -33,7 +33,7 @@ STALE_AFTER = 2.0  # seconds without an announcement before an agent is shown as
 
 
 def config_hash(files: Mapping[str, str]) -> str:
-    """The hash an agent acknowledges for ``files`` (see runtime.distribution.bundle_hash)."""
+    """The hash an agent acknowledges for ``files`` (see runtime.distribution_protocol.bundle_hash)."""
     return bundle_hash(files)
 
 

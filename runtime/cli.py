@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import signal
 import socket
@@ -43,6 +42,7 @@ from typing import Any
 from ckmconf import ConfigError, load
 from ckmconf.model import Network, Node, Partition, System
 
+from .distribution import NAME, run_agent
 from .kernel.node import NodeRuntime
 from .kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor, enter_partition
 from .kernel.runlog import RunLog
@@ -50,14 +50,12 @@ from .missions.agent import AgentRunner
 from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
+from .runrecord import EXIT_AGENTS, EXIT_CONFIG, EXIT_FAILED, EXIT_NETWORK
+from .runrecord import keep_statistics as _keep_statistics  # the name _run calls it by
 from .sessions import HardwareSessions
 from .verification.verify import verify_or_report
 
 LOG = logging.getLogger("ckm.run")
-EXIT_CONFIG = 1  # the configuration was refused (load, verify, build)
-EXIT_NETWORK = 4  # the network could not be joined
-EXIT_FAILED = 5  # a partition or a node task failed while running
-EXIT_AGENTS = 6  # a plan's agent did not end in its success final
 STATS_EVERY = 2.0  # seconds between rewrites of the statistics file while running
 
 
@@ -143,8 +141,6 @@ def _logging_to(run_dir: Path) -> Iterator[None]:
 
 def _await_config(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     """ckm-run --await-config: a node agent waiting for the editor's configurations."""
-    from .distribution import NAME, run_agent  # imports this module: loaded only when needed
-
     for option in ("node", "partition", "plan"):
         if getattr(args, option) is not None:
             parser.error(f"--{option} cannot go with --await-config (the editor chooses the node)")
@@ -293,15 +289,6 @@ def _network_event(run_log: RunLog, event: Any) -> None:
         LOG.info("network: %s %s %s", event.kind, event.peer, event.detail)
 
 
-def _keep_statistics(
-    run_log: RunLog, config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
-) -> None:
-    try:
-        run_log.statistics(_summary(config, system, runtimes, started, extra))
-    except Exception:
-        LOG.exception("cannot write the statistics to %s", run_log.stats_path)
-
-
 def _verdict(code: int, runtimes: list[NodeRuntime], agents: list[_Agent]) -> int:
     """The exit code, with the first error of everything that failed printed on stderr (issue G)."""
     codes = [code] if code else []
@@ -356,35 +343,6 @@ def _start_agents(system: System, plan: str, nodes: list[Node], transport: Trans
             started.append(running)
             LOG.info("plan %s: agent %s runs mission %s", plan, agent.name, agent.mission)
     return started
-
-
-def _summary(
-    config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
-) -> dict[str, Any]:
-    summary = {
-        "config": str(config),
-        "system": system.name,
-        "started": started,
-        "stopped": time.time(),
-        **extra,
-        "nodes": {r.node.name: r.statistics() for r in runtimes},
-    }
-    partitions = {r.node.name: r.partitions.statistics() for r in runtimes if r.partitions is not None}
-    if partitions:
-        summary["partitions"] = partitions
-    return summary
-
-
-def _write_run(
-    run_dir: Path, config: Path, system: System, runtimes: list[NodeRuntime], started: float, extra: dict[str, Any]
-) -> None:
-    """stats.json and events.jsonl of a finished run in one go (the distribution agent's pushed nodes)."""
-    summary = _summary(config, system, runtimes, started, extra)
-    (run_dir / "stats.json").write_text(json.dumps(summary, indent=2, default=str))
-    with (run_dir / "events.jsonl").open("w") as events:
-        for runtime in runtimes:
-            for event in runtime.events:
-                events.write(json.dumps(event, default=str) + "\n")
 
 
 if __name__ == "__main__":

@@ -6,28 +6,15 @@ run; the agent writes the bundle into a fresh directory, loads it strictly, buil
 the node, and only then replaces the node it ran (stopped with its actuators safe). On any
 error it refuses with the errors and keeps the old node running.
 
-Protocol (msgpack maps over the transport; AGENT is the agent's name):
-
-- ``/ckm/agents`` (agent → all, every ``ANNOUNCE_PERIOD`` s and on each change):
-  ``{type: "agent", name, host, pid, guid, status, config_hash, node, system, errors, last_id}``
-  with status ``waiting`` (nothing pushed yet), ``running``, ``refused`` (the last push was
-  refused and nothing runs), ``failed`` (a push was accepted but its node failed to start) or
-  ``stopped`` (the agent is leaving).
-- ``/ckm/agents/AGENT/config`` (editor → agent): ``{id, node, files: {path: xml}, main}``.
-- ``/ckm/agents/AGENT/ack`` (agent → editor): ``{type: "ack", agent, id, accepted, hash,
-  node, errors}``. A push resent with the same id is answered again, never applied twice.
-
-``bundle_hash`` is the sha256 of the bundle both sides compute to confirm what runs.
+The messages, topics, limits and the bundle hash are those of :mod:`runtime.distribution_protocol`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import logging
 import os
 import queue
-import re
 import shutil
 import signal
 import socket
@@ -35,107 +22,50 @@ import sys
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from ckmconf import ConfigError, load
 from ckmconf.model import Network, System
 
-from .cli import EXIT_NETWORK, _write_run
+from .distribution_protocol import (
+    AGENTS_TOPIC,
+    ANNOUNCE_PERIOD,
+    MAX_BUNDLE,
+    NAME,
+    Push,
+    Refused,
+    ack_topic,
+    bundle_hash,
+    config_topic,
+    parse_push,
+)
 from .kernel.node import NodeRuntime
 from .network import open_transport, read_group_key
 from .network.api import GroupKeyError, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .network.multipeer import NetworkError
 from .registry import Registry
+from .runrecord import EXIT_NETWORK, write_run
 
 LOG = logging.getLogger("ckm.distribution")
 
-AGENTS_TOPIC = "/ckm/agents"
-ANNOUNCE_PERIOD = 0.5
-MAX_BUNDLE = 8 * 1024 * 1024  # bytes of paths and texts together
-MAX_FILES = 256
-NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
-_COMPONENT = re.compile(r"[A-Za-z0-9_.+-]{1,128}")
-
-
-def config_topic(agent: str) -> str:
-    return f"{AGENTS_TOPIC}/{agent}/config"
-
-
-def ack_topic(agent: str) -> str:
-    return f"{AGENTS_TOPIC}/{agent}/ack"
-
-
-def bundle_hash(files: Mapping[str, str]) -> str:
-    """sha256 over the (path, text) pairs sorted by path, each length-prefixed (UTF-8)."""
-    digest = hashlib.sha256()
-    for path in sorted(files):
-        for part in (path.encode(), files[path].encode()):
-            digest.update(len(part).to_bytes(8, "big"))
-            digest.update(part)
-    return digest.hexdigest()
-
-
-def bundle_size(files: Mapping[str, str]) -> int:
-    return sum(len(p.encode()) + len(t.encode()) for p, t in files.items())
-
-
-class Refused(Exception):
-    """A push the agent will not apply; ``errors`` say why."""
-
-    def __init__(self, *errors: str) -> None:
-        super().__init__("; ".join(errors))
-        self.errors = list(errors)
-
-
-@dataclass(frozen=True)
-class Push:
-    id: str | int
-    node: str
-    files: dict[str, str]
-    main: str
-    hash: str
-
-
-def check_path(path: str) -> None:
-    """A bundle path must be relative, plain and stay inside the bundle (hostile input)."""
-    parts = PurePosixPath(path).parts
-    if not parts or path.startswith("/") or "\\" in path or len(parts) > 16:
-        raise Refused(f"bad path {path!r}: paths are relative, '/'-separated, at most 16 deep")
-    for part in parts:
-        if part in (".", "..") or not _COMPONENT.fullmatch(part):
-            raise Refused(f"bad path {path!r}: {part!r} is not a plain file or folder name")
-    if not path.endswith(".xml"):
-        raise Refused(f"bad path {path!r}: only .xml files are distributed")
-
-
-def parse_push(message: Any, max_bundle: int = MAX_BUNDLE) -> Push:
-    """Check a push message field by field; Refused names the first problem."""
-    if not isinstance(message, dict):
-        raise Refused(f"a push is a map with id, node, files and main, not {type(message).__name__}")
-    ident = message.get("id")
-    if isinstance(ident, bool) or not isinstance(ident, (str, int)) or len(str(ident)) > 128:
-        raise Refused("the push has no valid id (a string or integer)")
-    node, files, main = message.get("node"), message.get("files"), message.get("main")
-    if not isinstance(node, str) or not NAME.fullmatch(node):
-        raise Refused("the push names no valid node")
-    if not isinstance(files, dict) or not files:
-        raise Refused("the push has no files (a map of relative path → XML text)")
-    if len(files) > MAX_FILES:
-        raise Refused(f"the bundle has {len(files)} files; at most {MAX_FILES} are accepted")
-    if not all(isinstance(p, str) and isinstance(t, str) for p, t in files.items()):
-        raise Refused("the bundle's paths and contents must all be text")
-    size = bundle_size(files)
-    if size > max_bundle:
-        raise Refused(f"the bundle is {size} bytes; at most {max_bundle} are accepted")
-    for path in files:
-        check_path(path)
-    if not isinstance(main, str) or main not in files:
-        raise Refused(f"the main file {main!r} is not in the bundle")
-    return Push(ident, node, dict(files), main, bundle_hash(files))
+__all__ = [  # the protocol's names stay importable from here, where they were first defined
+    "AGENTS_TOPIC",
+    "MAX_BUNDLE",
+    "NAME",
+    "ConfigAgent",
+    "Push",
+    "Refused",
+    "ScopedTransport",
+    "ack_topic",
+    "bundle_hash",
+    "config_topic",
+    "parse_push",
+    "run_agent",
+]
 
 
 class ScopedTransport(Transport):
@@ -432,7 +362,7 @@ class ConfigAgent:
         main = running.directory / running.push.main
         extra = {"agent": self.name, "hash": running.push.hash}
         try:
-            _write_run(running.directory, main, running.system, [running.runtime], running.started, extra)
+            write_run(running.directory, main, running.system, [running.runtime], running.started, extra)
         except OSError:
             LOG.exception("agent %s: cannot record the run of %s", self.name, running.push.node)
         LOG.info("agent %s stopped node %s (%s)", self.name, running.push.node, running.push.hash[:12])

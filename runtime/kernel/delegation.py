@@ -24,18 +24,16 @@ import logging
 import threading
 import time
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-from ckmconf.model import Param
+from ckmconf.model import Node, Param
 from ckmconf.model.kernel import Controller as ControllerRecord
 from ckmconf.model.kernel import ControllerInput, ControllerOutput
 
-from ..network.api import Sample, TopicQoS
-from .scheduler import Task
-from .services import ControlService
-
-if TYPE_CHECKING:
-    from .node import NodeRuntime
+from ..network.api import Sample, TopicQoS, Transport
+from ..registry import Registry
+from .scheduler import Scheduler, Task
+from .services import ControlService, FutureActions
 
 LOG = logging.getLogger("ckm.delegation")
 _ids = itertools.count(1)
@@ -45,10 +43,42 @@ def channel(node: str) -> TopicQoS:
     return TopicQoS(f"/ckm/delegation/{node}", "delegation", history=16)
 
 
+class DelegationHost(Protocol):
+    """What delegation needs of its node (the kernel's ``NodeRuntime`` is one): the node's record,
+    its transport, registry and scheduler, the controllers it runs (given ones leave, taken ones
+    join the scheduler), its future actions, its topics' network names and its event log."""
+
+    @property
+    def node(self) -> Node: ...
+
+    @property
+    def transport(self) -> Transport: ...
+
+    @property
+    def registry(self) -> Registry: ...
+
+    @property
+    def scheduler(self) -> Scheduler: ...
+
+    @property
+    def controllers(self) -> dict[str, ControlService]: ...
+
+    @property
+    def futures(self) -> dict[str, FutureActions]: ...
+
+    def topic(self, name: str) -> TopicQoS:
+        """The QoS, with the network name, of topic ``name`` as the node sees it."""
+        ...
+
+    def report(self, kind: str, detail: dict[str, Any]) -> None:
+        """Record a node event (kept, logged and published on the node's alarm topic)."""
+        ...
+
+
 class Delegation:
     """The delegation endpoint of one node: gives its controllers away, takes others'."""
 
-    def __init__(self, runtime: NodeRuntime, timeout: float = 5.0) -> None:
+    def __init__(self, runtime: DelegationHost, timeout: float = 5.0) -> None:
         self.runtime = runtime
         self.timeout = timeout
         self.taken: dict[str, ControlService] = {}  # name → service run for another node
@@ -180,10 +210,10 @@ class Delegation:
         publisher.publish(message)
 
     def _report(self, kind: str, controller: str, peer: str, reason: str = "") -> None:
-        self.runtime._report(kind, {"controller": controller, "peer": peer, "reason": reason})
+        self.runtime.report(kind, {"controller": controller, "peer": peer, "reason": reason})
 
 
-def describe(runtime: NodeRuntime, service: ControlService) -> dict[str, Any]:
+def describe(runtime: DelegationHost, service: ControlService) -> dict[str, Any]:
     """A controller as plain data: kind, timing, params and the network names of its topics."""
     record = service.record
     return {

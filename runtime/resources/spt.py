@@ -36,8 +36,8 @@ from typing import Any, ClassVar
 from ckmconf.binding import Record
 from ckmconf.errors import ConfigError, Loc
 from ckmconf.model.resources import Plugin, Profile, SmartResource, Use
-from runtime.kernel.interfaces import read_params
 from runtime.registry import Registry, default_registry
+from runtime.verification.manifest import read_params  # below the kernel: resources never import it
 
 Path = tuple[str, ...]
 """A node's identity: plugin names from the root of its tree down to it."""
