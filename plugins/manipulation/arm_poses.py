@@ -1,0 +1,294 @@
+"""``plugin.arm-poses``: the RoboticArm.MoveIt service (thesis Table 7.1, §7.4.2, Fig. 7.20).
+
+The thesis drives the Turtlebot arm through MoveIt! to *predefined positions* in two motion
+groups, ``arm`` and ``gripper``. This SPT service plugin plays that role on its two inputs
+(``{input name: newest value or None}``, configs/usecase/resources.xml ``RoboticArm.MoveIt``):
+
+- ``goal`` (ArmGoal, ``/arm/goal``): ``{"id": int, "group": "arm" | "gripper", "pose": name,
+  "speed": optional share in (0, 1]}``; a goal with a new id (or new content) preempts the old;
+- ``joint_states`` (JointState, ``/arm/joint_states``): ``{"stamp", "name": [...], "position":
+  [...]}``; with no names (as the arm's bus sensor publishes it, D99) the positions are taken in
+  the order of the Param ``joints``.
+
+Outputs (only the keys naming a service Output are published):
+
+- ``trajectory`` (JointTrajectory, once per goal): ``{"joint_names": the group's joints,
+  "points": [{"positions": the measured start, "time_from_start": 0}, {"positions": the target,
+  "time_from_start": T}]}`` for the joint-trajectory controller; T = max over the joints of
+  1.5·|Δq|/(v·speed) — the cubic rest-to-rest profile's peak speed stays within v·speed, v the
+  joint's velocity limit (URDF, or Param ``maxVelocity``), speed the service Parameter ``speed``
+  (Table 7.1's configuration) or the goal's own;
+- ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose",
+  "state": "moving" | "reached" | "failed", "active", "error"}`` (and ``holding`` for the gripper);
+- the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
+  readable), else 0.
+
+Reached: every joint of the group within ``tolerance`` (rad) of its target (the gripper within
+``gripperTolerance`` of its range); a gripper *closing* whose fingers have stopped short — an
+object between them — for ``settle`` seconds after the planned time is reached too, with
+``holding`` true. Failed: an unknown pose, a pose the IK left out of reach or out of the joint
+limits (solved once, at set-up, in a private pybullet client: :mod:`.kinematics`), or not reached
+``timeout`` seconds after the planned time. Time is the frame's stamp (``Context.stamp``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import deque
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+from ckmconf.model.resources import Plugin
+from runtime.kernel.interfaces import ParamError
+from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.verification.manifest import MAPPING, P, Params, Ports
+
+from .kinematics import MODELS, ArmModel, PoseFile, Solution, read_poses
+
+JOINTS = "arm_shoulder_pan_joint arm_shoulder_lift_joint arm_elbow_flex_joint arm_wrist_flex_joint gripper_joint"
+CUBIC_PEAK = 1.5
+"""Peak over mean speed of the controller's cubic rest-to-rest segment (plugins/controllers/trajectory.py)."""
+MIN_DURATION = 0.1
+"""Shortest planned motion (s): a goal already met still gets a well-formed trajectory."""
+
+
+class _Goal:
+    """The goal being executed: what it asked, its target and its timing."""
+
+    def __init__(self, message: Mapping[str, Any], group: str, pose: str, speed: float) -> None:
+        self.id = message.get("id")
+        self.group, self.pose, self.speed = group, pose, speed
+        self.state = "moving"
+        self.error = ""
+        self.holding = False
+        self.indices: list[int] = []
+        self.target: list[float] = []
+        self.started: float | None = None  # planned once joint states are known
+        self.duration = 0.0
+
+
+class ArmPoses(ProcessingPlugin):
+    """Goals by predefined pose name to joint trajectories, and their status (see the module docstring)."""
+
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # ArmGoal + JointState in; trajectory, status out
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("model", "turtlebot", "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
+          "configuration file."),
+        P("poses", "models/arm_poses.yml", "Pose file (Fig. 7.20 targets), relative to the configuration file."),
+        P("joints", JOINTS, "The pan, shoulder, elbow and wrist joints, then the gripper joint (also the "
+          "order of a JointState without names)."),
+        P("maxVelocity", "", "Velocity limit per joint, one value or five (empty: the URDF's).", unit="rad/s"),
+        P("speed", 0.5, "Velocity scaling until the service Parameter 'speed' sets it.", above=0.0, max=1.0),
+        P("tolerance", 0.02, "Largest arm joint error at which a pose counts as reached.", unit="rad", above=0.0),
+        P("gripperTolerance", 0.05, "Largest gripper error, as a share of its range.", above=0.0, max=1.0),
+        P("settle", 0.5, "How long closing fingers must stand still on an object to count as holding it.",
+          unit="s", above=0.0),
+        P("timeout", 5.0, "Time allowed after the planned duration before a goal fails.", unit="s", above=0.0),
+    )
+
+    def __init__(self, record: Plugin) -> None:
+        super().__init__(record)
+        v = self.params
+        self.joints: list[str] = v["joints"].split()
+        if len(self.joints) != 5 or len(set(self.joints)) != 5:
+            raise ParamError(f"{self.owner}: parameter 'joints' must name 4 arm joints and the gripper joint, "
+                             f"each once, got {v['joints']!r}")
+        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        model = str(v["model"])
+        self.model_path = base / model if Path(model).suffix else MODELS / f"{model}.urdf"
+        self.poses_path = base / v["poses"]
+        velocity = v["maxVelocity"].split()
+        try:
+            self.max_velocity = [float(x) for x in velocity]
+        except ValueError:
+            raise ParamError(f"{self.owner}: parameter 'maxVelocity' = {v['maxVelocity']!r} is not numbers") from None
+        if len(self.max_velocity) not in (0, 1, 5) or not all(x > 0 and math.isfinite(x) for x in self.max_velocity):
+            raise ParamError(f"{self.owner}: parameter 'maxVelocity' needs one or five positive numbers")
+        self.speed: float = v["speed"]
+        self.model: ArmModel | None = None
+        self.file: PoseFile | None = None
+        self.solutions: dict[str, Solution] = {}
+        self.velocity: list[float] = []
+        self.goal: _Goal | None = None
+        self._message: Any = None
+        self._gripper: deque[tuple[float, float]] = deque()
+
+    # ------------------------------------------------------------------ set-up
+
+    def setup(self) -> None:
+        """Read the pose file, load the URDF privately and solve every arm pose (Fig. 7.20)."""
+        try:
+            self.file = read_poses(self.poses_path)
+        except OSError as exc:
+            raise OSError(exc.errno, f"{self.owner}: cannot read pose file {self.poses_path}: {exc.strerror}") from exc
+        except ValueError as exc:
+            raise ValueError(f"{self.owner}: bad pose file: {exc}") from None
+        if not self.model_path.is_file():
+            raise FileNotFoundError(f"{self.owner}: robot model {self.model_path} does not exist")
+        try:
+            self.model = ArmModel(self.model_path, self.joints[:4], self.joints[4], self.file.tool)
+        except ValueError as exc:
+            raise ValueError(f"{self.owner}: {exc}") from None
+        given = self.max_velocity * 5 if len(self.max_velocity) == 1 else self.max_velocity
+        self.velocity = [min(u, g) for u, g in zip(self.model.velocity, given, strict=True)] if given else list(
+            self.model.velocity)
+        self.solutions = {name: self.model.solve(target) for name, target in self.file.arm.items()}
+
+    def stop(self) -> None:
+        if self.model is not None:
+            self.model.close()
+            self.model = None
+
+    def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
+        """The service's ``speed`` Parameter (Table 7.1): the velocity scaling of later goals."""
+        if "speed" in parameters:
+            self.speed = self._speed(parameters["speed"], "service parameter 'speed'")
+
+    def _speed(self, value: Any, where: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 < value <= 1.0:
+            raise ValueError(f"{self.owner}: {where} = {value!r} must be a number in (0, 1]")
+        return float(value)
+
+    # ------------------------------------------------------------------ frames
+
+    def process(self, data: Any, context: Context) -> dict[str, Any]:
+        if self.model is None or self.file is None:
+            raise RuntimeError(f"{self.owner} is not set up")
+        if not isinstance(data, Mapping):
+            raise ValueError(f"{self.owner} expects {{'goal': …, 'joint_states': …}}, got {type(data).__name__}")
+        now = context.stamp
+        result: dict[str, Any] = {}
+        try:
+            positions = self._positions(data.get("joint_states"))
+            reading = ""
+        except ValueError as exc:
+            positions, reading = None, str(exc)
+        message = data.get("goal")
+        if message is not None and message != self._message:
+            self._message = message
+            self.goal = self._accept(message)
+            self._gripper.clear()
+        goal = self.goal
+        if goal is not None and goal.state == "moving" and positions is not None:
+            if goal.started is None:
+                result["trajectory"] = self._plan(goal, positions, now)
+            self._judge(goal, positions, now)
+        active = not reading and (goal is None or goal.state != "failed")
+        result["active"] = 1 if active else 0
+        if goal is not None:
+            error = goal.error or reading
+            result["status"] = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose,
+                                "state": goal.state, "active": active, "error": error}
+            if goal.group == "gripper":
+                result["status"]["holding"] = goal.holding
+        return result
+
+    def _positions(self, state: Any) -> list[float] | None:
+        """The five joint positions (Param ``joints`` order) of a JointState, None before the first."""
+        if state is None:
+            return None
+        if not isinstance(state, Mapping) or "position" not in state:
+            raise ValueError(f"{self.owner}: joint_states is not a JointState (no 'position')")
+        try:
+            values = [float(q) for q in state["position"]]
+        except (TypeError, ValueError):
+            raise ValueError(f"{self.owner}: joint_states 'position' is not a list of numbers") from None
+        names = [str(n) for n in (state.get("name") or [])]
+        if names:
+            if len(names) != len(values):
+                raise ValueError(f"{self.owner}: joint_states has {len(names)} names for {len(values)} positions")
+            by_name = dict(zip(names, values, strict=True))
+            missing = [j for j in self.joints if j not in by_name]
+            if missing:
+                raise ValueError(f"{self.owner}: joint_states has no {', '.join(missing)}")
+            values = [by_name[j] for j in self.joints]
+        elif len(values) != len(self.joints):
+            raise ValueError(f"{self.owner}: joint_states has {len(values)} unnamed positions, expected "
+                             f"{len(self.joints)} ({' '.join(self.joints)})")
+        if not all(math.isfinite(q) for q in values):
+            raise ValueError(f"{self.owner}: joint_states holds a position that is not finite")
+        return values
+
+    def _accept(self, message: Any) -> _Goal:
+        """A new goal, already failed if it cannot be executed (the reason in its ``error``)."""
+        assert self.file is not None
+        if not isinstance(message, Mapping):
+            goal = _Goal({}, "", "", self.speed)
+            return self._fail(goal, f"goal is {type(message).__name__}, not an ArmGoal mapping")
+        group, pose = message.get("group"), message.get("pose")
+        goal = _Goal(message, str(group or ""), str(pose or ""), self.speed)
+        if isinstance(goal.id, bool) or not isinstance(goal.id, int):
+            return self._fail(goal, f"goal id {goal.id!r} is not an integer")
+        if group not in ("arm", "gripper"):
+            return self._fail(goal, f"goal {goal.id}: group {group!r} is not 'arm' or 'gripper'")
+        known = self.file.arm if group == "arm" else self.file.gripper
+        if pose not in known:
+            return self._fail(goal, f"goal {goal.id}: unknown {group} pose {pose!r} (defined: {', '.join(known)})")
+        speed = message.get("speed")
+        if speed:
+            try:
+                goal.speed = self._speed(speed, f"goal {goal.id} speed")
+            except ValueError as exc:
+                return self._fail(goal, str(exc))
+        if group == "arm":
+            solution = self.solutions[goal.pose]
+            if solution.error:
+                return self._fail(goal, f"goal {goal.id}: arm pose {goal.pose!r} cannot be reached: {solution.error}")
+            goal.indices, goal.target = [0, 1, 2, 3], list(solution.joints)
+        else:
+            assert self.model is not None
+            goal.indices, goal.target = [4], [self.model.gripper_position(self.file.gripper[goal.pose])]
+        return goal
+
+    def _fail(self, goal: _Goal, error: str) -> _Goal:
+        goal.state, goal.error = "failed", error
+        return goal
+
+    def _plan(self, goal: _Goal, positions: Sequence[float], now: float) -> dict[str, Any]:
+        """The goal's JointTrajectory from the measured ``positions``, timed at the goal's speed."""
+        start = [positions[i] for i in goal.indices]
+        duration = max(CUBIC_PEAK * abs(t - s) / (self.velocity[i] * goal.speed)
+                       for i, s, t in zip(goal.indices, start, goal.target, strict=True))
+        goal.started, goal.duration = now, max(MIN_DURATION, duration)
+        return {
+            "joint_names": [self.joints[i] for i in goal.indices],
+            "points": [{"positions": start, "time_from_start": 0.0},
+                       {"positions": list(goal.target), "time_from_start": goal.duration}],
+        }
+
+    def _judge(self, goal: _Goal, positions: Sequence[float], now: float) -> None:
+        """Reached, still moving, or failed by timeout (see the module docstring)."""
+        assert self.model is not None and goal.started is not None
+        errors = [abs(positions[i] - t) for i, t in zip(goal.indices, goal.target, strict=True)]
+        if goal.group == "arm":
+            if max(errors) <= self.params["tolerance"]:
+                goal.state = "reached"
+                return
+        else:
+            span = self.model.upper[4] - self.model.lower[4]
+            if errors[0] <= self.params["gripperTolerance"] * span:
+                goal.state = "reached"
+                return
+            if self._holding(goal, positions[4], now, span):
+                goal.state, goal.holding = "reached", True
+                return
+        if now - goal.started > goal.duration + self.params["timeout"]:
+            worst = max(range(len(errors)), key=errors.__getitem__)
+            self._fail(goal, f"goal {goal.id}: {goal.group} pose {goal.pose!r} not reached in "
+                             f"{goal.duration + self.params['timeout']:.1f} s ({self.joints[goal.indices[worst]]} "
+                             f"still {errors[worst]:.3f} from its target)")
+
+    def _holding(self, goal: _Goal, position: float, now: float, span: float) -> bool:
+        """Whether closing fingers have stood still short of their target for ``settle`` s (an object)."""
+        assert goal.started is not None
+        self._gripper.append((now, position))
+        settle = self.params["settle"]
+        while len(self._gripper) > 1 and self._gripper[1][0] <= now - settle:
+            self._gripper.popleft()  # keep one sample at or before the window's start
+        closing = goal.target[0] < position
+        if not closing or now - goal.started < goal.duration or now - self._gripper[0][0] < settle:
+            return False
+        values = [q for _, q in self._gripper]
+        return max(values) - min(values) < 0.01 * span
