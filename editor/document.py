@@ -26,6 +26,7 @@ from PySide6.QtCore import QObject, QTimer, Signal
 from PySide6.QtGui import QUndoCommand, QUndoStack
 
 from ckmconf import load_bytes
+from ckmconf.model import System
 
 NS = "urn:ckm:1"
 Element = etree._Element
@@ -178,19 +179,14 @@ def _after_comments(data: bytes, start: int) -> int:
         position = match.end()
 
 
-def _mission_problems(system: object) -> list[Problem]:
-    from runtime.missions.cli import top_missions
-    from runtime.missions.validation.srflowgen import srflowgen
-    from runtime.missions.validation.static import check_mission
+def _mission_problems(system: System) -> list[Problem]:
+    # Loaded on first use: the validation brings networkx, which opening the editor does not need.
+    from runtime.missions.validation.check import check_missions, check_plans
 
     found: list[Problem] = []
-    for mission in top_missions(system):  # type: ignore[arg-type]
-        findings = [*check_mission(system, mission), *srflowgen(system, mission, system.validation)[0]]  # type: ignore[arg-type, attr-defined]
-        for f in findings:
-            found.append(Problem(f.file, f.line, f.column, f.xpath, f"[{f.kind}] {f.message}", f.severity, "mission"))
-    from runtime.missions.validation.plans import check_plans  # the plans' wait-for graphs (deadlocks …)
-
-    for f in check_plans(system):  # type: ignore[arg-type]
+    for f in check_missions(system):  # each top mission's static checks and SRFlowGen
+        found.append(Problem(f.file, f.line, f.column, f.xpath, f"[{f.kind}] {f.message}", f.severity, "mission"))
+    for f in check_plans(system):  # the plans' wait-for graphs (deadlocks …)
         found.append(Problem(f.file, f.line, f.column, f.xpath, f"[{f.kind}] {f.message}", f.severity, "plan"))
     return list(dict.fromkeys(found))
 

@@ -30,13 +30,8 @@ from ckmconf.model.missions import Plan, Validation
 
 from . import report
 from .fake import Coverage, explore, record_into
+from .validation.check import top_missions
 from .validation.findings import Finding, finding, ordered
-
-
-def top_missions(system: System) -> list[str]:
-    """Missions no other mission nests: the ones an agent runs."""
-    nested = {s.mission for m in system.missions for s in m.states if s.mission}
-    return [m.name for m in system.missions if m.name not in nested]
 
 
 def _coverage_findings(system: System, mission: str, coverage: Coverage, required: float) -> list[Finding]:

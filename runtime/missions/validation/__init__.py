@@ -5,8 +5,9 @@ Smart Resources; ``srflowgen`` traces every variable a behavior reads back to th
 sensors producing it and bounds the probability its quality requirements hold (eq. 5.7).
 """
 
+from .check import top_missions
 from .findings import Finding
 from .srflowgen import FlowReport, StateFlow, VariableFlow, srflowgen
-from .static import check_mission, top_missions
+from .static import check_mission
 
 __all__ = ["Finding", "FlowReport", "StateFlow", "VariableFlow", "check_mission", "srflowgen", "top_missions"]

@@ -57,12 +57,6 @@ def check_mission(system: System, mission_name: str, *, strict: bool = False) ->
     return ordered(checker.findings)
 
 
-def top_missions(system: System) -> list[str]:
-    """Missions no state nests: the ones to validate when none is named."""
-    graph = nesting_graph(system)
-    return [m.name for m in system.missions if graph.in_degree(m.name) == 0]
-
-
 def nesting_graph(system: System) -> nx.DiGraph:
     """Missions, with an edge from each mission to every mission a state of it runs."""
     graph = nx.DiGraph()
