@@ -6,4 +6,5 @@ bash scripts/setup.sh
 export QT_QPA_PLATFORM=offscreen
 .venv/bin/ruff check .
 .venv/bin/mypy
+.venv/bin/lint-imports  # the layer contracts of pyproject.toml [tool.importlinter]
 .venv/bin/pytest "$@"
