@@ -114,9 +114,9 @@ def _watch(server: ServerProcess, ending: threading.Event, failed: Callable[[str
     while not ending.wait(0.1):
         code = server.process.poll()
         if code is not None and not ending.is_set():
-            how = f"was killed by signal {-code}" if code < 0 else f"exited with code {code}"
-            failed(f"the simulated world server (pid {server.pid}) {how} while the run lasted: "
-                   f"{server.last_line()}; stopping the run")
+            how = f"was killed by signal {-code}" if code < 0 else f"exited with code {code} ({server.last_line()})"
+            failed(f"the simulated world server (pid {server.pid}) {how} while the run lasted; stopping the run "
+                   f"(its log: {server.log})")
             return
 
 

@@ -1,0 +1,274 @@
+"""One simulated world for every process of a run (issue J point 5, D100–D103).
+
+A world server (``python -m plugins.sim.server``) holds the pybullet world; ``hardware.sim``
+channels of any process are its clients. A partition process of ``ckm-run`` drives the rover while
+this test process measures it with its own lidar client; a killed server fails the run loudly
+(exit 5, message on stderr); malformed requests get errors naming the channel and the server lives
+on; the world plan is read from the channels; the client-mode device gives the in-process reading.
+Every process started here is killed in ``finally``; everything listens on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from multiprocessing.connection import Client
+from pathlib import Path
+
+import psutil
+import pytest
+
+import ckmconf
+from ckmconf import ConfigError
+from ckmconf.model import HWChannel
+from plugins.hardware.sim import SimBackend
+from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
+from plugins.sim.client import ENV_ADDRESS, ENV_KEY, Link, RemoteDevice
+from plugins.sim.server import WorldPlan
+from plugins.sim.session import READY, ServerProcess, world_session
+from tests.conftest import REPO
+from tests.runtime.network.conftest import private_network
+
+CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="shared-world">
+  <Node name="rover">
+    <Partition name="drive" restart="never"/>
+    <Partition name="sense" restart="never"/>
+    <HWChannel name="left_motor" direction="out" kind="pwm" backend="sim" min="-1" max="1">
+      <Param name="body" value="rover"/>
+      <Param name="pose" value="2.0 2.0 0"/>
+      <Param name="joint" value="left_wheel_joint"/>
+      <Param name="mode" value="velocity"/>
+      <Param name="maxVelocity" value="8"/>
+    </HWChannel>
+    <HWChannel name="right_motor" direction="out" kind="pwm" backend="sim" min="-1" max="1">
+      <Param name="body" value="rover"/>
+      <Param name="joint" value="right_wheel_joint"/>
+      <Param name="mode" value="velocity"/>
+      <Param name="maxVelocity" value="8"/>
+    </HWChannel>
+    <HWChannel name="left_encoder" direction="in" kind="counter" backend="sim">
+      <Param name="body" value="rover"/>
+      <Param name="joint" value="left_wheel_joint"/>
+    </HWChannel>
+    <HWChannel name="laser" direction="in" kind="stream" backend="sim" min="0" max="5" size="91">
+      <Param name="body" value="rover"/>
+      <Param name="sensor" value="lidar"/>
+      <Param name="link" value="laser_link"/>
+      <Param name="fov" value="1.5"/>
+    </HWChannel>
+    <Topic name="wheel_speed" type="float64" scope="internal"/>
+    <Topic name="drive_left" type="float64" scope="internal"/>
+    <Topic name="drive_right" type="float64" scope="internal"/>
+    <Topic name="nearest" type="float64" scope="internal"/>
+    <Sensor name="left_wheel" channel="left_encoder" topic="wheel_speed" period="0.02" partition="drive"/>
+    <Sensor name="lidar" channel="laser" topic="nearest" period="0.1" extrapolation="none" partition="sense"/>
+    <Controller name="left_duty" kind="constant" period="0.02" partition="drive">
+      <Param name="value" value="0.5"/><Input topic="wheel_speed" role="measure"/><Output topic="drive_left"/>
+    </Controller>
+    <Controller name="right_duty" kind="constant" period="0.02" partition="drive">
+      <Param name="value" value="0.5"/><Input topic="wheel_speed" role="measure"/><Output topic="drive_right"/>
+    </Controller>
+    <Actuator name="left" channel="left_motor" topic="drive_left" min="-1" max="1" safeValue="0" partition="drive"/>
+    <Actuator name="right" channel="right_motor" topic="drive_right" min="-1" max="1" safeValue="0" partition="drive"/>
+  </Node>
+  <Environment name="room" frame="map">
+    <Map xmin="0" ymin="0" xmax="6" ymax="4" height="1.5"/>
+  </Environment>
+</System>
+"""
+EXIT_FAILED = 5  # docs/exit-codes.md: something failed while running
+AHEAD = 45  # the lidar beam straight ahead (91 beams over 1.5 rad)
+
+
+def until(condition: Callable[[], bool], timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return condition()
+
+
+@pytest.fixture
+def config(tmp_path: Path) -> Path:
+    """The test system on a private loopback network."""
+    system = ckmconf.load_bytes(CONFIG.encode(), str(tmp_path / "template.xml"))
+    path = tmp_path / "shared_world.xml"
+    ckmconf.dump(dataclasses.replace(system, network=private_network()), path)
+    return path
+
+
+@pytest.fixture
+def no_server(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(ENV_ADDRESS, raising=False)
+    monkeypatch.delenv(ENV_KEY, raising=False)
+
+
+def channel_of(config: Path, name: str) -> HWChannel:
+    return next(ch for ch in ckmconf.load(config).nodes[0].channels if ch.name == name)
+
+
+@contextlib.contextmanager
+def ckm_run(config: Path, run_dir: Path, env: dict[str, str]) -> Iterator[subprocess.Popen[bytes]]:
+    """ckm-run of ``config`` (its output in RUN_DIR.out); it and its children are killed at the end."""
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    with (run_dir.parent / f"{run_dir.name}.out").open("wb") as out:
+        process = subprocess.Popen([sys.executable, "-m", "runtime.cli", str(config), "--log-dir", str(run_dir)],
+                                   cwd=REPO, stdout=subprocess.DEVNULL, stderr=out, env=env)
+    seen: list[psutil.Process] = []
+    try:
+        yield process
+    finally:
+        with contextlib.suppress(psutil.Error):
+            seen = psutil.Process(process.pid).children(recursive=True)
+        process.kill()
+        process.wait(timeout=10)
+        for child in seen:
+            with contextlib.suppress(psutil.Error):
+                child.kill()
+
+
+def partitions_running(run_dir: Path) -> bool:
+    logs = [run_dir / name / "ckm.log" for name in ("drive", "sense")]
+    return all(log.is_file() and "INFO ckm.run: running" in log.read_text() for log in logs)
+
+
+def test_a_partition_drives_the_robot_that_another_process_measures(
+    config: Path, tmp_path: Path, no_server: None
+) -> None:
+    with ServerProcess(config, tmp_path / "server") as server:
+        env = {**os.environ, **server.environ()}  # a server named already: ckm-run uses it, starts none
+        run_dir = tmp_path / "run"
+        with ckm_run(config, run_dir, env) as run:
+            laser = RemoteDevice(server.client_address(), SimBackend(channel_of(config, "laser")).spec())
+            link = Link(server.client_address())
+            try:
+                def sample() -> tuple[float, float]:
+                    ranges = laser.read()
+                    x = link.request({"op": "state"})["robots"]["rover"][0]
+                    return float(ranges[AHEAD]), float(x)  # type: ignore[index]
+
+                start_range, start_x = sample()
+                assert until(lambda: sample()[1] - start_x > 0.4, 30.0), "the drive partition did not move the rover"
+                now_range, now_x = sample()
+                # this process's lidar sees the wall come nearer by what the partition drove
+                assert start_range - now_range == pytest.approx(now_x - start_x, abs=0.05)
+                assert partitions_running(run_dir)
+            finally:
+                laser.close()
+                link.close()
+            run.send_signal(signal.SIGTERM)
+            assert run.wait(timeout=60) == 0, (tmp_path / "run.out").read_text()
+        assert not (run_dir / READY).exists()  # it started no server of its own
+        log = server.log.read_text()
+        assert log.count("connected") >= 5  # this test's two links, the partitions' four channels
+
+
+def test_a_killed_world_server_fails_the_run_loudly(config: Path, tmp_path: Path, no_server: None) -> None:
+    run_dir = tmp_path / "run"
+    with ckm_run(config, run_dir, dict(os.environ)) as run:
+        assert until(lambda: (run_dir / READY).is_file() and partitions_running(run_dir), 40.0), "no run started"
+        pid = json.loads((run_dir / READY).read_text())["pid"]
+        os.kill(pid, signal.SIGKILL)
+        code = run.wait(timeout=60)
+    stderr = (tmp_path / "run.out").read_text()
+    assert code == EXIT_FAILED, stderr
+    assert f"the simulated world server (pid {pid}) was killed by signal 9" in stderr
+    assert "stopping the run" in stderr
+
+
+def test_bad_requests_get_errors_naming_the_channel(config: Path, tmp_path: Path, no_server: None) -> None:
+    with ServerProcess(config, tmp_path / "server") as server:
+        link = Link(server.client_address())
+        try:
+            with pytest.raises(ValueError, match="bad request"):
+                link.exchange(b"\xff{not json")
+            with pytest.raises(ValueError, match="JSON object"):
+                link.exchange(b"[1, 2]")
+            with pytest.raises(ValueError, match="unknown op 'fly'"):
+                link.request({"op": "fly"})
+            with pytest.raises(ValueError, match="no channel open with handle 7"):
+                link.request({"op": "read", "handle": 7})
+            spec = SimBackend(channel_of(config, "left_encoder")).spec().to_dict()
+            wrong = {**spec, "name": "enc", "values": {**spec["values"], "joint": "no_such_joint"}}
+            with pytest.raises(KeyError, match="sim channel 'enc': robot 'rover' has no joint 'no_such_joint'"):
+                link.request({"op": "open", "spec": wrong})
+            with pytest.raises(ValueError, match="sim channel 'odd': kind 'torque'"):
+                link.request({"op": "open", "spec": {**spec, "name": "odd", "kind": "torque"}})
+            handle = link.request({"op": "open", "spec": spec})["handle"]
+            with pytest.raises(ValueError, match="sim channel 'left_encoder' is an input channel"):
+                link.request({"op": "write", "handle": handle, "value": 1.0})
+            assert isinstance(link.request({"op": "read", "handle": handle})["value"], float)
+            with pytest.raises(ConnectionError):  # a request over 1 MiB: that connection is dropped…
+                Link(server.client_address()).exchange(b" " * (2 << 20))
+            with pytest.raises(Exception, match="digest"):  # …a client without the key is refused…
+                Client(("127.0.0.1", server.client_address()[1]), authkey=b"wrong key")
+            assert link.request({"op": "ping"})["time"] >= 0.0  # …and the server serves on
+        finally:
+            link.close()
+        assert server.process.poll() is None
+    assert "stopped after" in server.log.read_text()
+
+
+def test_client_mode_reads_what_the_in_process_world_reads(
+    config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_server: None
+) -> None:
+    record = channel_of(config, "laser")
+    mover = channel_of(config, "left_motor")  # the channel that places the rover
+    with plant_scope(PlantScope(ManualClock(), name="in-process")):
+        local, placing = SimBackend(record), SimBackend(mover)
+    placing.setup()
+    local.setup()
+    expected = local.read()
+    with ServerProcess(config, tmp_path / "server") as server:
+        monkeypatch.setenv(ENV_ADDRESS, server.address)
+        monkeypatch.setenv(ENV_KEY, server.key.hex())
+        remote = SimBackend(record)
+        remote.setup()
+        try:
+            assert remote.remote is not None and remote.sim is None  # client mode: no world here
+            ranges = remote.read()
+        finally:
+            remote.stop()
+    assert isinstance(ranges, tuple) and isinstance(expected, tuple) and len(ranges) == 91
+    assert ranges == pytest.approx(expected, abs=0.002)  # the same device code on the same world
+
+
+def test_the_plan_follows_the_channels_and_refuses_two_worlds(config: Path, tmp_path: Path) -> None:
+    plan = WorldPlan.of(list(ckmconf.load(config).nodes))
+    assert plan is not None and plan.world == str(config.resolve())
+    assert plan.bodies == {"rover": ("", "2.0 2.0 0")}  # the first channel giving a pose places the robot
+    other = tmp_path / "other.xml"
+    other.write_text(config.read_text())
+    text = config.read_text().replace(
+        '<Param name="joint" value="right_wheel_joint"/>',
+        '<Param name="joint" value="right_wheel_joint"/><Param name="world" value="other.xml"/>', 1,
+    ).replace('<Param name="pose" value="2.0 2.0 0"/>', '<Param name="pose" value="2.0 2.0 0"/>'
+              '<Param name="world" value="shared_world.xml"/>', 1)
+    two = tmp_path / "two_worlds.xml"
+    two.write_text(text)
+    with pytest.raises(ConfigError, match=r"right_motor.*a run has one simulated world"):
+        WorldPlan.of(list(ckmconf.load(two).nodes))
+
+
+def test_a_session_starts_nothing_when_a_server_is_named_or_nothing_is_simulated(
+    config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    system = ckmconf.load(config)
+    failures: list[str] = []
+    monkeypatch.setenv(ENV_ADDRESS, "off")
+    with world_session(system, config, tmp_path / "a", system.nodes, failures.append):
+        assert os.environ[ENV_ADDRESS] == "off"
+    monkeypatch.delenv(ENV_ADDRESS)
+    bare = dataclasses.replace(system.nodes[0], channels=())
+    with world_session(system, config, tmp_path / "b", [bare], failures.append):
+        assert ENV_ADDRESS not in os.environ
+    assert not (tmp_path / "a" / READY).exists() and not (tmp_path / "b" / READY).exists() and not failures
