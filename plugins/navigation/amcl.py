@@ -43,6 +43,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import MapModel
 from plugins.environment.planner import Planner, Unreachable
+from plugins.localization.estimate import Estimate
 from plugins.localization.raster import GridMap
 from plugins.localization.trajectories import LAB
 from runtime.kernel.interfaces import ParamError
@@ -66,6 +67,8 @@ from .frames import (
 from .localizer import FILTERS, Localizer
 
 INPUTS = ("scan", "odom")
+STOPPED = 0.02
+"""The base is stopped when its odometry's speeds (m/s, rad/s) are below this."""
 
 
 def _numbers(text: str, count: int, name: str, owner: str) -> list[float]:
@@ -132,6 +135,7 @@ class AmclNavigation(ProcessingPlugin):
         self.plan_length = 0.0
         self.extra: list[AvoidedArea] = []
         self.unlocalized_since: float | None = None
+        self.stopped = True
 
     # ------------------------------------------------------------------ set-up and goals
 
@@ -278,7 +282,11 @@ class AmclNavigation(ProcessingPlugin):
         result: dict[str, Any] = {}
         estimate = None
         if odom_message is not None:
-            odom = pose_of(mapping(odom_message, self.owner, "input 'odom'"), self.owner, "input 'odom'")
+            odom_fields = mapping(odom_message, self.owner, "input 'odom'")
+            odom = pose_of(odom_fields, self.owner, "input 'odom'")
+            twist = odom_fields.get("twist")
+            speeds = [twist.get(k) for k in ("linear", "angular")] if isinstance(twist, Mapping) else []
+            self.stopped = all(isinstance(v, int | float) and abs(v) < STOPPED for v in speeds)
             estimate = self.localizer.update(odom, scan)
         if estimate is not None:
             pose: Pose = (float(estimate.pose[0]), float(estimate.pose[1]), float(wrap(float(estimate.pose[2]))))
@@ -291,7 +299,7 @@ class AmclNavigation(ProcessingPlugin):
         localized = estimate is not None and estimate.dispersion <= self.params["maxDispersion"]
         if self.phase in ("planning", "active"):
             if not localized or estimate is None:
-                self._unlocalized(now, None if estimate is None else float(estimate.dispersion))
+                self._unlocalized(now, self._why(estimate, odom_message is not None))
             else:
                 self.unlocalized_since = None
                 self._navigate(pose, scan)
@@ -299,22 +307,25 @@ class AmclNavigation(ProcessingPlugin):
         result["path"] = self._path()
         return result
 
-    def _unlocalized(self, now: float, dispersion: float | None) -> None:
+    def _why(self, estimate: Estimate | None, odometry: bool) -> str:
+        if estimate is not None:
+            return f"dispersion {estimate.dispersion:.2f} m above {self.params['maxDispersion']:g} m"
+        return "no scan received" if odometry else "no odometry received"
+
+    def _unlocalized(self, now: float, why: str) -> None:
         """Wait (stopped) for a localization; fail after ``localizeTimeout``."""
         self.unlocalized_since = now if self.unlocalized_since is None else self.unlocalized_since
         self.plan = None
         self.phase = "planning"
         if now - self.unlocalized_since > self.params["localizeTimeout"]:
-            why = "no odometry received" if dispersion is None else (
-                f"dispersion {dispersion:.2f} m above {self.params['maxDispersion']:g} m")
             self.phase, self.reason = "failed", f"no localization for {self.params['localizeTimeout']:g} s ({why})"
 
     def _navigate(self, pose: Pose, scan: Mapping[str, Any] | None) -> None:
         assert self.goal is not None
         gx, gy, gyaw = self.goal
-        if math.dist(pose[:2], (gx, gy)) <= self.params["tolerance"] and (
+        if self.stopped and math.dist(pose[:2], (gx, gy)) <= self.params["tolerance"] and (
             gyaw is None or abs(wrap(gyaw - pose[2])) <= self.params["yawTolerance"]
-        ):
+        ):  # the base has stopped at the path's end (odometry): arrived, if localization agrees
             self.phase, self.plan = "arrived", None
             return
         if self.plan is not None:
