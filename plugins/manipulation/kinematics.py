@@ -188,7 +188,7 @@ class ArmModel:
         return low + share * (high - low)
 
     def solve(
-        self, target: ArmTarget, seed: Sequence[float] = (0.0, 0.0, 0.0, 0.0), tolerance: float = 0.005
+        self, target: ArmTarget, seed: Sequence[float] = (0.0, 0.3, 1.2, 0.0), tolerance: float = 0.005
     ) -> Solution:
         """The arm angles putting the tool point at ``target`` with its pitch (see the module docstring)."""
         heading = math.atan2(target.y - self.pan_origin[1], target.x - self.pan_origin[0])

@@ -2,10 +2,11 @@
 
 The loop plays what the use case's turtlebot node does (configs/usecase/nodes.xml): the arm's bus
 sensor publishes a JointState without names at 20 Hz, the joint-trajectory controller (the real
-``controller.joint-trajectory``, nodes.xml's Params) plays the plugin's trajectories at 48 Hz, and
+``controller.joint-trajectory``, nodes.xml's Params) plays the plugin's trajectories at 60 Hz, and
 its commands drive the joints in position mode (the gripper's on both fingers, as the ``mirror``
-Param does, under the grasp's 10 N force limit of D87). The plugin sees only its input messages; the physics is stepped here, in simulated
-time, and :class:`plugins.sim.grasp.Gripper` decides when an object is held.
+Param does, under the grasp's 10 N force limit of D87). The plugin sees only its input messages;
+the physics is stepped here, in simulated time, and :class:`plugins.sim.grasp.Gripper` decides
+when an object is held.
 """
 
 from __future__ import annotations
