@@ -330,6 +330,11 @@ class _Agent:
             self.error, self.outcome = error, "crashed"
 
 
+def _progress(line: str) -> None:
+    """An agent's progress line on the terminal (the run's record has every event)."""
+    print(line, flush=True)
+
+
 def _start_agents(system: System, plan: str, nodes: list[Node], transport: Transport, run_dir: Path) -> list[_Agent]:
     """The plan's agents whose node runs here, each running its mission in a thread."""
     record = system.plan(plan)
@@ -338,7 +343,7 @@ def _start_agents(system: System, plan: str, nodes: list[Node], transport: Trans
     started = []
     for agent in record.agents:
         if agent.node in here:
-            running = _Agent(AgentRunner(system, plan, agent.name, transport, run_dir), agent.name)
+            running = _Agent(AgentRunner(system, plan, agent.name, transport, run_dir, progress=_progress), agent.name)
             running.thread.start()
             started.append(running)
             LOG.info("plan %s: agent %s runs mission %s", plan, agent.name, agent.mission)

@@ -128,6 +128,7 @@ class AgentRunner:
         registry: Registry | None = None,
         period: float = 0.1,
         heartbeat: float = 0.5,
+        progress: Callable[[str], None] | None = None,
     ) -> None:
         record = system.plan(plan)
         if record is None:
@@ -137,6 +138,8 @@ class AgentRunner:
             raise KeyError(f"plan {plan!r} has no agent {agent!r}")
         self.plan, self.agent, self.transport = record, me, transport
         self.period, self.heartbeat = period, heartbeat
+        self.progress = progress  # told each change of active state, as one line (issue K: a run shows how it goes)
+        self._shown: str | None = None
         self.signals = Signals()
         self.recorder = RunRecorder(run_dir, agent)
         self.factory = LiveFactory(system, transport, self.signals, registry)
@@ -257,6 +260,7 @@ class AgentRunner:
                     next_beat = now + self.heartbeat
                 if self.engine.step() is not None or (end is not None and now >= end):
                     break
+                self._show(now)
                 self._stop.wait(self.period)
             self.outcome = self.engine.outcome or "stopped"
         except Exception as error:
@@ -267,6 +271,21 @@ class AgentRunner:
         finally:
             self._finish()
         return self.outcome
+
+    def _show(self, now: float) -> None:
+        """One progress line when the active state changes: agent, elapsed time, state path, mission progress."""
+        if self.progress is None:
+            return
+        path = self.engine.active_path()
+        if path == self._shown:
+            return
+        self._shown = path
+        share = self.engine.top.progress()
+        line = f"[{now - self._started:7.1f} s] {self.agent.name}: {path or '-'}  ({share:.0%} of the mission)"
+        try:
+            self.progress(line)
+        except Exception:  # a closed terminal must not end the mission
+            LOG.exception("agent %s: progress line not shown", self.agent.name)
 
     def _finish(self) -> None:
         """End the recording with the outcome; each step isolated so that none skips the others."""
@@ -281,6 +300,11 @@ class AgentRunner:
         except Exception:
             LOG.exception("agent %s: stopping its mission failed", self.agent.name)
             self.recorder.write("end", outcome=outcome)
+        if self.progress is not None:
+            try:
+                self.progress(f"{self.agent.name}: mission ended: {outcome}")
+            except Exception:
+                LOG.exception("agent %s: progress line not shown", self.agent.name)
         try:
             self._beat.publish({"agent": self.agent.name, "state": None, "outcome": outcome})
         except Exception:

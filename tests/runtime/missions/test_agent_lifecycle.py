@@ -139,3 +139,23 @@ def test_the_report_draws_finished_agents_as_finished(tmp_path: Path) -> None:
     paths = write_plots(run, tmp_path / "plots")
     assert tmp_path / "plots" / "plan.png" in paths and (tmp_path / "plots" / "plan.png").stat().st_size > 0
     assert not [e for e in run.events if e.kind == "agent-lost"]
+
+
+def test_progress_lines_follow_the_active_state(tmp_path: Path) -> None:
+    """Issue K point 2: the terminal shows each agent's active state as it changes, then its outcome."""
+    path = tmp_path / "system.xml"
+    path.write_text(SYSTEM.replace("TYPE", "string"))
+    system = load(path)
+    transport = open_transport(private_network(), name="pc")
+    transport.setup()
+    transport.start()
+    lines: list[str] = []
+    try:
+        runner = AgentRunner(system, "p", "late", transport, tmp_path / "run", heartbeat=0.1, period=0.05,
+                             progress=lines.append)  # fmt: skip
+        assert runner.run(20) == "done"
+    finally:
+        transport.stop()
+    states = [line.split("late: ", 1)[1].split("  (")[0] for line in lines if "%" in line]
+    assert states == ["Late/S", "Late/T"], lines
+    assert lines[-1] == "late: mission ended: done"
