@@ -99,6 +99,7 @@ class BaseDisplacement(ProcessingPlugin):
         self.move_id: int | None = None
         self.move_state = "done"
         self.move_deadline = 0.0
+        self.ended: dict[str, Any] | None = None
         self._seen: dict[str, Any] = {}
 
     def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
@@ -194,6 +195,17 @@ class BaseDisplacement(ProcessingPlugin):
     def _end_move(self, state: str) -> None:
         if self.move_state == "moving":
             self.move_state = state  # the move is kept for its remaining/total in the status
+            if self.move_id is not None:
+                self.ended = self._status()  # a preempted move's end is published before the new one's
+
+    def _status(self) -> dict[str, Any]:
+        move = self.move
+        return {
+            "id": self.move_id,
+            "state": self.move_state,
+            "remaining": 0.0 if self.move_state == "done" or move is None else float(move.remaining),
+            "total": 0.0 if move is None else float(move.total),
+        }
 
     # ------------------------------------------------------------------ frame
 
@@ -224,14 +236,10 @@ class BaseDisplacement(ProcessingPlugin):
                 "twist": dict(twist) if isinstance(twist, Mapping) else {"linear": 0.0, "angular": 0.0},
                 "dispersion": self.dispersion,
             }
-        if self.move_id is not None:
-            move = self.move
-            result["move_status"] = {
-                "id": self.move_id,
-                "state": self.move_state,
-                "remaining": 0.0 if self.move_state == "done" or move is None else float(move.remaining),
-                "total": 0.0 if move is None else float(move.total),
-            }
+        if self.ended is not None and self.ended["id"] != self.move_id:
+            result["move_status"], self.ended = self.ended, None
+        elif self.move_id is not None:
+            result["move_status"], self.ended = self._status(), None
         return result
 
     def _command(self, now: float, dt: float) -> Command:

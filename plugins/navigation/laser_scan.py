@@ -35,6 +35,8 @@ from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 MAX_STEPS = 100_000
 """Most steps a sweep may hold (a URG-04LX has 683, a UTM-30LX 1081)."""
+NO_RETURN = 1e-4
+"""A reading within this of ``rangeMax`` (m) is the sensor's no-return value (float32 ranges round it)."""
 
 
 class LaserScanService(ProcessingPlugin):
@@ -120,7 +122,7 @@ class LaserScanService(ProcessingPlugin):
         out = kept.copy()
         with np.errstate(invalid="ignore"):
             bad = ~np.isfinite(kept) | (kept < 0)
-            out[(kept >= hi) & ~bad] = np.inf
+            out[(kept >= hi - NO_RETURN) & ~bad] = np.inf
             out[(kept < lo) & ~bad] = -np.inf
         out[bad] = np.nan
         intensities = data.get("intensities")
@@ -155,5 +157,5 @@ def valid_beams(scan: Mapping[str, Any], owner: str) -> tuple[npt.NDArray[np.flo
         raise ValueError(f"{owner}: the scan has no ranges or a bad geometry (increment {step}, range {lo}–{hi})")
     angles = start + step * np.arange(ranges.size, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        keep = np.isfinite(ranges) & (ranges >= lo) & (ranges < hi)
+        keep = np.isfinite(ranges) & (ranges >= lo) & (ranges < hi - NO_RETURN)
     return ranges[keep], angles[keep]

@@ -28,7 +28,7 @@ from plugins.localization.raster import GridMap
 from plugins.localization.reliability_filter import ReliabilityFilter, ReliabilitySettings
 
 from .frames import Pose, compose, inverse, wrap
-from .laser_scan import valid_beams
+from .laser_scan import NO_RETURN, valid_beams
 
 Array = npt.NDArray[np.float64]
 FILTERS = ("reliability", "mcl")
@@ -74,7 +74,7 @@ class Localizer:
         r = ranges[index]
         lo, hi = float(scan["range_min"]), float(scan["range_max"])
         with np.errstate(invalid="ignore"):
-            valid = np.isfinite(r) & (r >= lo) & (r < hi)
+            valid = np.isfinite(r) & (r >= lo) & (r < hi - NO_RETURN)
         angles = start + step * index + self.laser[2]
         x = self.laser[0] + np.where(valid, r, 0.0) * np.cos(angles)
         y = self.laser[1] + np.where(valid, r, 0.0) * np.sin(angles)

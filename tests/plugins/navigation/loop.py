@@ -88,7 +88,7 @@ def _laser_types() -> dict[str, MessageType]:
     return {m.name: m for m in system.message_types}
 
 
-def plugin(kind: str, cls: type[ProcessingPlugin], file: Path | None = None, **params: object) -> Any:
+def plugin(kind: str, cls: type[ProcessingPlugin], file: Path | None = None, /, **params: object) -> Any:
     """A service plugin built from a ``<Plugin>`` record (declared in ``file``, for relative Params)."""
     loc = None if file is None else ckmconf.Loc(str(file), 1, 1, "/Plugin")
     return cls(Plugin(name=kind, kind=kind, params=tuple(Param(name=k, value=str(v)) for k, v in params.items()),
