@@ -147,12 +147,19 @@ class WorldServer:
         threading.Thread(target=self._accept, name="ckm-sim-accept", daemon=True).start()
         while not stop.is_set():
             ready = wait([self._wake_r, *(c.conn for c in self.clients)], timeout=0.2)
+            batch: list[tuple[_Client, bytes]] = []
             for conn in ready:
                 if conn is self._wake_r:
                     self._admit()
                     continue
                 client = next(c for c in self.clients if c.conn is conn)
-                self._serve_one(client)
+                data = self._receive(client)
+                if data is not None:
+                    batch.append((client, data))
+            # renders last (stable sort): a wheel read waits for at most the render under way (D103)
+            batch.sort(key=lambda item: self._renders(*item))
+            for client, data in batch:
+                self._reply(client, self.handle(client, data))
 
     def _admit(self) -> None:
         while self._wake_r.poll():
@@ -169,17 +176,29 @@ class WorldServer:
         self.clients.remove(client)
         client.conn.close()
 
-    def _serve_one(self, client: _Client) -> None:
+    def _receive(self, client: _Client) -> bytes | None:
         try:
-            data = client.conn.recv_bytes(MAX_REQUEST)
+            return client.conn.recv_bytes(MAX_REQUEST)
         except (EOFError, OSError) as exc:  # gone, or a request over MAX_REQUEST (unreadable after it)
             self._drop(client, f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__)
+            return None
+
+    def _reply(self, client: _Client, reply: dict[str, Any]) -> None:
+        if client not in self.clients:
             return
-        reply = self.handle(client, data)
         try:
             client.conn.send(reply)
         except (OSError, ValueError) as exc:
             self._drop(client, f"reply not sent: {exc}")
+
+    def _renders(self, client: _Client, data: bytes) -> bool:
+        """Whether the request reads a camera (the one costly kind of request)."""
+        try:
+            message = json.loads(data)
+            device = client.devices.get(message.get("handle")) if message.get("op") == "read" else None
+        except (ValueError, AttributeError, TypeError):
+            return False
+        return device is not None and device.spec.values.get("sensor") in ("rgb", "depth")
 
     # ------------------------------------------------------------------ requests
 

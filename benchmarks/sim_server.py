@@ -1,0 +1,167 @@
+"""The world server's cost (issue J point 5, D103): ``python -m benchmarks.sim_server [--json]``.
+
+The use case's world (configs/usecase/lab.xml: environment, turtlebot and nao placed by nodes.xml)
+is served by a world server process and, for comparison, built in this process; the same devices
+are read both ways, as a ``hardware.sim`` channel reads them (world synced to real time, the read
+flattened into the channel's tuple):
+
+- ``round_trip_ms``: per device (a wheel encoder, the 683-beam Hokuyo, the Xtion RGB and depth at
+  VGA and QVGA), the mean time of one read through the server and in process, and the difference.
+- ``blocking``: a wheel-encoder client reading as fast as it can while another client asks for
+  VGA RGB frames back to back: the wheel read's median, 99th percentile and worst time, with and
+  without the renders (requests are served one at a time, so a render delays every other one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import ckmconf
+from plugins.hardware.sim import SimBackend
+from plugins.sim.client import Link, RemoteDevice
+from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
+from plugins.sim.server import WorldPlan
+from plugins.sim.session import ServerProcess
+
+LAB = Path(__file__).resolve().parent.parent / "configs" / "usecase" / "lab.xml"
+NODES = ("kobuki", "turtlebot", "nao")
+READS = {"wheel": 400, "lidar": 100, "rgb VGA": 8, "depth VGA": 8, "rgb QVGA": 20, "depth QVGA": 20}
+
+
+def _specs() -> dict[str, Spec]:
+    """The measured devices' specs, from the use case's channels (QVGA: the same camera, resized)."""
+    nodes = [n for n in ckmconf.load(LAB).nodes if n.name in NODES]
+    channels = {ch.name: ch for node in nodes for ch in node.channels if ch.backend == "sim"}
+    spec = {name: SimBackend(channels[name]).spec() for name in ("left_encoder", "hokuyo", "xtion_rgb", "xtion_depth")}
+
+    def resized(base: Spec, width: int, height: int, depth: int) -> Spec:
+        values = {**base.values, "width": width, "height": height}
+        return dataclasses.replace(base, size=width * height * depth, values=values)
+
+    return {
+        "wheel": spec["left_encoder"], "lidar": spec["hokuyo"],
+        "rgb VGA": spec["xtion_rgb"], "depth VGA": spec["xtion_depth"],
+        "rgb QVGA": resized(spec["xtion_rgb"], 320, 240, 3), "depth QVGA": resized(spec["xtion_depth"], 320, 240, 1),
+    }
+
+
+def _mean_ms(read: Callable[[], Any], count: int) -> float:
+    read()  # the first read may build caches (a camera's first frame)
+    start = time.perf_counter()
+    for _ in range(count):
+        read()
+    return 1000 * (time.perf_counter() - start) / count
+
+
+def _in_process(specs: dict[str, Spec]) -> dict[str, float]:
+    plan = WorldPlan.of([n for n in ckmconf.load(LAB).nodes if n.name in NODES])
+    assert plan is not None
+    sim: SimWorld = plan.build()
+    result = {}
+    for name, spec in specs.items():
+        device = ChannelDevice(sim, spec)
+
+        def read(device: ChannelDevice = device) -> Any:
+            with sim.lock:
+                sim.sync()
+                return to_value(device.read())
+
+        result[name] = _mean_ms(read, READS[name])
+    sim.world.close()
+    return result
+
+
+def _latencies(read: Callable[[], Any], seconds: float) -> list[float]:
+    times = []
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        start = time.perf_counter()
+        read()
+        times.append(1000 * (time.perf_counter() - start))
+    return times
+
+
+def _figures(times: list[float]) -> dict[str, float]:
+    ordered = sorted(times)
+    return {
+        "reads": len(ordered), "median_ms": round(statistics.median(ordered), 3),
+        "p99_ms": round(ordered[int(0.99 * (len(ordered) - 1))], 3), "max_ms": round(ordered[-1], 3),
+    }
+
+
+def _blocking(server: ServerProcess, specs: dict[str, Spec], seconds: float) -> dict[str, Any]:
+    wheel = RemoteDevice(server.client_address(), specs["wheel"])
+    camera = Link(server.client_address())
+    handle = camera.request({"op": "open", "spec": specs["rgb VGA"].to_dict()})["handle"]
+    alone = _figures(_latencies(wheel.read, seconds))
+    renders: list[float] = []
+    rendering = threading.Event()
+
+    def frames() -> None:  # raw replies: no flattening in this process, which would hold the GIL
+        while not rendering.is_set():
+            start = time.perf_counter()
+            camera.request({"op": "read", "handle": handle})
+            renders.append(1000 * (time.perf_counter() - start))
+
+    thread = threading.Thread(target=frames, daemon=True)
+    thread.start()
+    loaded = _figures(_latencies(wheel.read, seconds))
+    rendering.set()
+    thread.join(10.0)
+    wheel.close()
+    camera.close()
+    return {"alone": alone, "with_vga_renders": loaded, "render_ms": round(statistics.mean(renders), 2)}
+
+
+def run(argv: list[str] | None = None) -> dict[str, Any]:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.sim_server", description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="length of each blocking measurement")
+    args = parser.parse_args(argv)
+    specs = _specs()
+    local = _in_process(specs)
+    with tempfile.TemporaryDirectory() as folder, ServerProcess(LAB, Path(folder), NODES) as server:
+        remote = {}
+        for name, spec in specs.items():
+            device = RemoteDevice(server.client_address(), spec)
+            remote[name] = _mean_ms(lambda device=device: to_value(device.read()), READS[name])  # type: ignore[misc]
+            device.close()
+        blocking = _blocking(server, specs, args.seconds)
+    trips = {
+        name: {"server_ms": round(remote[name], 3), "in_process_ms": round(local[name], 3),
+               "overhead_ms": round(remote[name] - local[name], 3)}
+        for name in specs
+    }
+    return {"round_trip_ms": trips, "blocking": blocking}
+
+
+def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    rows = [
+        (f"{name} read", f"{row['server_ms']:.3f} ms via server, {row['in_process_ms']:.3f} ms in process")
+        for name, row in result["round_trip_ms"].items()
+    ]
+    block = result["blocking"]
+    for label, key in (("wheel read alone", "alone"), ("wheel read during VGA renders", "with_vga_renders")):
+        f = block[key]
+        rows.append((label, f"median {f['median_ms']} ms, p99 {f['p99_ms']} ms, max {f['max_ms']} ms"))
+    rows.append(("VGA render through the server", f"{block['render_ms']} ms"))
+    return rows
+
+
+if __name__ == "__main__":
+    arguments = sys.argv[1:]
+    as_json = "--json" in arguments
+    outcome = run([a for a in arguments if a != "--json"])
+    for label, value in describe(outcome):
+        print(f"{label:32s} {value}")
+    if as_json:
+        print(json.dumps(outcome))
