@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from ..binding import Record
 from ..expressions import SWITCH, ExpressionError, parse
-from ..model import Adaptation, Alarm, Clamp, Controller, HWChannel, Lookup, Node, Partition, Switch, System
+from ..model import Adaptation, Alarm, Clamp, Controller, HWChannel, Lookup, Node, Partition, Switch, System, Topic
+from ..rostypes import is_ros_type, ros_type_problem
 from .report import Reporter, missing
 from .scope import Scope
 
@@ -26,10 +27,19 @@ def check_kernel(system: System, scope: Scope, report: Reporter) -> None:
             )
         else:
             external[topic.name] = topic
-        if not scope.type_exists(topic.type):
-            report.error(topic, missing("message type", topic.type, "the system", scope.type_names()), "type")
+        _check_topic_type(topic, scope, report)
     for node in system.nodes:
         _check_node(node, scope, report)
+
+
+def _check_topic_type(topic: Topic, scope: Scope, report: Reporter) -> None:
+    """A topic's type: built-in, a MessageType, or a ROS 2 type package/msg/Name (ckmconf.rostypes)."""
+    if is_ros_type(topic.type):
+        problem = ros_type_problem(topic.type, topic.loc.file if topic.loc else None)
+        if problem is not None:
+            report.error(topic, problem, "type")
+    elif not scope.type_exists(topic.type):
+        report.error(topic, missing("message type", topic.type, "the system", scope.type_names()), "type")
 
 
 def _at(record: Record) -> str:
@@ -98,8 +108,8 @@ def _check_node(node: Node, scope: Scope, report: Reporter) -> None:
         if channel.min is not None and channel.max is not None and channel.min >= channel.max:
             report.error(channel, f"min ({channel.min:g}) must be less than max ({channel.max:g})", "min")
     for topic in node.topics:
-        if topic.scope == "internal" and not scope.type_exists(topic.type):
-            report.error(topic, missing("message type", topic.type, "the system", scope.type_names()), "type")
+        if topic.scope == "internal":
+            _check_topic_type(topic, scope, report)
 
     def topic_ref(record: Record, name: str, attr: str = "topic") -> None:
         if scope.topic(node, name) is None:

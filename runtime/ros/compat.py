@@ -66,13 +66,14 @@ def compatibility_problems(
             problems.append(f"{where}.{field.name}: {ros_type} has no field {field.name!r}{also}")
             continue
         place = f"{where}.{field.name}"
-        problems += _field_problems(field.type, field.count, ros_fields[target], ros, ckm_types, place)
+        problems += field_problems(field.type, field.count, ros_fields[target], ros, ckm_types, place)
     return problems
 
 
-def _field_problems(
+def field_problems(
     ckm: str, count: int, desc: Any, ros: RosTypes, ckm_types: Mapping[str, MessageType], where: str
 ) -> list[str]:
+    """Why ``count`` values of CKM type ``ckm`` cannot fill a ROS field of rosbags description ``desc``."""
     kind, detail = desc
     if ckm == "bytes" and count == 1:
         if kind == Nodetype.SEQUENCE and detail[0][0] == Nodetype.BASE and detail[0][1][0] in ("uint8", "byte"):

@@ -10,7 +10,9 @@ single node; ``verify`` does the same for a loaded System:
   range; every required Param is given;
 - the value types of producers, topics and consumers agree: what a sensor writes (one number, or a
   vector of ``size`` numbers) and what controllers, actuators and behaviors read and write, against
-  the ``type`` of the topic or plan signal (:mod:`runtime.verification.types`);
+  the ``type`` of the topic or plan signal (:mod:`runtime.verification.types`); a topic of a ROS 2
+  type (``sensor_msgs/msg/LaserScan``) against its fields (:mod:`runtime.ros.config`, issue L), and
+  a custom ROS type's ``.msg`` file must load;
 - the topics of each Smart Resource service against its processing plugins: every ``<Output>``
   against what the output plugin of each of its scenarios' profiles returns (one Output: the whole
   result; several: the field of the Output's name), every ``<Input>`` of a stream against what its
@@ -52,6 +54,7 @@ from ckmconf.model import (
     System,
     Topic,
 )
+from ckmconf.rostypes import is_ros_type
 from ckmconf.source import Limits, SourceFile, read_source
 
 from ..kernel.vectors import chain_refusal, is_vector, shape_of
@@ -95,6 +98,7 @@ class _Verifier:
         self.registry = registry
         self.report = Reporter(_sources(system))
         self.types: dict[str, MessageType] = {m.name: m for m in system.message_types}
+        self._ros_types: Any = None
         self.external: dict[str, Topic] = {t.name: t for t in system.topics}
         for node in system.nodes:
             for topic in node.topics:
@@ -102,6 +106,7 @@ class _Verifier:
                     self.external.setdefault(topic.name, topic)
 
     def run(self) -> None:
+        self._ros_topics()
         for node in self.system.nodes:
             self._node(node)
         for resource in self.system.resources:
@@ -164,8 +169,28 @@ class _Verifier:
         """The declared types of the plan signals called ``name``."""
         return [s.type for plan in self.system.plans for s in plan.signals if s.name == name and s.type]
 
+    def _ros(self) -> Any:
+        """The ROS types of the system (runtime.ros.config.ConfigRosTypes), loaded on first need."""
+        if self._ros_types is None:
+            from ..ros.config import ConfigRosTypes  # rosbags' store: only for systems naming ROS types
+
+            self._ros_types = ConfigRosTypes(self.system)
+        return self._ros_types
+
+    def _ros_topics(self) -> None:
+        """Each topic of a custom ROS type whose ``.msg`` definition does not load, at the topic."""
+        for topic in [*self.system.topics, *(t for n in self.system.nodes for t in n.topics)]:
+            if is_ros_type(topic.type) and topic.type in self._ros().problems:
+                self.report.error(topic, self._ros().problems[topic.type], "type")
+
     def _flow(self, record: Record, attr: str, value: str, carried: str | None, sentence: str, size: int = 1) -> None:
         """Report when ``value`` does not fit a topic of type ``carried``; ``sentence`` holds a {} for it."""
+        if carried is not None and is_ros_type(carried):
+            for problem in self._ros().value_problems(value, carried):
+                self.report.error(
+                    record, sentence.format(describe(value, size)) + f" of ROS type {carried}: {problem}", attr
+                )
+            return
         if carried is not None and not fits(value, carried, self.types):
             self.report.error(record, sentence.format(describe(value, size)) + f" of type {carried}", attr)
 
@@ -231,13 +256,18 @@ class _Verifier:
         if refusal is not None:
             self.report.error(sensor.adaptation or sensor, f"sensor {sensor.name!r}: {refusal}")
         carried = self._topic_type(sensor.topic, node)
+        if carried is not None and is_ros_type(carried):
+            self._flow(
+                sensor, "topic", NUMBERS, carried, f"sensor {sensor.name!r} writes {{}} onto topic {sensor.topic!r}"
+            )
+            return
         known = carried is not None and (carried in BUILTIN_TYPES or carried in self.types)
         if known and carried is not None and shape_of(carried, record.size, self.types) is None:
             self.report.error(
                 sensor,
                 f"sensor {sensor.name!r} writes whole reads of channel {record.name!r} (size {record.size}) "
                 f"onto topic {sensor.topic!r} of type {carried}, which has no field to carry them: a numeric "
-                f"or bytes topic, a MessageType with a count=\"0\" number field or a bytes field, or one of "
+                f'or bytes topic, a MessageType with a count="0" number field or a bytes field, or one of '
                 f"{record.size} scalar numbers",
                 "topic",
             )
