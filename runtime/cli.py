@@ -50,6 +50,7 @@ from .missions.agent import AgentRunner
 from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
+from .ros.recording import RECORD_FORMATS, RecordingError, RunRecorder
 from .runrecord import EXIT_AGENTS, EXIT_CONFIG, EXIT_FAILED, EXIT_NETWORK
 from .runrecord import keep_statistics as _keep_statistics  # the name _run calls it by
 from .sessions import HardwareSessions
@@ -71,6 +72,12 @@ def _parser() -> argparse.ArgumentParser:
         "--await-config", action="store_true", help="run no configuration: announce an agent and wait for pushes"
     )
     parser.add_argument("--name", help="with --await-config: the agent's name (default: the host name)")
+    parser.add_argument(
+        "--record", metavar="TOPICS", help="record these topics (comma-separated, or 'all') as a rosbag2 bag (run dir)"
+    )
+    parser.add_argument(
+        "--record-format", choices=RECORD_FORMATS, default="mcap", help="storage of the --record bag (default: mcap)"
+    )
     return parser
 
 
@@ -114,12 +121,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{args.config}: no plan {args.plan!r} (plans: {names})", file=sys.stderr)
         return 1
     run_dir = args.log_dir or Path("runs") / f"{system.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    label = f"{args.node}.{args.partition}" if partition is not None else args.node
+    record_args = (args.record, args.record_format)
+    try:  # every --record problem before anything starts (runtime.ros.recording)
+        recorder = None if args.record is None else RunRecorder.in_run(system, nodes, run_dir, label, *record_args)
+    except RecordingError as error:
+        print(f"{args.config}: {error}", file=sys.stderr)
+        return 1
     with _logging_to(run_dir):
         name = f"{args.node}.{args.partition}" if partition is not None else args.node or system.name
         # Several `--node` processes may share a run directory: each keeps its own files (D64).
         run_log = RunLog(run_dir, shared_as=args.node if args.node is not None and partition is None else None)
         try:
-            return _run(system, Path(args.config), nodes, args.duration, run_log, name, partition, args.plan)
+            return _run(system, Path(args.config), nodes, args.duration, run_log, name, partition, args.plan, recorder)
         finally:
             run_log.close()
 
@@ -173,6 +187,7 @@ def _run(
     name: str,
     partition: Partition | None,
     plan: str | None = None,
+    recorder: RunRecorder | None = None,
 ) -> int:
     run_dir = run_log.run_dir
     network = system.network or Network()
@@ -199,7 +214,10 @@ def _run(
     started = time.time()
 
     def extra() -> dict[str, Any]:
-        return {"partition": partition.name, "memory": memory.statistics() if memory else None} if partition else {}
+        record = {"recording": recorder.statistics()} if recorder is not None else {}
+        if partition is None:
+            return record
+        return {"partition": partition.name, "memory": memory.statistics() if memory else None, **record}
 
     def session_failed(message: str) -> None:  # a backend's run-wide session (the sim world server) broke
         nonlocal code
@@ -212,6 +230,8 @@ def _run(
     try:
         sessions.start()  # before any node or partition is built (runtime.sessions)
         transport.start()
+        if recorder is not None:  # subscribed before any node publishes
+            recorder.start(transport)
         for node in nodes:
             if partition is not None:
                 runtime = NodeRuntime(node, system, transport, partition=partition.name)
@@ -261,11 +281,16 @@ def _run(
             _isolated(f"stop the partitions of {supervisor.node.name}", supervisor.stop)
         for runtime in reversed(runtimes):
             _isolated(f"stop node {runtime.node.name}", runtime.stop)
+        if recorder is not None:  # after the nodes' last samples, before the transport goes
+            _isolated("finish the recording", recorder.stop)
         _isolated("stop the transport", transport.stop)
         _isolated("end the hardware sessions", sessions.stop)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         _keep_statistics(run_log, config, system, runtimes, started, extra())
+    if recorder is not None and recorder.failure is not None:  # watched like a task: stderr and the exit code
+        print(f"{config}: {recorder.failure}", file=sys.stderr)
+        code = min(code, EXIT_FAILED) if code else EXIT_FAILED
     return _verdict(code, runtimes, agents)
 
 
