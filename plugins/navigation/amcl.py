@@ -15,9 +15,10 @@ MobileBase.Displacement). Each frame (0.8 s in the use case, Table 7.8):
 
 The goal is the service Parameter ``goal`` (Table 7.1 "Goal", via :meth:`apply_service_parameters`):
 an Area of the Environment (its centroid, any heading) or ``"x y yaw"`` in the map frame. States:
-``planning`` (no plan yet, or waiting for a localization within ``maxDispersion``), ``active``,
-``arrived`` (within ``tolerance``, and ``yawTolerance`` for a pose goal: the path is then empty,
-which stops the base), ``failed`` with a ``reason``: the planner's (unreachable goal: it collides
+``planning`` (no plan yet, or waiting, stopped, for an estimate whose position uncertainty
+√(σx² + σy²) is within ``maxUncertainty``: decision D108), ``active``, ``arrived`` (the base has
+stopped within ``tolerance``, and ``yawTolerance`` for a pose goal: the path is then empty, which
+keeps it stopped; D109), ``failed`` with a ``reason``: the planner's (unreachable goal: it collides
 with an obstacle, lies outside the map, or no free path joins it) or no localization for
 ``localizeTimeout`` seconds. A start inside an inflated obstacle (after a close approach) is left
 by the nearest free point within ``escape`` metres (decision D107). Top-level ``dispersion`` is the
@@ -71,6 +72,12 @@ STOPPED = 0.02
 """The base is stopped when its odometry's speeds (m/s, rad/s) are below this."""
 
 
+def uncertainty(estimate: Estimate) -> float:
+    """√(σx² + σy²) of an estimate's covariance: how far off its position may be (m)."""
+    covariance = np.asarray(estimate.covariance, dtype=np.float64)
+    return math.sqrt(max(0.0, float(covariance[0, 0] + covariance[1, 1])))
+
+
 def _numbers(text: str, count: int, name: str, owner: str) -> list[float]:
     try:
         values = [float(v) for v in text.split()]
@@ -103,7 +110,8 @@ class AmclNavigation(ProcessingPlugin):
         P("speed", 0.3, "Speed asked of the Mobile Base along the path.", unit="m/s", above=0.0),
         P("tolerance", 0.15, "Arrived within this distance of the goal.", unit="m", above=0.0),
         P("yawTolerance", 0.2, "And within this heading of a pose goal.", unit="rad", above=0.0),
-        P("maxDispersion", 0.5, "Localization dispersion above which the robot does not drive.", unit="m", above=0.0),
+        P("maxUncertainty", 0.35, "Position uncertainty √(σx² + σy²) of the estimate above which the robot does not "
+          "drive.", unit="m", above=0.0),
         P("localizeTimeout", 10.0, "Fail after this long without a good localization.", unit="s", above=0.0),
         P("strayDistance", 0.5, "Replan when the robot is this far from the path.", unit="m", above=0.0),
         P("blockLookahead", 1.5, "Scan points on this much of the path ahead block it.", unit="m", above=0.0),
@@ -296,7 +304,7 @@ class AmclNavigation(ProcessingPlugin):
             result["dispersion"] = float(estimate.dispersion)
         if self.goal is None:
             return result
-        localized = estimate is not None and estimate.dispersion <= self.params["maxDispersion"]
+        localized = estimate is not None and uncertainty(estimate) <= self.params["maxUncertainty"]
         if self.phase in ("planning", "active"):
             if not localized or estimate is None:
                 self._unlocalized(now, self._why(estimate, odom_message is not None))
@@ -309,7 +317,7 @@ class AmclNavigation(ProcessingPlugin):
 
     def _why(self, estimate: Estimate | None, odometry: bool) -> str:
         if estimate is not None:
-            return f"dispersion {estimate.dispersion:.2f} m above {self.params['maxDispersion']:g} m"
+            return f"uncertainty {uncertainty(estimate):.2f} m above {self.params['maxUncertainty']:g} m"
         return "no scan received" if odometry else "no odometry received"
 
     def _unlocalized(self, now: float, why: str) -> None:

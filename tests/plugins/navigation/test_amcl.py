@@ -1,0 +1,168 @@
+"""amcl-navigation (Navigation.AMCL, Table 7.1) on scans ray-cast in the test room's grid: goals by
+Area or pose, the path re-anchored in the odom frame, replanning round scan points on the path,
+leaving an inflated obstacle, waiting for and failing without a localization, bad input."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import shapely
+
+import ckmconf
+from plugins.localization.raster import GridMap, environment_obstacles
+from plugins.localization.raycast import cast
+from plugins.navigation.amcl import AmclNavigation
+from plugins.navigation.frames import Pose, compose, inverse, transform_point
+from plugins.navigation.laser_scan import LaserScanService
+from runtime.kernel.interfaces import ParamError
+from runtime.resources.spt import Context
+
+from .loop import plugin, room
+
+LASER = (0.10, 0.0, 0.0)
+ANGLES = np.linspace(-4.1888 / 2, 4.1888 / 2, 683)
+
+
+def grid(path: Path, *extra: shapely.Geometry) -> GridMap:
+    env = ckmconf.load(path).environment
+    assert env is not None
+    bounds = (env.map.xmin, env.map.ymin, env.map.xmax, env.map.ymax)
+    return GridMap.from_shapes(bounds, [*environment_obstacles(env, 0.14), *extra], 0.02)
+
+
+def scan(world: GridMap, truth: Pose) -> dict[str, Any]:
+    """The LaserScan the laser-scan service makes of the sweep from ``truth`` (the laser 0.1 m ahead)."""
+    laser = compose(truth, LASER)
+    ranges = cast(world, np.array([laser]), ANGLES, 5.6)[0]
+    service: LaserScanService = plugin("laser-scan", LaserScanService)
+    return service.process({"stamp": 1.0, "ranges": ranges.astype(np.float32)}, Context(0, 1.0))
+
+
+def odometry(pose: Pose) -> dict[str, Any]:
+    return {"stamp": 1.0, "pose": {"x": pose[0], "y": pose[1], "yaw": pose[2]},
+            "twist": {"linear": 0.0, "angular": 0.0}, "dispersion": 0.0}
+
+
+def navigation(file: Path, **params: object) -> AmclNavigation:
+    made: AmclNavigation = plugin("amcl-navigation", AmclNavigation, file,
+                                  **{"environment": file.name, "particles": 500, **params})
+    made.setup()
+    return made
+
+
+def frames(nav: AmclNavigation, world: GridMap, truth: Pose, odom: Pose, count: int = 3) -> dict[str, Any]:
+    result: dict[str, Any] = {}
+    for k in range(count):
+        result = nav.process({"scan": scan(world, truth), "odom": odometry(odom)}, Context(k, 0.8 * k))
+    return result
+
+
+@pytest.fixture
+def file(tmp_path: Path) -> Path:
+    return room(tmp_path)
+
+
+def test_goals_are_areas_or_poses_and_a_bad_goal_names_the_areas(file: Path) -> None:
+    nav = navigation(file, goal="Target")
+    assert nav.goal == pytest.approx((4.0, 1.8, None)) and nav.goal_text == "Target"
+    nav.apply_service_parameters({"goal": "3.5 2 1.57"})
+    assert nav.goal == pytest.approx((3.5, 2.0, 1.57))
+    for bad in ("Kitchen", "1 2", "1 2 nan"):
+        with pytest.raises(ValueError, match=r"is neither an Area of environment 'nav-room' \(Start, Target, Walled\)"):
+            nav.apply_service_parameters({"goal": bad})
+    for bad_value in ("", 3, None):
+        with pytest.raises(ValueError, match="service parameter 'goal'"):
+            nav.apply_service_parameters({"goal": bad_value})
+    assert nav.goal == pytest.approx((3.5, 2.0, 1.57))  # a refused goal changes nothing
+    nav.apply_service_parameters({"max_sensors": 2})  # not this plugin's
+
+
+def test_without_a_goal_only_the_pose_is_published(file: Path) -> None:
+    nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.1 0.05")
+    result = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0))
+    assert set(result) == {"pose", "dispersion"}
+    pose = result["pose"]
+    assert math.hypot(pose["pose"]["x"] - 1.0, pose["pose"]["y"] - 1.8) < 0.1
+    assert len(pose["covariance"]) == 9 and pose["dispersion"] == result["dispersion"] > 0
+
+
+def test_the_path_is_the_plan_re_anchored_in_the_odom_frame(file: Path) -> None:
+    truth, odom = (1.0, 1.8, 0.0), (0.5, -0.2, 1.0)  # the odom frame is turned and shifted from the map's
+    nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.1 0.05", goal="4 1.8 1.57")
+    result = frames(nav, grid(file), truth, odom)
+    status, path = result["status"], result["path"]
+    assert status["state"] == "active" and status["goal"] == "4 1.8 1.57" and status["reason"] == ""
+    assert status["path_length"] > 3.0 and status["remaining"] == pytest.approx(status["path_length"], abs=0.15)
+    assert path["frame"] == "odom" and path["goal"] == "4 1.8 1.57" and path["speed"] == 0.3
+    assert path["points"][0] == pytest.approx(list(odom[:2]))  # starts at the robot, in odometry
+    correction = compose(truth, inverse(odom))  # the true map→odom
+    end = transform_point(correction, tuple(path["points"][-1]))
+    assert math.dist(end, (4.0, 1.8)) < 0.1
+    assert math.remainder(path["yaw"] + correction[2] - 1.57, 2 * math.pi) == pytest.approx(0.0, abs=0.05)
+    for point in path["points"]:  # every waypoint clear of the pillar by the inflated radius
+        assert shapely.box(2.3, 1.1, 2.7, 2.9).distance(shapely.Point(transform_point(correction, tuple(point)))) > 0.19
+
+
+def test_scan_points_on_the_path_ahead_make_it_replan_round_them(file: Path) -> None:
+    nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.05 0.03", goal="Target")
+    first = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)["path"]
+    # the odom frame is the map's shifted by (-1, -1.8): map y = odom y + 1.8
+    assert min(p[1] for p in first["points"]) + 1.8 < 1.1  # round the pillar's south end, the shorter way
+    truth = (1.7, 0.8, 0.0)  # further on, a box the map does not know closes the south gap
+    blocked = grid(file, shapely.box(2.2, 0.1, 2.8, 0.7))
+    result = frames(nav, blocked, truth, (0.7, -1.0, 0.0), 2)
+    assert result["path"]["id"] == first["id"] + 1
+    assert max(p[1] for p in result["path"]["points"]) + 1.8 > 2.9  # now round the north end
+    assert result["status"]["state"] == "active"
+
+
+def test_a_start_inside_the_inflated_pillar_leaves_by_the_nearest_free_point(file: Path) -> None:
+    truth = (2.12, 1.5, 0.0)  # 0.18 m from the pillar: inside its 0.2 m inflation
+    nav = navigation(file, initialPose="2.12 1.5 0", initialSpread="0.02 0.02", goal="Start")
+    result = frames(nav, grid(file), truth, truth, 2)
+    assert result["status"]["state"] == "active", result["status"]
+    assert math.dist(result["path"]["points"][0], truth[:2]) < 0.05
+    nav_strict = navigation(file, initialPose="2.12 1.5 0", initialSpread="0.02 0.02", goal="Start", escape=0.0)
+    failed = frames(nav_strict, grid(file), truth, truth, 1)["status"]
+    assert failed["state"] == "failed" and "the start collides with 'Pillar'" in failed["reason"]
+
+
+def test_without_a_localization_it_waits_stopped_then_fails_with_the_reason(file: Path) -> None:
+    nav = navigation(file, initialPose="1 1.8 0", goal="Target", localizeTimeout=2.0)
+    result: dict[str, Any] = {}
+    for k in range(5):  # odometry but no scan: no estimate
+        result = nav.process({"scan": None, "odom": odometry((0.0, 0.0, 0.0))}, Context(k, 0.8 * k))
+        if k == 0:
+            assert result["status"]["state"] == "planning" and result["path"]["points"] == []
+    assert result["status"]["state"] == "failed"
+    assert result["status"]["reason"] == "no localization for 2 s (no scan received)"
+    assert "pose" not in result
+
+
+@pytest.mark.parametrize(
+    ("inputs", "message"),
+    [
+        ({"cmd_vel": {}}, r"unknown inputs \['cmd_vel'\]"),
+        ({"scan": {"ranges": [1.0]}, "odom": odometry((0, 0, 0))}, "the scan is not a LaserScan"),
+        ({"scan": None, "odom": {"pose": {"x": 1}}}, "input 'odom' pose field 'y'"),
+        ({"scan": 3, "odom": None}, "input 'scan' must be a message"),
+    ],
+)
+def test_bad_input_is_refused_naming_it(file: Path, inputs: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        navigation(file).process(inputs, Context(0, 0.0))
+
+
+def test_bad_params_and_a_missing_environment_are_refused(file: Path) -> None:
+    with pytest.raises(ParamError, match=r"'laserPose' = '0\.1 0' is not 3 numbers"):
+        navigation(file, laserPose="0.1 0")
+    with pytest.raises(ParamError, match="filter"):
+        navigation(file, filter="ekf")
+    with pytest.raises(ValueError, match="'initialPose' = 'Kitchen' is neither an Area"):
+        navigation(file, initialPose="Kitchen")
+    with pytest.raises(ValueError, match="cannot use environment file"):
+        navigation(file, environment="missing.xml")
