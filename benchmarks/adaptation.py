@@ -15,9 +15,10 @@ the thesis' one-client figures. The adaptation then works against the same relat
 absolute figures are ours. The per-profile processing costs are reported too.
 
 The same schedule runs twice: with the TCM, then with the threshold baseline
-(:class:`~runtime.resources.tcm.ThresholdSelector`). Alarms are compared by one judge for both:
-a rising edge of "the active scenario's policies are not met over the last ``window`` quality
-samples" (eq. 4.4 on the recorded measures), per client.
+(:class:`~runtime.resources.threshold.ThresholdSelector`), injected as the Smart Resource's
+scenario selector. Alarms are compared by one judge for both: a rising edge of "the active
+scenario's policies are not met over the last ``window`` quality samples" (eq. 4.4 on the
+recorded measures), per client.
 """
 
 from __future__ import annotations
@@ -39,6 +40,8 @@ from runtime.resources.client import ServiceClient, ServiceDirectory
 from runtime.resources.quality import probability_within
 from runtime.resources.resource import SmartResourceRuntime
 from runtime.resources.spt import Topology
+from runtime.resources.tcm import TaskConfiguringModule
+from runtime.resources.threshold import ThresholdSelector
 
 from .adaptation_report import describe, figures, summarize
 from .netbench import private_settings
@@ -132,7 +135,10 @@ def experiment(
     baseline: bool,
     parameters: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """One run of the schedule; every client's quality messages, events and alarms, timestamped."""
+    """One run of the schedule; every client's quality messages, events and alarms, timestamped.
+
+    ``baseline`` runs the threshold baseline instead of the TCM as every instance's scenario selector.
+    """
     network = network_from(private_settings("multipeer"))  # private loopback group and ports
     counter = iter(range(10**12))
 
@@ -151,7 +157,7 @@ def experiment(
         supply_period=SUPPLY_PERIOD,
         share=False,
         primary=False,
-        baseline=baseline,
+        selector=ThresholdSelector if baseline else TaskConfiguringModule,
     )
     clients: dict[str, ServiceClient] = {}
     timeline: list[tuple[float, int]] = []

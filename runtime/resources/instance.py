@@ -20,7 +20,8 @@ from ckmconf.model.resources import TCM, Service
 from ..network.api import Publisher, TopicQoS, Transport
 from . import codec
 from .api import Bounds, client_topic, preferred_scenario, typed_default
-from .tcm import Alarm, Decision, ScenarioEvent, TaskConfiguringModule, ThresholdSelector
+from .selection import Alarm, Decision, ScenarioEvent, ScenarioSelector, SelectorFactory
+from .tcm import TaskConfiguringModule
 
 KERNEL_MEASURES = ("deadline", "latency", "rate", "cpu", "memory")
 """Measures the runtime takes itself (a QualityMeasure's ``source``); any other source is a result field."""
@@ -58,8 +59,9 @@ class Instance:
         initial: str | None = None,
         requirements: tuple[Bounds, ...] = (),
         parameters: Mapping[str, Any] | None = None,
-        baseline: bool = False,
+        selector: SelectorFactory = TaskConfiguringModule,
     ) -> None:
+        """``selector`` builds what selects the active scenario: the TCM, unless a benchmark injects another."""
         if not service.scenarios:
             raise ValueError(f"service {resource}.{service.name} has no scenarios")
         self.resource, self.service, self.client = resource, service, client
@@ -72,8 +74,7 @@ class Instance:
         initial = initial or preferred
         tcm = service.tcm or TCM(learning="none")  # one scenario and no TCM: a fixed profile
         settings = tcm if initial is None else dataclasses.replace(tcm, initial=initial)
-        selector = ThresholdSelector if baseline else TaskConfiguringModule
-        self.tcm: TaskConfiguringModule | ThresholdSelector = selector(
+        self.tcm: ScenarioSelector = selector(
             service.scenarios,
             settings,
             requirements=requirements,

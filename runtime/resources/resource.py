@@ -52,7 +52,9 @@ from . import codec
 from .api import DIRECTORY_TOPIC, Request, describe, parse_request, preferred_scenario, topics, typed_default
 from .buffers import Supplied, TripleBuffer
 from .instance import Instance
+from .selection import SelectorFactory
 from .spt import Frame, Topology
+from .tcm import TaskConfiguringModule
 
 LOG = logging.getLogger("ckm.resources")
 DEFAULT_FRAME_PERIOD = 1 / 30
@@ -137,12 +139,12 @@ class SmartResourceRuntime:
         announce_period: float = 1.0,
         max_clients: int = 16,
         supply_period: float | None = None,
-        baseline: bool = False,
+        selector: SelectorFactory = TaskConfiguringModule,
     ) -> None:
         self.resource, self.transport = resource, transport
         self.node = node or resource.node
         self.share, self.primary, self.max_clients = share, primary, max_clients
-        self.baseline = baseline  # the threshold switcher instead of the TCM (benchmark baseline)
+        self.selector = selector  # builds each instance's scenario selector: the TCM, or a benchmark's baseline
         self._supply_period = supply_period
         self.announce_period = announce_period
         self.services = {s.name: s for s in resource.services if s.scenarios}
@@ -248,7 +250,7 @@ class SmartResourceRuntime:
                 initial = preferred_scenario(service, {p.name: p.default for p in service.parameters})
                 send = self._sender(name)
                 instance = Instance(
-                    self.resource.name, service, "", self.transport, send, initial=initial, baseline=self.baseline
+                    self.resource.name, service, "", self.transport, send, initial=initial, selector=self.selector
                 )
                 self._add(instance)
         for stream in self.streams.values():
@@ -349,7 +351,7 @@ class SmartResourceRuntime:
                 initial=self._joining_scenario(service, request.parameters),
                 requirements=request.requirements or (),
                 parameters=request.parameters,
-                baseline=self.baseline,
+                selector=self.selector,
             )
             problems = self._forward(service, request.parameters)
             if problems:
