@@ -12,8 +12,9 @@ position through the pinhole model (horizontal field of view ``fov``), moves the
 ``gain`` of it, at most ``speed``·Δt per frame (Δt: the time since the previous frame, the
 service Parameter ``speed`` of Table 7.2 in rad/s), within the Nao's joint limits. A result
 already acted on (the stream hands the newest one again when only the head state is new) does not
-move the head twice. The target is the most reliable object matching the Parameters ``target``
-(its name or shape contains it) and ``targetTexture``; any object when both are empty.
+move the head twice; its track and target are still published. The target is the most reliable
+object matching the Parameters ``target`` (its name or shape contains it) and ``targetTexture``;
+any object when both are empty.
 
 Outputs: ``head_goal`` (PanTilt, head angles for the ``pan-tilt-position`` controller, while a
 target is in view), ``track`` (TrackState ``{"stamp", "label", "moving", "in_view", "error",
@@ -180,13 +181,14 @@ class PanTiltTrack(ProcessingPlugin):
         head = self._head(data.get("head_state"))
         result: dict[str, Any] = {}
         recognised = data.get("objects")
-        if head is not None and recognised is not None and recognised != self._acted:
+        if head is not None and recognised is not None:
+            fresh = recognised != self._acted  # a result already acted on must not move the head twice
             self._acted = recognised
             found = self.choose(recognised)
             if found is None:
                 self._track = {"label": "", "moving": False, "in_view": False, "error": None, "target": None}
             else:
-                result.update(self._follow(found, recognised, head, dt, now))
+                result.update(self._follow(found, recognised, head, dt, now, fresh))
         moving = bool(self._track["moving"])
         result["track"] = {"stamp": now, **self._track,
                            "head": None if head is None else {"pan": head[0], "tilt": head[1]}}
@@ -237,7 +239,7 @@ class PanTiltTrack(ProcessingPlugin):
         return (float(found["x"]) - 0.5) * 2 * half, (float(found["y"]) - 0.5) * 2 * half * height / width
 
     def _follow(self, found: Mapping[str, Any], recognised: Mapping[str, Any], head: tuple[float, float],
-                dt: float, now: float) -> dict[str, Any]:
+                dt: float, now: float, fresh: bool) -> dict[str, Any]:
         right, down = self._offsets(found, recognised)
         offset = (math.atan(right), math.atan(down))
         error = math.hypot(*offset)
@@ -249,7 +251,7 @@ class PanTiltTrack(ProcessingPlugin):
                     for h, m, (low, high) in zip(head, moves, self.limits, strict=True)]
         target = self._locate(found, right, down, head, now)
         self._track = {"label": found["name"], "moving": True, "in_view": True, "error": error, "target": target}
-        out: dict[str, Any] = {"head_goal": {"pan": goal[0], "tilt": goal[1]}}
+        out: dict[str, Any] = {"head_goal": {"pan": goal[0], "tilt": goal[1]}} if fresh else {}
         if target is not None:
             out["target"] = target
         return out
