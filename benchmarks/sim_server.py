@@ -9,7 +9,8 @@ flattened into the channel's tuple):
   VGA and QVGA), the mean time of one read through the server and in process, and the difference.
 - ``blocking``: a wheel-encoder client reading as fast as it can while another client asks for
   VGA RGB frames back to back: the wheel read's median, 99th percentile and worst time, with and
-  without the renders (requests are served one at a time, so a render delays every other one).
+  without the renders; with the render worker (the default, D103) and with the renders made in the
+  server's physics thread (``--no-render-worker``), where a render delays every other request.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import ckmconf
 from plugins.hardware.sim import SimBackend
 from plugins.sim.client import Link, RemoteDevice
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
-from plugins.sim.server import WorldPlan
+from plugins.sim.plan import WorldPlan
 from plugins.sim.session import ServerProcess
 
 LAB = Path(__file__).resolve().parent.parent / "configs" / "usecase" / "lab.xml"
@@ -136,12 +137,15 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
             remote[name] = _mean_ms(lambda device=device: to_value(device.read()), READS[name])  # type: ignore[misc]
             device.close()
         blocking = _blocking(server, specs, args.seconds)
+    with tempfile.TemporaryDirectory() as folder, ServerProcess(LAB, Path(folder), NODES,
+                                                                options=["--no-render-worker"]) as server:
+        in_thread = _blocking(server, specs, args.seconds)
     trips = {
         name: {"server_ms": round(remote[name], 3), "in_process_ms": round(local[name], 3),
                "overhead_ms": round(remote[name] - local[name], 3)}
         for name in specs
     }
-    return {"round_trip_ms": trips, "blocking": blocking}
+    return {"round_trip_ms": trips, "blocking": blocking, "blocking_without_worker": in_thread}
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
@@ -149,11 +153,12 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
         (f"{name} read", f"{row['server_ms']:.3f} ms via server, {row['in_process_ms']:.3f} ms in process")
         for name, row in result["round_trip_ms"].items()
     ]
-    block = result["blocking"]
-    for label, key in (("wheel read alone", "alone"), ("wheel read during VGA renders", "with_vga_renders")):
-        f = block[key]
-        rows.append((label, f"median {f['median_ms']} ms, p99 {f['p99_ms']} ms, max {f['max_ms']} ms"))
-    rows.append(("VGA render through the server", f"{block['render_ms']} ms"))
+    for how, name in (("render worker", "blocking"), ("renders in the physics thread", "blocking_without_worker")):
+        block = result[name]
+        for label, key in (("wheel read alone", "alone"), ("wheel read during VGA renders", "with_vga_renders")):
+            f = block[key]
+            rows.append((f"{label} ({how})", f"median {f['median_ms']} ms, p99 {f['p99_ms']} ms, max {f['max_ms']} ms"))
+        rows.append((f"VGA render through the server ({how})", f"{block['render_ms']} ms"))
     return rows
 
 
@@ -162,6 +167,6 @@ if __name__ == "__main__":
     as_json = "--json" in arguments
     outcome = run([a for a in arguments if a != "--json"])
     for label, value in describe(outcome):
-        print(f"{label:32s} {value}")
+        print(f"{label:58s} {value}")
     if as_json:
         print(json.dumps(outcome))

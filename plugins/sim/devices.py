@@ -90,6 +90,10 @@ class SimWorld(SimulationHook):
         self._frames[key] = (self.world.steps, frame)
         return frame
 
+    def keep_frame(self, key: tuple[int, int, float, int, int], step: int, frame: Frame) -> None:
+        """Remember a frame rendered elsewhere (the server's render worker) for ``step``."""
+        self._frames[key] = (step, frame)
+
     def robot(self, name: str, model: str, pose: str) -> Robot:
         """The robot ``name``, loaded on first use (at ``pose`` "x y yaw", else beside the map's centre)."""
         if name not in self.robots:
@@ -162,8 +166,7 @@ class ChannelDevice:
         if sensor == "lidar":
             return self.device.scan()  # type: ignore[no-any-return]
         if sensor in ("rgb", "depth"):
-            frame = self.sim.frame(self.device, v["width"], v["height"])
-            return frame.rgb if sensor == "rgb" else np.round(frame.depth * 1000.0)
+            return self.from_frame(self.sim.frame(self.device, v["width"], v["height"]))
         if sensor == "imu":
             return self.device.read()  # type: ignore[no-any-return]
         if sensor == "contact":
@@ -173,6 +176,18 @@ class ChannelDevice:
         if v.get("joints"):
             return tuple(self._noisy(self._joint_value(j)) for j in self.device)
         return self._noisy(self._joint_value(self.device[0]))
+
+    @property
+    def camera(self) -> tuple[int, int, float, int, int] | None:
+        """The render this camera channel reads (the key of :meth:`SimWorld.frame`); None if no camera."""
+        if self.spec.values.get("sensor") not in ("rgb", "depth"):
+            return None
+        v = self.spec.values
+        return (self.device.robot.body, self.device.link, self.device.fov, v["width"], v["height"])
+
+    def from_frame(self, frame: Frame) -> np.ndarray:
+        """A camera channel's read of ``frame``: its colour, or its depth in mm."""
+        return frame.rgb if self.spec.values.get("sensor") == "rgb" else np.round(frame.depth * 1000.0)
 
     def write(self, raw: float) -> None:
         """Drive the joint(s) to ``raw`` (the world's lock held, the world synced)."""

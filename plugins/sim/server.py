@@ -10,7 +10,9 @@ know the key in ``CKM_SIM_AUTHKEY`` (:mod:`plugins.sim.client`). When listening 
 One thread, the one that built the world, owns the pybullet client and answers every request in
 turn (it waits on all connections at once and serves one request of each ready one per round), so
 the physics state is never touched concurrently; a thread of its own only accepts connections
-(the HMAC handshake). Before each read or write the world advances, in its fixed steps, to the
+(the HMAC handshake). Camera reads are rendered by a render worker process on a mirror of the
+world (:mod:`plugins.sim.render`, D103) while this thread goes on serving; ``--no-render-worker``
+renders them here. Before each read or write the world advances, in its fixed steps, to the
 server's clock (real time, ``time.monotonic``; started by the first request), as D88 does in
 process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`Spec`) → ``handle``;
 ``read``/``write``/``close`` (``handle``; ``value`` to write); ``state`` (time, steps, robots' true
@@ -36,71 +38,18 @@ from types import FrameType
 from typing import Any
 
 from ckmconf import ConfigError, load
-from ckmconf.model import HWChannel, Node, System
+from ckmconf.model import System
 from runtime.kernel.interfaces import ParamError
 
 from .client import ENV_KEY
 from .devices import ChannelDevice, SimWorld, Spec
+from .plan import WorldPlan
+from .render import RenderWorker, job_of
+from .sensors import Frame
 
 LOG = logging.getLogger("ckm.sim.server")
 HOST = "127.0.0.1"
 MAX_REQUEST = 1 << 20  # bytes: a request is a small JSON object; anything larger is malformed
-
-
-@dataclass
-class WorldPlan:
-    """What the server builds, read from the run's sim channels in document order (D101): the first
-    channel naming ``world`` (else the first sim channel) decides the world file, seed and textures;
-    each robot is loaded, in the order first named, at the ``pose`` (and ``model``) of the first of
-    its channels giving one."""
-
-    world: str
-    seed: int
-    textures: str
-    bodies: dict[str, tuple[str, str]] = field(default_factory=dict)  # name → (model, pose)
-
-    @classmethod
-    def of(cls, nodes: list[Node]) -> WorldPlan | None:
-        """The plan of ``nodes``' sim channels (None without any); ConfigError located at a channel
-        whose Params are wrong or that names another world than the one already chosen."""
-        from plugins.hardware.sim import SimBackend  # the backend reads the Params (one code path)
-
-        backends: list[tuple[HWChannel, SimBackend]] = []
-        for channel in (ch for node in nodes for ch in node.channels if ch.backend == "sim"):
-            try:
-                backends.append((channel, SimBackend(channel)))
-            except ParamError as exc:
-                raise _located(channel, str(exc)) from None
-        if not backends:
-            return None
-        named = [(ch, b) for ch, b in backends if b.values["world"]]
-        first_channel, first = named[0] if named else backends[0]
-        for channel, backend in named[1:]:
-            if backend.world_file != first.world_file:
-                raise _located(channel, f"sim channel {channel.name!r}: Param 'world' names {backend.world_file}, "
-                                        f"but channel {first_channel.name!r} already chose {first.world_file}: "
-                                        "a run has one simulated world")
-        plan = cls(first.world_file, int(first.values["seed"]), first._path(first.values["textures"]))
-        for _, backend in backends:
-            spec = backend.spec().values
-            model, pose = plan.bodies.get(spec["body"], ("", ""))
-            plan.bodies[spec["body"]] = (model or spec["model"], pose or spec["pose"])
-        return plan
-
-    def build(self) -> SimWorld:
-        """The world, on real time, with every robot of the plan loaded."""
-        environment = load(self.world).environment if self.world else None
-        sim = SimWorld(time.monotonic, environment, self.seed, self.textures, self.world)
-        for name, (model, pose) in self.bodies.items():
-            sim.robot(name, model, pose)
-        return sim
-
-
-def _located(channel: HWChannel, message: str) -> ConfigError:
-    loc = channel.loc
-    if loc is None:
-        return ConfigError("<memory>", 1, 1, "/", message)
-    return ConfigError(loc.file, loc.line, loc.column, loc.xpath, message)
 
 
 @dataclass
@@ -110,11 +59,26 @@ class _Client:
     devices: dict[int, ChannelDevice] = field(default_factory=dict)
 
 
+@dataclass
+class _Flight:
+    """A frame the render worker is making, and the camera reads waiting for it."""
+
+    key: tuple[int, int, float, int, int]
+    step: int
+    time: float
+    waiters: list[tuple[_Client, ChannelDevice]]
+
+
 class WorldServer:
     """Serves ``sim``'s devices to authenticated clients (see the module docstring)."""
 
-    def __init__(self, sim: SimWorld, authkey: bytes, host: str = HOST, port: int = 0) -> None:
+    def __init__(
+        self, sim: SimWorld, authkey: bytes, host: str = HOST, port: int = 0, renderer: RenderWorker | None = None
+    ) -> None:
         self.sim = sim
+        self.renderer = renderer
+        self._cameras: list[tuple[_Client, ChannelDevice]] = []  # camera reads waiting for the worker
+        self._flight: _Flight | None = None
         self.listener = Listener((host, port), authkey=authkey)
         host, port = self.listener.address
         self.address = f"{host}:{port}"
@@ -146,11 +110,15 @@ class WorldServer:
         """Answer requests until ``stop`` is set (call from the thread that built the world)."""
         threading.Thread(target=self._accept, name="ckm-sim-accept", daemon=True).start()
         while not stop.is_set():
-            ready = wait([self._wake_r, *(c.conn for c in self.clients)], timeout=0.2)
+            rendering = [self.renderer.conn] if self.renderer is not None and self.renderer.busy else []
+            ready = wait([self._wake_r, *rendering, *(c.conn for c in self.clients)], timeout=0.2)
             batch: list[tuple[_Client, bytes]] = []
             for conn in ready:
                 if conn is self._wake_r:
                     self._admit()
+                    continue
+                if rendering and conn is rendering[0]:
+                    self._landed()
                     continue
                 client = next(c for c in self.clients if c.conn is conn)
                 data = self._receive(client)
@@ -159,7 +127,10 @@ class WorldServer:
             # renders last (stable sort): a wheel read waits for at most the render under way (D103)
             batch.sort(key=lambda item: self._renders(*item))
             for client, data in batch:
-                self._reply(client, self.handle(client, data))
+                reply = self.handle(client, data)
+                if reply is not None:  # None: a camera read, answered when its frame is made
+                    self._reply(client, reply)
+            self._dispatch()
 
     def _admit(self) -> None:
         while self._wake_r.poll():
@@ -202,8 +173,9 @@ class WorldServer:
 
     # ------------------------------------------------------------------ requests
 
-    def handle(self, client: _Client, data: bytes) -> dict[str, Any]:
-        """The reply to one request; an error reply for anything wrong, never an exception."""
+    def handle(self, client: _Client, data: bytes) -> dict[str, Any] | None:
+        """The reply to one request (None: a camera read handed to the render worker); an error reply
+        for anything wrong, never an exception."""
         self.requests += 1
         name = ""
         try:
@@ -229,6 +201,9 @@ class WorldServer:
             if op == "close":
                 del client.devices[handle]
                 return {}
+            if op == "read" and device.camera is not None and self.renderer is not None:
+                self._cameras.append((client, device))
+                return None
             with self.sim.lock:
                 self.sim.sync()
                 if op == "read":
@@ -245,6 +220,69 @@ class WorldServer:
                 text = f"sim channel {name!r}: {text}" if name else f"world server: bad request: {text}"
             LOG.warning("client %d: %s", client.number, text)
             return {"error": text, "type": type(exc).__name__}
+
+    # ------------------------------------------------------------------ renders (D103)
+
+    def _dispatch(self) -> None:
+        """Hand the next waiting camera read to the idle render worker (with the others asking for
+        the same frame), at the world's current step."""
+        while self.renderer is not None and not self.renderer.busy and self._cameras:
+            client, device = self._cameras.pop(0)
+            key = device.camera
+            assert key is not None
+            with self.sim.lock:
+                self.sim.sync()
+                world = self.sim.world
+                flight = _Flight(key, world.steps, world.time, [(client, device)])
+                flight.waiters += [(c, d) for c, d in self._cameras if d.camera == key]
+                self._cameras = [(c, d) for c, d in self._cameras if d.camera != key]
+                try:
+                    self.renderer.submit(world, job_of(device))
+                except (OSError, ValueError) as exc:
+                    self._lose_renderer(f"{type(exc).__name__}: {exc}")
+                    self._flight = flight
+                    self._finish(flight, None)
+                    return
+            self._flight = flight
+
+    def _landed(self) -> None:
+        assert self.renderer is not None and self._flight is not None
+        flight, result = self._flight, self.renderer.result()
+        if isinstance(result, str):
+            LOG.warning("render worker: %s; rendering in the physics thread", result)
+            if not self.renderer.alive():
+                self._lose_renderer(result)
+        self._finish(flight, result if isinstance(result, Frame) else None)
+
+    def _finish(self, flight: _Flight, frame: Frame | None) -> None:
+        self._flight = None
+        client, device = flight.waiters[0]
+        try:
+            with self.sim.lock:
+                if frame is None:  # the worker could not: render here, now
+                    self.sim.sync()
+                    frame = self.sim.frame(device.device, *flight.key[3:])
+                else:
+                    self.sim.keep_frame(flight.key, flight.step, frame)
+            for client, device in flight.waiters:
+                self._reply(client, {"value": device.from_frame(frame), "time": flight.time})
+        except Exception as exc:  # never the server's end
+            for client, device in flight.waiters:
+                self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
+
+    def _lose_renderer(self, why: str) -> None:
+        LOG.error("render worker lost (%s): cameras render in the physics thread from now on", why)
+        if self.renderer is not None:
+            self.renderer.close()
+        self.renderer = None
+        waiting, self._cameras = self._cameras, []
+        for client, device in waiting:  # served here, in order
+            try:
+                with self.sim.lock:
+                    self.sim.sync()
+                    self._reply(client, {"value": device.read(), "time": self.sim.world.time})
+            except Exception as exc:  # never the server's end
+                self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
 
     def _open(self, client: _Client, spec: Spec) -> int:
         world = spec.values.get("world")
@@ -266,6 +304,8 @@ class WorldServer:
 
     def close(self) -> None:
         self.listener.close()
+        if self.renderer is not None:
+            self.renderer.close()
         for client in list(self.clients):
             self._drop(client, "server stopping")
 
@@ -288,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ready", type=Path, help="write the address here (JSON) once listening")
     parser.add_argument("--parent", type=int, help="stop when this process is no longer the parent")
     parser.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: any free one)")
+    parser.add_argument("--no-render-worker", action="store_true", help="render cameras in the physics thread")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
@@ -315,8 +356,12 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
     started = time.perf_counter()
+    renderer = None if args.no_render_worker else RenderWorker(plan)  # builds its mirror meanwhile
     sim = plan.build()
-    server = WorldServer(sim, key, port=args.port)
+    if renderer is not None and not renderer.await_ready():
+        LOG.error("the render worker did not start: cameras render in the physics thread")
+        renderer = None
+    server = WorldServer(sim, key, port=args.port, renderer=renderer)
     LOG.info("world %s with %s built in %.2f s; listening on %s", plan.world, ", ".join(plan.bodies),
              time.perf_counter() - started, server.address)
     if args.parent is not None:

@@ -29,7 +29,7 @@ from types import TracebackType
 from ckmconf.model import Node, System
 
 from .client import ENV_ADDRESS, ENV_KEY, Address
-from .server import WorldPlan
+from .plan import WorldPlan
 
 LOG = logging.getLogger("ckm.sim.session")
 START_TIMEOUT = 120.0  # seconds to build the world (the lab with textures: ~2 s quiet, far more loaded)
@@ -41,7 +41,11 @@ LOGFILE = "sim-server.log"
 class ServerProcess:
     """A world server child process (also used by the tests and ``benchmarks.sim_server``)."""
 
-    def __init__(self, config: Path, run_dir: Path, nodes: Sequence[str] = (), timeout: float = START_TIMEOUT) -> None:
+    def __init__(
+        self, config: Path, run_dir: Path, nodes: Sequence[str] = (), timeout: float = START_TIMEOUT,
+        options: Sequence[str] = (),
+    ) -> None:
+        """``options``: more command-line options of the server (``--no-render-worker``)."""
         run_dir.mkdir(parents=True, exist_ok=True)
         self.key = secrets.token_bytes(32)
         self.ready = run_dir / READY
@@ -51,6 +55,7 @@ class ServerProcess:
                    "--ready", str(self.ready), "--parent", str(os.getpid())]
         for node in nodes:
             command += ["--node", node]
+        command += list(options)
         env = {**os.environ, ENV_KEY: self.key.hex()}
         env.pop(ENV_ADDRESS, None)
         with self.log.open("ab") as log:

@@ -27,11 +27,11 @@ import pytest
 
 import ckmconf
 from ckmconf import ConfigError
-from ckmconf.model import HWChannel
+from ckmconf.model import HWChannel, Param
 from plugins.hardware.sim import SimBackend
 from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
 from plugins.sim.client import ENV_ADDRESS, ENV_KEY, Link, RemoteDevice
-from plugins.sim.server import WorldPlan
+from plugins.sim.plan import WorldPlan
 from plugins.sim.session import READY, ServerProcess, world_session
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
@@ -64,12 +64,22 @@ CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
       <Param name="link" value="laser_link"/>
       <Param name="fov" value="1.5"/>
     </HWChannel>
+    <HWChannel name="wrist" direction="in" kind="stream" backend="sim" units="mm" size="4800">
+      <Param name="body" value="turtlebot"/>
+      <Param name="pose" value="4.5 2.0 3.1416"/>
+      <Param name="sensor" value="depth"/>
+      <Param name="link" value="camera_depth_optical_frame"/>
+      <Param name="width" value="80"/>
+      <Param name="height" value="60"/>
+    </HWChannel>
     <Topic name="wheel_speed" type="float64" scope="internal"/>
+    <Topic name="wrist_depth" type="float64" scope="internal"/>
     <Topic name="drive_left" type="float64" scope="internal"/>
     <Topic name="drive_right" type="float64" scope="internal"/>
     <Topic name="nearest" type="float64" scope="internal"/>
     <Sensor name="left_wheel" channel="left_encoder" topic="wheel_speed" period="0.02" partition="drive"/>
     <Sensor name="lidar" channel="laser" topic="nearest" period="0.1" extrapolation="none" partition="sense"/>
+    <Sensor name="wrist" channel="wrist" topic="wrist_depth" period="0.5" extrapolation="none" partition="sense"/>
     <Controller name="left_duty" kind="constant" period="0.02" partition="drive">
       <Param name="value" value="0.5"/><Input topic="wheel_speed" role="measure"/><Output topic="drive_left"/>
     </Controller>
@@ -169,7 +179,8 @@ def test_a_partition_drives_the_robot_that_another_process_measures(
             assert run.wait(timeout=60) == 0, (tmp_path / "run.out").read_text()
         assert not (run_dir / READY).exists()  # it started no server of its own
         log = server.log.read_text()
-        assert log.count("connected") >= 5  # this test's two links, the partitions' four channels
+        assert log.count("connected") >= 7  # this test's two links, the partitions' five channels
+        assert "render worker" not in log  # no render fell back to the physics thread
 
 
 def test_a_killed_world_server_fails_the_run_loudly(config: Path, tmp_path: Path, no_server: None) -> None:
@@ -221,31 +232,48 @@ def test_bad_requests_get_errors_naming_the_channel(config: Path, tmp_path: Path
 def test_client_mode_reads_what_the_in_process_world_reads(
     config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_server: None
 ) -> None:
-    record = channel_of(config, "laser")
-    mover = channel_of(config, "left_motor")  # the channel that places the rover
     with plant_scope(PlantScope(ManualClock(), name="in-process")):
-        local, placing = SimBackend(record), SimBackend(mover)
-    placing.setup()
-    local.setup()
-    expected = local.read()
+        local = [SimBackend(channel_of(config, name)) for name in ("left_motor", "laser", "wrist")]
+    for backend in local:
+        backend.setup()
+    ranges, depth = local[1].read(), local[2].read()
+    wrist = channel_of(config, "wrist")
+    stray = dataclasses.replace(wrist, name="stray", params=tuple(  # a robot the plan did not load
+        Param(name=k, value=v) for k, v in (("body", "station_arm"), ("pose", "1 3 0"), ("sensor", "depth"),
+                                            ("link", "wrist_camera_optical_frame"), ("width", "80"), ("height", "60"))
+    ))
     with ServerProcess(config, tmp_path / "server") as server:
         monkeypatch.setenv(ENV_ADDRESS, server.address)
         monkeypatch.setenv(ENV_KEY, server.key.hex())
-        remote = SimBackend(record)
-        remote.setup()
+        remote = [SimBackend(record) for record in (channel_of(config, "laser"), wrist)]
+        for backend in remote:
+            backend.setup()
         try:
-            assert remote.remote is not None and remote.sim is None  # client mode: no world here
-            ranges = remote.read()
+            assert all(b.remote is not None and b.sim is None for b in remote)  # client mode: no world here
+            served_ranges, served_depth = remote[0].read(), remote[1].read()  # the depth: by the render worker
+            strayed = SimBackend(stray)
+            strayed.setup()
+            away = strayed.read()  # the worker's mirror has no station arm: the server renders it itself
+            strayed.stop()
         finally:
-            remote.stop()
-    assert isinstance(ranges, tuple) and isinstance(expected, tuple) and len(ranges) == 91
-    assert ranges == pytest.approx(expected, abs=0.002)  # the same device code on the same world
+            for backend in remote:
+                backend.stop()
+        log = server.log.read_text()
+    assert isinstance(served_ranges, tuple) and isinstance(ranges, tuple) and len(served_ranges) == 91
+    assert served_ranges == pytest.approx(ranges, abs=0.002)  # the same device code on the same world
+    assert isinstance(served_depth, tuple) and isinstance(depth, tuple) and len(served_depth) == 4800
+    assert min(depth) < 5000  # it sees something: the rover, the floor, the walls
+    differences = [abs(a - b) for a, b in zip(served_depth, depth, strict=True)]
+    assert sum(differences) / len(differences) < 5.0  # mm: the mirror's render is the world's
+    assert isinstance(away, tuple) and len(away) == 4800 and min(away) > 0.0
+    assert "rendering in the physics thread" in log
 
 
 def test_the_plan_follows_the_channels_and_refuses_two_worlds(config: Path, tmp_path: Path) -> None:
     plan = WorldPlan.of(list(ckmconf.load(config).nodes))
     assert plan is not None and plan.world == str(config.resolve())
-    assert plan.bodies == {"rover": ("", "2.0 2.0 0")}  # the first channel giving a pose places the robot
+    # the first channel giving a pose places each robot
+    assert plan.bodies == {"rover": ("", "2.0 2.0 0"), "turtlebot": ("", "4.5 2.0 3.1416")}
     other = tmp_path / "other.xml"
     other.write_text(config.read_text())
     text = config.read_text().replace(
