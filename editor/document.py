@@ -27,8 +27,9 @@ from PySide6.QtGui import QUndoCommand, QUndoStack
 
 from ckmconf import load_bytes
 from ckmconf.model import System
+from ckmconf.source import NAMESPACE
 
-NS = "urn:ckm:1"
+NS = NAMESPACE  # the model's one namespace, as ckmconf reads it
 Element = etree._Element
 
 
@@ -355,6 +356,6 @@ def duplicate(element: Element) -> Element:
 
 
 DECLARATION = b'<?xml version="1.0" encoding="UTF-8"?>'
-_EMPTY = DECLARATION + b'\n<System xmlns="urn:ckm:1" version="1.0" name="untitled"/>\n'
+_EMPTY = DECLARATION + f'\n<System xmlns="{NAMESPACE}" version="1.0" name="untitled"/>\n'.encode()
 
 Listener = Callable[[Element], None]

@@ -17,6 +17,7 @@ from PySide6.QtGui import QUndoStack
 
 from ckmconf import load
 from ckmconf.model import System
+from ckmconf.source import NAMESPACE
 
 from .document import Document, Element, Problem, _mission_problems, local, resolve
 
@@ -123,7 +124,7 @@ class Workspace(QObject):
     # ------------------------------------------------------------------ queries
 
     def elements(self, tag: str) -> list[Element]:
-        return [e for d in self.all() for e in d.root.iter(f"{{urn:ckm:1}}{tag}")]
+        return [e for d in self.all() for e in d.root.iter(f"{{{NAMESPACE}}}{tag}")]
 
     def mission(self, name: str) -> Element | None:
         return next((m for m in self.elements("Mission") if m.get("name") == name), None)
