@@ -25,6 +25,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "config": ("benchmarks.config", "run", "describe"),
     "pubsub": ("benchmarks.netbench", "run_pubsub", "describe_pubsub"),
     "discovery": ("benchmarks.netbench", "run_discovery", "describe_discovery"),
+    "fusion": ("benchmarks.fusion", "run", "describe"),
     "jitter": ("benchmarks.jitter", "run", "describe"),
     "localization": ("benchmarks.localization", "run", "describe"),
     "rates": ("benchmarks.rates", "run", "describe"),
@@ -33,7 +34,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
 # These take their own options: ckm-bench NAME --help lists them.
-TAKES_OPTIONS = {"adaptation", "localization", "soak", "zoom"}
+TAKES_OPTIONS = {"adaptation", "fusion", "localization", "soak", "zoom"}
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:
