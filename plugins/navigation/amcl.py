@@ -190,16 +190,17 @@ class AmclNavigation(ProcessingPlugin):
     def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
         """The service's ``goal`` Parameter (Table 7.1 "Goal"): navigate there from the next frame.
 
-        Setting a goal again, even the same one, starts a new navigation (the robot may have moved).
+        Setting a goal again, even the same one, starts a new navigation (the robot may have moved);
+        an empty goal cancels it (the base is told to stop).
         """
         if "goal" not in parameters:
             return
         text = parameters["goal"]
-        if not isinstance(text, str) or not text.strip():
+        if not isinstance(text, str):
             raise ValueError(f"{self.owner}: service parameter 'goal' = {text!r} must be an Area name or 'x y yaw'")
         if self.env is None:
             self.setup()
-        self.goal = self._place(text, "service parameter 'goal'")
+        self.goal = self._place(text, "service parameter 'goal'") if text.strip() else None
         self.goal_text = text
         self._pending_goal = None
         self.phase, self.reason, self.plan, self.extra = "planning", "", None, []
@@ -303,6 +304,9 @@ class AmclNavigation(ProcessingPlugin):
                               "dispersion": float(estimate.dispersion)}
             result["dispersion"] = float(estimate.dispersion)
         if self.goal is None:
+            if self.path_id:  # a cancelled goal: keep the base stopped
+                result["path"] = {"id": self.path_id, "goal": "", "frame": "odom", "points": [], "yaw": None,
+                                  "speed": float(self.params["speed"])}
             return result
         localized = estimate is not None and uncertainty(estimate) <= self.params["maxUncertainty"]
         if self.phase in ("planning", "active"):

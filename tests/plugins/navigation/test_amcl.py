@@ -74,17 +74,24 @@ def test_goals_are_areas_or_poses_and_a_bad_goal_names_the_areas(file: Path) -> 
     for bad in ("Kitchen", "1 2", "1 2 nan"):
         with pytest.raises(ValueError, match=r"is neither an Area of environment 'nav-room' \(Start, Target, Walled\)"):
             nav.apply_service_parameters({"goal": bad})
-    for bad_value in ("", 3, None):
+    for bad_value in (3, None):
         with pytest.raises(ValueError, match="service parameter 'goal'"):
             nav.apply_service_parameters({"goal": bad_value})
     assert nav.goal == pytest.approx((3.5, 2.0, 1.57))  # a refused goal changes nothing
     nav.apply_service_parameters({"max_sensors": 2})  # not this plugin's
+    nav.apply_service_parameters({"goal": " "})  # no goal: navigation cancelled
+    assert nav.goal is None
 
 
-def test_without_a_goal_only_the_pose_is_published(file: Path) -> None:
+def test_without_a_goal_only_the_pose_is_published_and_a_cancelled_goal_stops_the_base(file: Path) -> None:
     nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.1 0.05")
     result = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0))
     assert set(result) == {"pose", "dispersion"}
+    nav.apply_service_parameters({"goal": "Target"})
+    assert frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)["path"]["points"]
+    nav.apply_service_parameters({"goal": ""})  # cancelled: the base is told to stop, no status
+    result = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)
+    assert result["path"]["points"] == [] and "status" not in result
     pose = result["pose"]
     assert math.hypot(pose["pose"]["x"] - 1.0, pose["pose"]["y"] - 1.8) < 0.1
     assert len(pose["covariance"]) == 9 and pose["dispersion"] == result["dispersion"] > 0
