@@ -15,7 +15,9 @@ recording: :attr:`RunRecorder.failure` says why, for the run's exit code.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import math
 import queue
 import re
 import threading
@@ -27,7 +29,7 @@ from typing import Any
 from ckmconf.model import Node, System
 
 from ..network.api import Sample, Subscription, TopicQoS, Transport
-from .bag import BagError, BagRecorder, Storage, offered_qos
+from .bag import BagRecorder, Storage, offered_qos
 from .config import ConfigRosTypes, all_topics
 from .convert import to_message
 from .types import RosTypeError
@@ -136,6 +138,7 @@ class RunRecorder:
         self._by_transport = {t.qos.name: t for t in self.topics}
         self._subscriptions: list[Subscription] = []
         self._lock = threading.Lock()
+        self._opened = threading.Event()
         self._thread = threading.Thread(target=self._run, name="ckm-recorder", daemon=True)
 
     @classmethod
@@ -146,36 +149,33 @@ class RunRecorder:
         (``--node``; several may share a run directory)."""
         return cls(system, nodes, run_dir / ("bag" if label is None else f"bag-{label}"), spec, storage)
 
-    def start(self, transport: Transport) -> None:
-        """Create the bag, declare its topics, subscribe to them through ``transport`` and start writing."""
-        try:
-            self._bag.open()
-            for topic in self.topics:
-                qos = offered_qos(topic.qos.reliability, topic.qos.history)
-                self._bag.add_topic(topic.bag_name, topic.ros_type, qos=qos)
-        except (BagError, RosTypeError, OSError) as error:
-            self._bag.close()
-            raise RecordingError(f"cannot record into {self.path}: {error}") from error
+    def start(self, transport: Transport, timeout: float = 10.0) -> None:
+        """Create the bag, declare its topics, subscribe to them through ``transport`` and start writing.
+
+        The bag is opened, written and closed by the recorder's thread alone (sqlite3 connections
+        belong to the thread that made them); this waits at most ``timeout`` s for it to open.
+        """
         self._thread.start()
+        if not self._opened.wait(timeout):
+            self._fail(f"the bag {self.path} did not open within {timeout:g} s")
+        if self.failure is not None:
+            raise RecordingError(self.failure)
         for topic in self.topics:
             self._subscriptions.append(transport.subscribe(topic.qos, self._received))
         LOG.info("recording %d topic(s) into %s (%s)", len(self.topics), self.path, self.storage)
 
     def stop(self, timeout: float = 10.0) -> None:
-        """Stop subscribing, write what is queued (at most ``timeout`` seconds), close the bag."""
+        """Stop subscribing, write what is queued and close the bag (at most ``timeout`` seconds)."""
         for subscription in self._subscriptions:
             subscription.close()
         self._subscriptions.clear()
         if self._thread.is_alive():
-            self._queue.put(_STOP)  # blocks only while the queue is full, i.e. the writer is busy
+            with contextlib.suppress(queue.Full):  # a stuck writer is reported below
+                self._queue.put(_STOP, timeout=timeout)
             self._thread.join(timeout)
             if self._thread.is_alive():
-                self._fail(f"the recorder did not finish writing within {timeout:g} s")
-                return  # its thread still owns the bag
-        try:
-            self._bag.close()
-        except Exception as error:
-            self._fail(f"cannot finish the bag {self.path}: {type(error).__name__}: {error}")
+                self._fail(f"the recorder did not finish writing {self.path} within {timeout:g} s")
+                return
         for name, counts in self.statistics()["topics"].items():
             if counts["dropped"]:
                 LOG.warning(
@@ -210,16 +210,35 @@ class RunRecorder:
             self._drop(sample.topic, f"the recorder's queue is full ({QUEUE_LIMIT} samples)")
 
     def _run(self) -> None:
+        """The recorder's thread: open the bag, write what arrives until told to stop, close it."""
+        try:
+            self._bag.open()
+            for topic in self.topics:
+                qos = offered_qos(topic.qos.reliability, topic.qos.history)
+                self._bag.add_topic(topic.bag_name, topic.ros_type, qos=qos)
+        except Exception as error:
+            self._fail(f"cannot record into {self.path}: {type(error).__name__}: {error}")
+            self._close()
+            return
+        finally:
+            self._opened.set()
         while True:
             item = self._queue.get()
             if item is _STOP:
-                return
+                break
             try:
                 self._write(item)
             except Exception as error:  # the bag itself failed: nothing more can be recorded
-                self._fail(f"recording into {self.path} failed: {type(error).__name__}: {error}")
                 LOG.exception("recording into %s failed", self.path)
-                return
+                self._fail(f"recording into {self.path} failed: {type(error).__name__}: {error}")
+                break
+        self._close()
+
+    def _close(self) -> None:
+        try:
+            self._bag.close()
+        except Exception as error:
+            self._fail(f"cannot finish the bag {self.path}: {type(error).__name__}: {error}")
 
     def _write(self, sample: Sample) -> None:
         topic = self._by_transport.get(sample.topic)
@@ -231,7 +250,11 @@ class RunRecorder:
         except (RosTypeError, TypeError, ValueError) as error:  # this value does not fit the type
             self._drop(sample.topic, str(error))
             return
-        self._bag.write_cdr(topic.bag_name, data, max(0.0, sample.stamp - sample.offset))
+        stamp = sample.stamp - sample.offset
+        if not math.isfinite(stamp) or stamp < 0:  # a publisher's bad clock: this sample, not the bag
+            self._drop(sample.topic, f"its time stamp {sample.stamp!r} is not a time since the epoch")
+            return
+        self._bag.write_cdr(topic.bag_name, data, stamp)
         with self._lock:
             self._counts[sample.topic].written += 1
 
