@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, NUMBER, P, Params, Ports
 
 CHANNELS: Mapping[str, int] = {"rgb8": 3, "bgr8": 3, "mono8": 1}
 
@@ -41,7 +41,8 @@ CHANNELS: Mapping[str, int] = {"rgb8": 3, "bgr8": 3, "mono8": 1}
 class NaoQiBridge(ProcessingPlugin):
     """The Nao's camera and head as service outputs, with their availability (see the module docstring)."""
 
-    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # Image + two angles in; Image, PanTilt, status out
+    PORTS = Ports(inputs={"camera": MAPPING, "head_yaw": NUMBER, "head_pitch": NUMBER, "*": MAPPING},
+                  outputs={"*": MAPPING})  # an Image and two angles in; Image, PanTilt, NaoStatus out
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("timeout", 0.5, "Age after which an input without new samples is stale.", unit="s", above=0.0),
         P("encoding", "rgb8", "Encoding of frames that name none: rgb8, bgr8 or mono8.", choices=tuple(CHANNELS)),
