@@ -132,3 +132,16 @@ def test_an_unreachable_goal_is_refused_with_the_reason_and_the_robot_stays(
     states, _ = _navigate(bench, "7 2 0", 5.0)  # outside the 5 × 4 m room
     assert states[-1] == "failed" and "map bounds" in bench.latest("/nav/status")["reason"]
     assert math.dist(bench.truth()[:2], START[:2]) < 0.01
+
+
+def test_in_the_use_case_lab_the_robot_drives_from_home_to_the_workbench(bench_factory: type[Bench]) -> None:
+    """configs/usecase/environment.xml, the sim's start pose (nodes.xml), the Params proposed for the
+    use case (docs/navigation.md): 7.8 m between the drop table, the column and the workbench."""
+    lab = Path(__file__).resolve().parents[3] / "configs" / "usecase" / "environment.xml"
+    nav = {"initialPose": "1.5 1.5 0.785", "initialSpread": "0.2 0.1"}
+    bench = bench_factory(lab, (1.5, 1.5, 0.785), nav=nav)
+    states, _ = _navigate(bench, "WorkbenchArea", 60.0)
+    assert states[-1] == "arrived", states
+    x, y, _ = bench.truth()
+    assert math.hypot(x - 8.1, y - 5.5) < 0.2  # the area's centroid
+    assert max(e for _, e in bench.estimates[1:]) < 0.2
