@@ -39,7 +39,7 @@ from ckmconf.rostypes import custom_msg_file, is_ros_type
 from ..resources import codec
 from ..verification.manifest import ANY, ARRAY, MAPPING, NUMBER, NUMBERS
 from .compat import compatibility_problems, field_problems, snake_case
-from .convert import IMAGE, TIME_TYPES
+from .convert import _DEFAULT_ENCODING, IMAGE, TIME_TYPES
 from .types import RosTypeError, RosTypes
 
 CKM_PACKAGE = "ckm_msgs"
@@ -203,6 +203,8 @@ class ConfigRosTypes:
         if ros_type in TIME_TYPES or (ros_type == IMAGE and isinstance(value, np.ndarray)):
             return value
         fields = dict(self.ros.fields(ros_type))
+        if isinstance(value, np.ndarray) and value.ndim in (2, 3) and "data" in fields:
+            return _image_fields(value, fields)  # an image-like MessageType (width, height, data …)
         if not isinstance(value, Mapping):
             return {"data": value} if "data" in fields else value  # else to_message says what is wrong
         names = self.field_names.get(ros_type)
@@ -222,6 +224,27 @@ class ConfigRosTypes:
         if nested and isinstance(item, list | tuple):
             return [self.payload(detail[0][1], element) for element in item]
         return item
+
+
+def _image_fields(image: np.ndarray, fields: Mapping[str, Any]) -> dict[str, Any]:
+    """An (H, W) or (H, W, C) array as the fields of an image-like message: its pixels in ``data``,
+    and ``height``, ``width``, ``encoding``, ``step``, ``is_bigendian`` where the type has them."""
+    height, width = image.shape[:2]
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    code = image.dtype.newbyteorder("<").str[1:]
+    data = np.ascontiguousarray(image).astype("<" + code, copy=False)
+    kind, detail = fields["data"]
+    element = detail[0][1][0] if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and detail[0][0] == Nodetype.BASE else ""
+    known = {
+        "height": height,
+        "width": width,
+        "encoding": _DEFAULT_ENCODING.get((code, channels), f"{code}x{channels}"),
+        "step": width * channels * data.dtype.itemsize,
+        "is_bigendian": 0,
+        # raw bytes for a bytes/uint8[] field, the values themselves for a numeric array field
+        "data": data.tobytes() if element in ("uint8", "byte", "char") else data.reshape(-1),
+    }
+    return {name: value for name, value in known.items() if name in fields}
 
 
 def _nested_name(desc: Any) -> str | None:

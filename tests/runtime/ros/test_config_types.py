@@ -136,3 +136,33 @@ def test_value_problems_use_the_compatibility_check_for_message_types() -> None:
     assert types.value_problems("array", "sensor_msgs/msg/Image") == []
     assert types.value_problems("mapping", "nav_msgs/msg/Odometry") == []
     assert types.value_problems("string", "std_msgs/msg/String") == []
+
+
+def test_an_array_on_an_image_like_message_type_fills_its_size_fields() -> None:
+    image = MessageType(
+        name="Image",
+        fields=(
+            Field(name="stamp", type="time"),
+            Field(name="width", type="uint32"),
+            Field(name="height", type="uint32"),
+            Field(name="encoding", type="string"),
+            Field(name="data", type="bytes"),
+        ),
+    )
+    depth = MessageType(
+        name="Depth", fields=(Field(name="width", type="uint32"), Field(name="data", type="uint16", count=0))
+    )
+    system = ckmconf.load(DATA / "ros_typed_loop.xml")
+    types = ConfigRosTypes(replace(system, message_types=(*system.message_types, image, depth)))
+    rgb = np.arange(24, dtype=np.uint8).reshape(2, 4, 3)
+    ros_type = types.ros_type_of("Image")
+    back = decode_payload(
+        types.ros, ros_type, types.ros.encode(ros_type, to_message(types.ros, ros_type, types.payload(ros_type, rgb)))
+    )
+    assert (back["width"], back["height"], back["encoding"], back["data"]) == (4, 2, "rgb8", rgb.tobytes())
+    frame = np.full((3, 5), 1234, np.uint16)
+    ros_type = types.ros_type_of("Depth")
+    back = decode_payload(
+        types.ros, ros_type, types.ros.encode(ros_type, to_message(types.ros, ros_type, types.payload(ros_type, frame)))
+    )
+    assert back["width"] == 5 and list(back["data"]) == [1234] * 15
