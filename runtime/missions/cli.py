@@ -11,7 +11,8 @@ the quality requirements through the services (eq. 5.2–5.7). Findings are prin
 problem reported like ``ckm-validate`` and exits 1). ``--run-dir`` keeps the
 episodes' recordings (``ckm-mission report DIR/MISSION/episode-1`` draws Fig. 7.21).
 
-``report`` prints Table 7.9 for a recorded run and writes its Fig. 7.23-style plots.
+``report`` prints Table 7.9 for a recorded run and writes its Fig. 7.23-style plots; with ``--html``
+it writes one self-contained HTML page about the run instead (:mod:`.html_report`, docs/report.md).
 """
 
 from __future__ import annotations
@@ -170,10 +171,46 @@ def main(argv: Sequence[str] | None = None) -> int:
     rep.add_argument("--out", type=Path, help="plots directory (default: RUN_DIR/report)")
     rep.add_argument("--json", action="store_true", help="end with one line of JSON")
     rep.add_argument("--depth", choices=("leaf", "top"), default="leaf", help="rows per behavior state or top state")
+    _html_arguments(rep)
     args = parser.parse_args(argv)
     if args.command == "validate":
         return _validate(args)
+    if args.html:
+        return _html_report(args)
     return report.main(args.run_dir, out=args.out, json=args.json, depth=args.depth)
+
+
+def _html_arguments(rep: argparse.ArgumentParser) -> None:
+    """``report --html``: one self-contained HTML page (runtime.missions.html_report)."""
+    from .report_bag import ReportTopics
+
+    topics = ReportTopics()
+    html = rep.add_argument_group("--html", "one self-contained HTML page; --out names it (RUN_DIR/report.html)")
+    html.add_argument("--html", action="store_true", help="write the HTML report instead of the table and plots")
+    html.add_argument("--config", type=Path, help="the run's System file (default: the one stats.json names)")
+    html.add_argument("--bag", type=Path, action="append", help="a rosbag2 bag to read (default: those in RUN_DIR)")
+    html.add_argument("--target", help="words naming the target object (default: the one recognised most often)")
+    html.add_argument("--pose-topic", default=topics.estimate, help=f"estimated pose topic ({topics.estimate})")
+    html.add_argument("--truth-topic", action="append", help=f"ground-truth pose topic ({', '.join(topics.truth)})")
+    html.add_argument("--camera-topic", action="append", help=f"camera image topic ({', '.join(topics.cameras)})")
+    html.add_argument("--zoom-topic", action="append", help=f"zoom-map area topic ({', '.join(topics.zoom)})")
+
+
+def _html_report(args: argparse.Namespace) -> int:
+    from . import html_report
+    from .report_bag import ReportTopics
+
+    defaults = ReportTopics()
+    topics = ReportTopics(
+        estimate=args.pose_topic,
+        truth=tuple(args.truth_topic or defaults.truth),
+        fused=defaults.fused,
+        recognition=defaults.recognition,
+        cameras=tuple(args.camera_topic or defaults.cameras),
+        zoom=tuple(args.zoom_topic or defaults.zoom),
+    )
+    options = html_report.Options(config=args.config, bags=args.bag, topics=topics, target=args.target)
+    return html_report.main(args.run_dir, out=args.out, options=options)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,230 @@
+"""What the HTML run report (:mod:`.html_report`) reads from a run's rosbag2 bags (§7.4–7.5).
+
+``ckm-run --record TOPICS`` leaves a rosbag2 bag (MCAP or sqlite3, :mod:`runtime.ros.bag`) in the
+run directory. The report takes from it, by topic (:class:`ReportTopics`, every name configurable):
+
+- the **estimated trajectory** (``/nav/pose``, PoseEstimate) and the **true trajectory** (a
+  simulator's ground-truth topic, when recorded) for the Fig. 7.16 picture;
+- the **zoom-map areas** (§6.1.3) when a topic carries them (``{x, y, width, depth}``, the shape of
+  ``plugins.environment.zoom.Recentring``);
+- the **recognition results** (``/recog/objects`` fused, and each source's) for Fig. 7.19;
+- the **camera frame nearest** each moment of Fig. 7.22 / 7.24 (an ``Image`` on a camera topic).
+
+Payloads are read by shape, not by type name, so a CKM MessageType recorded as its generated
+``ckm_msgs/msg/…`` type and a standard ROS type (``geometry_msgs/msg/PoseStamped``,
+``nav_msgs/msg/Odometry``, ``sensor_msgs/msg/Image``) both work. Times are the bag's (seconds since
+the epoch, the publication time), which the report puts on the recordings' run time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..ros.bag import BagSource
+from ..ros.convert import IMAGE_ENCODINGS
+
+STORAGE_SUFFIXES = (".mcap", ".db3")
+
+
+@dataclass(frozen=True)
+class ReportTopics:
+    """The topics the report looks for in the bags (all configurable on the command line)."""
+
+    estimate: str = "/nav/pose"
+    truth: tuple[str, ...] = ("/sim/turtlebot/pose", "/sim/turtlebot/true_pose", "/sim/truth/turtlebot")
+    fused: str = "/recog/objects"
+    recognition: tuple[str, ...] = ("/rgbd/rgb/objects", "/rgbd/depth/objects", "/pantilt/objects")
+    cameras: tuple[str, ...] = ("xtion_rgb_raw", "/rgbd/rgb/image", "/nao/camera/image")
+    zoom: tuple[str, ...] = ("/nav/zoom", "/env/zoom", "/zoom_map/area")
+
+    def wanted(self) -> set[str]:
+        return {self.estimate, self.fused, *self.truth, *self.recognition, *self.cameras, *self.zoom}
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """One recognised object in one recognition message."""
+
+    time: float
+    name: str
+    reliability: float
+    x: float | None
+    y: float | None
+
+
+@dataclass
+class Frame:
+    """The camera frame nearest a moment: the payload is decoded to pixels only for these."""
+
+    topic: str
+    moment: float
+    label: str
+    time: float = math.nan
+    payload: Any = None
+
+
+@dataclass
+class BagData:
+    """Everything the report takes from the bags, with notes on what was not there."""
+
+    bags: list[Path] = field(default_factory=list)
+    topics: dict[str, str] = field(default_factory=dict)  # topic → ROS type, over every bag
+    counts: dict[str, int] = field(default_factory=dict)  # messages per topic
+    poses: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)  # topic → (t, x, y)
+    zoom: list[tuple[float, float, float, float, float]] = field(default_factory=list)  # t, x, y, width, depth
+    detections: dict[str, list[list[Sighting]]] = field(default_factory=dict)  # topic → per message
+    frames: list[Frame] = field(default_factory=list)
+    errors: list[str] = field(default_factory=list)
+
+
+def find_bags(run_dir: Path) -> list[Path]:
+    """The bag directories of a run: the run directory itself or a folder up to two levels below
+    it holding ``metadata.yaml`` or a storage file (``.mcap``/``.db3``)."""
+    candidates = [run_dir]
+    for child in sorted(p for p in run_dir.iterdir() if p.is_dir()):
+        candidates += [child, *sorted(p for p in child.iterdir() if p.is_dir())]
+    return [c for c in candidates if _is_bag(c)]
+
+
+def _is_bag(folder: Path) -> bool:
+    if (folder / "metadata.yaml").is_file():
+        return True
+    return any(p.suffix in STORAGE_SUFFIXES and p.is_file() for p in folder.iterdir())
+
+
+def _storage_files(bag: Path) -> str:
+    files = sorted(p.name for p in bag.glob("*") if p.suffix in STORAGE_SUFFIXES)
+    return ", ".join(str(bag / f) for f in files) or str(bag / "metadata.yaml")
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.number):
+        return None
+    number = float(value)
+    return number if math.isfinite(number) else None
+
+
+def pose_xy(payload: Any, depth: int = 0) -> tuple[float, float] | None:
+    """The planar position a pose-like payload holds: ``{x, y}``, ``{pose: …}``, ``{position: …}``
+    (Pose2D, PoseEstimate, Odometry, geometry_msgs Pose/PoseStamped, nav_msgs/Odometry)."""
+    if not isinstance(payload, Mapping) or depth > 4:
+        return None
+    x, y = _number(payload.get("x")), _number(payload.get("y"))
+    if x is not None and y is not None:
+        return x, y
+    for key in ("pose", "position"):
+        if key in payload:
+            return pose_xy(payload[key], depth + 1)
+    return None
+
+
+def sightings(payload: Any, t: float) -> list[Sighting]:
+    """The objects of a recognition result ``{objects: [{name|label, shape, texture, x, y, reliability}]}``."""
+    if not isinstance(payload, Mapping) or not isinstance(payload.get("objects"), list | tuple):
+        return []
+    found = []
+    for item in payload["objects"]:
+        if not isinstance(item, Mapping):
+            continue
+        reliability = _number(item.get("reliability"))
+        if reliability is None:
+            continue
+        words = [str(item.get(k) or "") for k in ("name", "label", "shape", "texture")]
+        name = " ".join(dict.fromkeys(w for w in words if w))  # name first, no repeats
+        found.append(Sighting(t, name, reliability, _number(item.get("x")), _number(item.get("y"))))
+    return found
+
+
+def _zoom_area(payload: Any) -> tuple[float, float, float, float] | None:
+    if not isinstance(payload, Mapping):
+        return None
+    values = [_number(payload.get(k)) for k in ("x", "y", "width", "depth")]
+    if all(v is not None for v in values):
+        x, y, w, d = values
+        return x, y, w, d  # type: ignore[return-value]
+    bounds = [_number(payload.get(k)) for k in ("xmin", "ymin", "xmax", "ymax")]
+    if all(v is not None for v in bounds):
+        x0, y0, x1, y1 = bounds
+        return (x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0  # type: ignore[operator]
+    return None
+
+
+def image_pixels(payload: Any) -> np.ndarray:
+    """The pixels of an image payload: an (H, W[, C]) array (``sensor_msgs/msg/Image`` read by
+    :mod:`runtime.ros.convert`) or a CKM ``Image`` ``{width, height, encoding, data}``."""
+    if isinstance(payload, np.ndarray):
+        pixels = payload
+        encoding = "rgb8"
+    elif isinstance(payload, Mapping) and isinstance(payload.get("data"), bytes | bytearray | np.ndarray):
+        encoding = str(payload.get("encoding") or "rgb8")
+        if encoding not in IMAGE_ENCODINGS:
+            raise ValueError(f"image encoding {encoding!r} is not supported ({', '.join(IMAGE_ENCODINGS)})")
+        code, channels = IMAGE_ENCODINGS[encoding]
+        width, height = int(payload.get("width") or 0), int(payload.get("height") or 0)
+        raw = np.asarray(payload["data"], dtype=np.uint8) if not isinstance(payload["data"], bytes | bytearray) \
+            else np.frombuffer(bytes(payload["data"]), dtype=np.uint8)  # fmt: skip
+        size = width * height * channels * np.dtype(code).itemsize
+        if width <= 0 or height <= 0 or raw.size < size:
+            raise ValueError(f"image of {width}×{height} {encoding}: {raw.size} bytes do not hold it")
+        flat = raw[:size].view(np.dtype("<" + code))
+        pixels = flat.reshape((height, width) if channels == 1 else (height, width, channels))
+    else:
+        raise ValueError(f"not an image payload ({type(payload).__name__})")
+    if pixels.ndim == 3 and encoding.startswith("bgr"):
+        pixels = pixels[:, :, [2, 1, 0, *range(3, pixels.shape[2])]]
+    return pixels
+
+
+def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[float, str]]) -> BagData:
+    """Read the wanted topics of ``bags``; ``moments`` are (epoch time, label) for the snapshots.
+
+    A bag that cannot be read (no metadata, a corrupt storage file, an undecodable message) adds
+    an error naming its files to :attr:`BagData.errors`; what was read before it is kept.
+    """
+    data = BagData()
+    for bag in bags:
+        data.bags.append(bag)
+        try:
+            types = BagSource(bag).topic_types()
+        except Exception as error:  # rosbags raises several kinds for a broken bag: name the files
+            data.errors.append(f"{_storage_files(bag)}: not a readable rosbag2 bag: {error}")
+            continue
+        data.topics.update(types)
+        wanted = sorted(set(types) & topics.wanted())
+        if not wanted:
+            continue
+        frames = {(t, m): Frame(t, m, label) for t in topics.cameras if t in types for m, label in moments}
+        try:
+            for message in BagSource(bag, topics=wanted).messages():
+                _take(data, topics, message.topic, message.time, message.payload, frames)
+        except Exception as error:
+            data.errors.append(f"{_storage_files(bag)}: corrupt rosbag2 bag, reading stopped: {error}")
+        for frame in frames.values():
+            if frame.payload is not None:
+                data.frames.append(frame)
+    data.frames.sort(key=lambda f: (f.moment, f.topic))
+    return data
+
+
+def _take(data: BagData, topics: ReportTopics, topic: str, t: float, payload: Any, frames: dict[Any, Frame]) -> None:
+    data.counts[topic] = data.counts.get(topic, 0) + 1
+    if topic == topics.estimate or topic in topics.truth:
+        xy = pose_xy(payload)
+        if xy is not None:
+            data.poses.setdefault(topic, []).append((t, *xy))
+    if topic in topics.zoom:
+        area = _zoom_area(payload)
+        if area is not None and (not data.zoom or data.zoom[-1][1:] != area):  # one entry per move
+            data.zoom.append((t, *area))
+    if topic == topics.fused or topic in topics.recognition:
+        data.detections.setdefault(topic, []).append(sightings(payload, t))
+    if topic in topics.cameras:
+        for (camera, moment), frame in frames.items():
+            if camera == topic and (frame.payload is None or abs(t - moment) < abs(frame.time - moment)):
+                frame.time, frame.payload = t, payload

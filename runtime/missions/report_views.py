@@ -1,0 +1,154 @@
+"""The sections of the HTML run report drawn from the run's bags (:mod:`.report_bag`): Fig. 7.16,
+Fig. 7.19 and the camera frames of Fig. 7.22 / 7.24; each says what it lacks instead of failing.
+
+Bag times are seconds since the epoch; the recordings' run time is ``epoch − origin`` where the
+origin is the recordings' wall anchor (:func:`.html_report._origin`), so every plot shares the time
+axis of Table 7.9 and Fig. 7.23.
+"""
+
+from __future__ import annotations
+
+import base64
+from bisect import bisect_left
+from collections import Counter
+from collections.abc import Callable, Sequence
+from html import escape
+from pathlib import Path
+
+from ckmconf.model import System
+
+from .report import Report
+from .report_bag import BagData, ReportTopics, Sighting, image_pixels
+from .report_figures import image_png, map_png, reliability_png
+
+APPROACH_STATES = ("SPOT", "APPR", "PICK", "OBJ_TRACK", "OBJ_FIX")
+"""States shaded on the reliability plot: where recognition matters (§7.4.1, Fig. 7.19)."""
+POSE_GAP = 1.0
+"""Longest time (s) between a recognition and the robot pose it is measured from."""
+
+
+def png_tag(data: bytes, alt: str) -> str:
+    return f'<img alt="{escape(alt)}" src="data:image/png;base64,{base64.b64encode(data).decode("ascii")}">'
+
+
+def note(text: str, kind: str = "note") -> str:
+    return f'<p class="{kind}">{escape(text)}</p>'
+
+
+def _missing(what: str, topics: Sequence[str], data: BagData) -> str:
+    where = "no bag in the run" if not data.bags else f"not in the bag{'s' if len(data.bags) > 1 else ''}"
+    return note(f"No {what}: topic {' / '.join(topics)} {where}.")
+
+
+def map_section(
+    system: System | None, config: Path | None, data: BagData, topics: ReportTopics, clock: Callable[[float], float]
+) -> str:
+    """Fig. 7.16: the environment, estimated and true trajectories, zoom-map areas, target sightings."""
+    out = []
+    env = system.environment if system is not None else None
+    if env is None:
+        out.append(note("No <Environment> in the configuration: the trajectories are drawn without a map."))
+    tracks = []
+    estimate = data.poses.get(topics.estimate, [])
+    if estimate:
+        tracks.append((f"estimated ({topics.estimate})", "tab:blue", [(clock(t), x, y) for t, x, y in estimate]))
+    else:
+        out.append(_missing("estimated trajectory", [topics.estimate], data))
+    truth = next((t for t in topics.truth if data.poses.get(t)), None)
+    if truth is not None:
+        tracks.append((f"true ({truth})", "tab:green", [(clock(t), x, y) for t, x, y in data.poses[truth]]))
+    else:
+        out.append(_missing("true trajectory", topics.truth, data))
+    if not data.zoom:
+        out.append(_missing("zoom-map areas", topics.zoom, data))
+    zoom = [(clock(t), x, y, w, d) for t, x, y, w, d in data.zoom]
+    sightings = [s for message in data.detections.get(topics.fused, []) for s in message]
+    target = [(s.x, s.y) for s in sightings if s.x is not None and s.y is not None]
+    if env is None and not tracks and not zoom:
+        return "".join(out) + note("Nothing to draw for Fig. 7.16.")
+    base = config.parent if config is not None else None
+    return "".join(out) + png_tag(map_png(env, tracks, zoom, target if len(target) < 5000 else [], base), "Fig. 7.16")
+
+
+def choose_target(data: BagData, topics: ReportTopics, target: str | None) -> tuple[list[str], str]:
+    """The terms naming the target object and how it was chosen (given, or recognised most often)."""
+    if target:
+        return target.lower().split(), f"target {target!r} (--target)"
+    names: Counter[str] = Counter()
+    for topic in [topics.fused, *topics.recognition]:
+        for message in data.detections.get(topic, []):
+            names.update({s.name for s in message if s.name})
+        if names:
+            break
+    if not names:
+        return [], "no object recognised"
+    name = names.most_common(1)[0][0]
+    return name.lower().split(), f"target {name!r}: the object recognised most often (--target to choose another)"
+
+
+def _best(message: list[Sighting], terms: list[str]) -> Sighting | None:
+    matching = [s for s in message if terms and all(t in s.name.lower() for t in terms)]
+    return max(matching, key=lambda s: s.reliability) if matching else None
+
+
+def _pose_at(track: list[tuple[float, float, float]], t: float) -> tuple[float, float] | None:
+    times = [p[0] for p in track]
+    i = bisect_left(times, t)
+    near = [p for p in track[max(0, i - 1) : i + 1] if abs(p[0] - t) <= POSE_GAP]
+    if not near:
+        return None
+    best = min(near, key=lambda p: abs(p[0] - t))
+    return best[1], best[2]
+
+
+def reliability_section(
+    data: BagData, topics: ReportTopics, report: Report, target: str | None, clock: Callable[[float], float]
+) -> str:
+    """Fig. 7.19: the target's reliability vs run time on each recognition topic, vs distance (fused)."""
+    present = [t for t in [topics.fused, *topics.recognition] if data.detections.get(t)]
+    if not present:
+        return _missing("recognition results", [topics.fused, *topics.recognition], data)
+    terms, chosen = choose_target(data, topics, target)
+    out = [f"<p>{escape(chosen)}.</p>"]
+    series = []
+    for topic in present:
+        best = [_best(m, terms) for m in data.detections[topic]]
+        points = [(clock(s.time), s.reliability) for s in best if s is not None]
+        if points:
+            series.append((topic + (" (fused)" if topic == topics.fused else ""), points))
+        missed = sum(1 for s in best if s is None)
+        out.append(f"<p>{escape(topic)}: target in {len(points)} of {len(best)} results ({missed} without it).</p>")
+    distance = []
+    track = data.poses.get(topics.estimate) or next((data.poses[t] for t in topics.truth if data.poses.get(t)), [])
+    for message in data.detections.get(topics.fused, []):
+        seen = _best(message, terms)
+        robot = _pose_at(track, seen.time) if seen is not None and seen.x is not None else None
+        if seen is not None and robot is not None and seen.x is not None and seen.y is not None:
+            distance.append((((seen.x - robot[0]) ** 2 + (seen.y - robot[1]) ** 2) ** 0.5, seen.reliability))
+    if not distance:
+        out.append(note("No reliability against distance: no fused target position with a robot pose near it."))
+    spans = [(r.state, begin, end) for r in report.rows if r.state in APPROACH_STATES for begin, end in r.spans]
+    if not series:
+        return "".join(out) + note("The target was never recognised: nothing to plot.")
+    return "".join(out) + png_tag(reliability_png(series, distance, spans), "Fig. 7.19")
+
+
+def snapshots_section(
+    data: BagData, topics: ReportTopics, moments: list[tuple[float, str]], states: Sequence[str]
+) -> str:
+    """The camera frame nearest each moment (entering one of ``states``) on every camera topic."""
+    if not moments:
+        return note(f"No moment to show: no agent entered {', '.join(states)} (or the recordings have no wall time).")
+    cameras = [t for t in topics.cameras if t in data.topics]
+    if not cameras:
+        return _missing("camera images", topics.cameras, data)
+    out = []
+    for frame in data.frames:
+        try:
+            picture = png_tag(image_png(image_pixels(frame.payload)), frame.label)
+        except ValueError as error:
+            out.append(note(f"{frame.topic}: frame at {frame.time:.3f} not shown: {error}", "error"))
+            continue
+        caption = f"{frame.label} — {frame.topic}, frame {frame.time - frame.moment:+.2f} s from it"
+        out.append(f"<figure>{picture}<figcaption>{escape(caption)}</figcaption></figure>")
+    return "".join(out) or note(f"No frame on {', '.join(cameras)}.")
