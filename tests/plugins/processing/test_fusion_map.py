@@ -70,8 +70,9 @@ def head_towards(lab: Lab, name: str) -> dict[str, float]:
 
 
 def located(out: Mapping[str, Any], name: str) -> dict[str, Any]:
-    (obj,) = [o for o in out["objects"] if o["name"] == name]
-    return obj
+    found: list[dict[str, Any]] = [o for o in out["objects"] if o["name"] == name]
+    assert len(found) == 1, found
+    return found[0]
 
 
 # --------------------------------------------------------------------------- the mount chain
