@@ -244,8 +244,11 @@ class RunRecorder:
         topic = self._by_transport.get(sample.topic)
         if topic is None:
             return
+        value = sample.value
+        if topic.qos.type == "bool" and isinstance(value, int | float) and not isinstance(value, bool):
+            value = value != 0  # a digital channel reads 0.0 / 1.0: numbers fit bool topics (verify)
         try:
-            payload = self.types.payload(topic.ros_type, sample.value)
+            payload = self.types.payload(topic.ros_type, value)
             data = self._bag.types.encode(topic.ros_type, to_message(self._bag.types, topic.ros_type, payload))
         except (RosTypeError, TypeError, ValueError) as error:  # this value does not fit the type
             self._drop(sample.topic, str(error))

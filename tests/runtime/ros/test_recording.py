@@ -134,12 +134,15 @@ def test_values_that_do_not_fit_are_dropped_and_counted_never_fatal(tmp_path: Pa
     system = ckmconf.load(config)
     network = system.network
     assert network is not None
-    recorder = RunRecorder.in_run(system, system.nodes, tmp_path, None, "/wheels,/scan,/reading,/clock_time", "mcap")
+    recorder = RunRecorder.in_run(
+        system, system.nodes, tmp_path, None, "/wheels,/scan,/reading,/clock_time,/bumper", "mcap"
+    )
     assert [t.ros_type for t in recorder.topics] == [
         "sensor_msgs/msg/LaserScan",
         "ckm_test_msgs/msg/Reading",
         "ckm_msgs/msg/WheelState",
         "builtin_interfaces/msg/Time",
+        "std_msgs/msg/Bool",
     ]
     transport = open_transport(network, name="recorder-test")
     transport.setup()
@@ -157,6 +160,8 @@ def test_values_that_do_not_fit_are_dropped_and_counted_never_fatal(tmp_path: Pa
         publish["/reading"].publish({"label": "cup", "value": 1.5, "quality": {"reliability": 0.9}})
         publish["/clock_time"].publish(now)
         publish["/clock_time"].publish(float("nan"))
+        publish["/bumper"].publish(1.0)  # a digital channel's read: numbers fit bool topics
+        publish["/bumper"].publish(False)
     finally:
         recorder.stop()
         transport.stop()
@@ -166,18 +171,20 @@ def test_values_that_do_not_fit_are_dropped_and_counted_never_fatal(tmp_path: Pa
         "/scan": (1, 1),
         "/reading": (1, 0),
         "/clock_time": (1, 1),
+        "/bumper": (2, 0),
     }
     assert "exactly 2" in stats["/wheels"]["firstDrop"] and recorder.failure is None
     with (tmp_path / "bag" / "bag.mcap").open("rb") as stream:
-        decoded = {
-            c.topic: m
-            for _, c, _, m in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
-        }
+        messages = list(make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages())
+    decoded = {c.topic: m for _, c, _, m in messages}  # the last of each topic
+    assert [m.data for _, c, _, m in messages if c.topic == "/bumper"] == [True, False]
     assert list(decoded["/wheels"].wheel_speeds) == [1.0, 2.0] and decoded["/wheels"].pose.x == 3.0
     assert bytes(decoded["/wheels"].raw) == b"\x07" and decoded["/wheels"].stamp.sec == math.floor(now)
     assert decoded["/reading"].label == "cup" and decoded["/reading"].quality.reliability == pytest.approx(0.9)
     assert decoded["/scan"].header.frame_id == "laser" and list(decoded["/scan"].ranges) == [1.0] * 4
-    assert _rosbags_messages(tmp_path / "bag") == Counter({"/wheels": 1, "/scan": 1, "/reading": 1, "/clock_time": 1})
+    assert _rosbags_messages(tmp_path / "bag") == Counter(
+        {"/wheels": 1, "/scan": 1, "/reading": 1, "/clock_time": 1, "/bumper": 2}
+    )
 
 
 def test_unknown_topics_are_refused_with_the_known_ones() -> None:
