@@ -4,7 +4,7 @@ The loop plays what the use case's turtlebot node does (configs/usecase/nodes.xm
 sensor publishes a JointState without names at 20 Hz, the joint-trajectory controller (the real
 ``controller.joint-trajectory``, nodes.xml's Params) plays the plugin's trajectories at 60 Hz, and
 its commands drive the joints in position mode (the gripper's on both fingers, as the ``mirror``
-Param does, under the grasp's 10 N force limit of D87). The plugin sees only its input messages;
+Param does, at the URDF's effort limit as ``hardware.sim`` does). The plugin sees only its input messages;
 the physics is stepped here, in simulated time, and :class:`plugins.sim.grasp.Gripper` decides
 when an object is held.
 """
@@ -87,8 +87,8 @@ class ArmLoop:
         commands = self.controller.step_outputs(inputs, CONTROL_STEPS * self.world.time_step)
         for joint, command in zip(self.joints[:4], commands, strict=False):
             self.robot.command(joint, "position", float(command))
-        for finger in (self.joints[4], self.mirror):  # under the grasp's force limit (D87)
-            self.robot.command(finger, "position", float(commands[4]), self.gripper.force)
+        for finger in (self.joints[4], self.mirror):  # at the URDF's effort limit, as hardware.sim drives them
+            self.robot.command(finger, "position", float(commands[4]))
 
     def run(self, seconds: float) -> None:
         """Advance the loop by ``seconds`` of simulated time."""
