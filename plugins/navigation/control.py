@@ -6,15 +6,15 @@ before the acceleration limits of :class:`Limiter`.
 - :class:`PathFollower`: pure pursuit (Coulter 1992) on a polyline. The carrot is ``lookahead``
   metres further along the path than the robot's projection on it; the curvature toward it is
   κ = 2·sin(α)/d (α its bearing, d its distance). The speed is the top speed, capped so the
-  robot can still stop at the path's end (v ≤ √(2·a·remaining)) and so that |κ·v| stays within
-  ``max_angular``; a carrot more than ``turn_in_place`` rad off the heading is first faced by
+  robot can still stop at the path's end braking at half the limit (v ≤ √(a·remaining)) and
+  so that |κ·v| stays within ``max_angular``; a carrot more than ``turn_in_place`` rad off the heading is first faced by
   turning in place (the Kobuki is differential drive). At the end (within ``tolerance``) the
   robot turns in place to the path's final yaw, if it has one.
 - :class:`RelativeMove`: rotate / drive / rotate to a goal pose fixed in the odometry frame when
   the goal arrived. A goal behind the robot (BACK's) is driven backwards rather than turned to.
   While driving, the heading is kept on the goal point by a proportional term, and the speed
-  follows the same stopping profile; the drive ends when the goal is within ``tolerance`` or has
-  been passed (its projection on the heading changes sign).
+  follows the same stopping profile; the drive ends when the goal is less than a fifth of
+  ``tolerance`` ahead or has been passed (its projection on the heading changes sign).
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ from .frames import Point, Pose, along, project, relative, remaining_length, wra
 
 Command = tuple[float, float]
 STOP: Command = (0.0, 0.0)
+FINISH = 0.2
+"""A relative move drives until the goal is this share of the tolerance ahead (then brakes)."""
 
 
 @dataclass(frozen=True)
@@ -46,8 +48,12 @@ class Gains:
 
 
 def stopping_speed(distance: float, gains: Gains, top: float) -> float:
-    """The fastest speed (≤ ``top``) from which the robot still stops within ``distance`` m."""
-    return min(top, max(gains.min_speed, math.sqrt(2.0 * gains.accel * max(0.0, distance))))
+    """A speed (≤ ``top``) from which the robot stops within ``distance`` m braking at half ``accel``.
+
+    Planning the stop at half the limit leaves the other half for the command's delay (one
+    period, and the base's own loops): braking at the limit overshot by the distance of a period.
+    """
+    return min(top, max(gains.min_speed, math.sqrt(gains.accel * max(0.0, distance))))
 
 
 def turn(error: float, gains: Gains) -> float:
@@ -150,7 +156,7 @@ class RelativeMove:
             self.phase = "drive"
         if self.phase == "drive":
             ahead, error = self._bearing(pose)
-            if self.remaining > g.tolerance and ahead > 0:
+            if ahead > FINISH * g.tolerance:  # drive on to a fraction of the tolerance: it ends short otherwise
                 v = stopping_speed(ahead, g, self.speed)
                 w = max(-g.max_angular, min(g.max_angular, g.heading_gain * error)) if self.remaining > 0.1 else 0.0
                 return (-v if self.backwards else v), w

@@ -115,7 +115,7 @@ def test_relative_moves_end_within_a_few_centimetres(tmp_path: Path, bench_facto
         x, y, yaw = bench.truth()
         c, s = math.cos(yaw0), math.sin(yaw0)
         want = (x0 + c * dx - s * dy, y0 + s * dx + c * dy)
-        assert math.dist((x, y), want) < 0.04, (goal_id, (x, y), want)
+        assert math.dist((x, y), want) < 0.03, (goal_id, (x, y), want)
         assert abs(math.remainder(yaw - yaw0 - dyaw, 2 * math.pi)) < 0.06
     assert bench.latest("/base/odom")["dispersion"] > 0
 
