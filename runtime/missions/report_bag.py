@@ -103,6 +103,11 @@ def _storage_files(bag: Path) -> str:
     return ", ".join(str(bag / f) for f in files) or str(bag / "metadata.yaml")
 
 
+def _first_line(error: Exception) -> str:
+    lines = str(error).strip().splitlines()
+    return lines[0] if lines else type(error).__name__
+
+
 def _number(value: Any) -> float | None:
     if isinstance(value, bool) or not isinstance(value, int | float | np.number):
         return None
@@ -193,7 +198,7 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
         try:
             types = BagSource(bag).topic_types()
         except Exception as error:  # rosbags raises several kinds for a broken bag: name the files
-            data.errors.append(f"{_storage_files(bag)}: not a readable rosbag2 bag: {error}")
+            data.errors.append(f"{_storage_files(bag)}: not a readable rosbag2 bag: {_first_line(error)}")
             continue
         data.topics.update(types)
         wanted = sorted(set(types) & topics.wanted())
@@ -204,7 +209,7 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
             for message in BagSource(bag, topics=wanted).messages():
                 _take(data, topics, message.topic, message.time, message.payload, frames)
         except Exception as error:
-            data.errors.append(f"{_storage_files(bag)}: corrupt rosbag2 bag, reading stopped: {error}")
+            data.errors.append(f"{_storage_files(bag)}: corrupt rosbag2 bag, reading stopped: {_first_line(error)}")
         for frame in frames.values():
             if frame.payload is not None:
                 data.frames.append(frame)

@@ -30,6 +30,8 @@ from ckmconf.model.environment import Environment, EnvObject, Geometry2D, Geomet
 from ckmconf.model.environment import Polygon as PolygonRecord
 from ckmconf.model.environment import Rectangle as RectangleRecord
 
+SNAPSHOT_WIDTH = 480
+"""Camera frames wider than this (px) are subsampled by a whole step before encoding."""
 Track = tuple[str, str, Sequence[tuple[float, float, float]]]  # label, colour, (t, x, y)
 
 
@@ -122,7 +124,8 @@ def map_png(
         draw_environment(ax, env, base)
     for i, (t, x, y, width, depth) in enumerate(zoom):
         ax.add_patch(Box((x - width / 2, y - depth / 2), width, depth, fill=False, ls="--", ec="tab:purple", lw=1))
-        ax.text(x - width / 2 + 0.05, y - depth / 2 + 0.05, f"Z{i + 1} {t:.0f}s", fontsize=6, color="tab:purple")
+        label = f"Z{i + 1} {t:.0f}s"
+        ax.text(x - width / 2 + 0.05, y - depth / 2 + 0.05, label, fontsize=6, color="tab:purple", clip_on=True)
     for label, color, points in tracks:
         if not points:
             continue
@@ -174,6 +177,8 @@ def image_png(pixels: np.ndarray) -> bytes:
     from matplotlib.image import imsave
 
     array = np.asarray(pixels)
+    step = max(1, -(-array.shape[1] // SNAPSHOT_WIDTH))  # a frame is shown small: keep the page light
+    array = array[::step, ::step]
     if array.ndim == 3 and array.shape[2] == 1:
         array = array[:, :, 0]
     if array.dtype != np.uint8:

@@ -18,7 +18,7 @@ from runtime.missions.html_report import Options, build_html, main
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import build_report
 from runtime.missions.report_bag import ReportTopics
-from runtime.ros.bag import BagRecorder
+from runtime.ros.bag import BagRecorder, Storage
 from runtime.ros.types import RosTypes
 
 REPO = Path(__file__).resolve().parents[3]
@@ -108,9 +108,9 @@ def robot_xy(t: float) -> tuple[float, float]:
     return 1.5 + 6.1 * s, 1.5 + 3.9 * s
 
 
-def write_bag(run_dir: Path, topics: dict[str, str] = TOPICS) -> Path:
+def write_bag(run_dir: Path, topics: dict[str, str] = TOPICS, storage: Storage = "mcap") -> Path:
     path = run_dir / "bag"
-    with BagRecorder(path, storage="mcap", types=ros_types()) as bag:
+    with BagRecorder(path, storage=storage, types=ros_types()) as bag:
         for topic, type_name in topics.items():
             bag.add_topic(topic, type_name)
         for t in np.arange(0.0, 151.0, 1.0):
@@ -336,3 +336,11 @@ def test_cli_options_choose_topics_target_and_bag(tmp_path: Path, capsys: pytest
 def test_options_default_to_the_use_case_topics() -> None:
     topics = Options().topics
     assert topics == ReportTopics() and topics.estimate == "/nav/pose" and "/nao/camera/image" in topics.cameras
+
+
+def test_a_sqlite3_bag_is_read_like_an_mcap_one(tmp_path: Path) -> None:
+    run_dir = make_run(tmp_path / "run", bag=False, config=False)
+    write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"], "/recog/objects": TOPICS["/recog/objects"]}, "sqlite3")
+    page = parse(build_html(run_dir)[0])
+    assert {"Fig. 7.16", "Fig. 7.19"} <= {alt for alt, _ in page.images}
+    assert ["/recog/objects", "ckm_msgs/msg/Detections", "61"] in page.table("topics")
