@@ -19,7 +19,7 @@ Staleness (D112). The stream hands the plugin the newest value of each input whe
 has a fresh sample, without saying which. A camera frame is new when its ``stamp`` changes; the
 head is live when its angles change or when a frame comes without a new camera frame (then a head
 sample triggered it). That needs the service's period shorter than the camera's (the default
-1/30 s against the Nao camera's 1/15 s). NaoQi's battery and stiffness are not simulated: the
+1/30 s against the simulated Nao camera's 0.5 s, D126). NaoQi's battery and stiffness are not simulated: the
 status leaves them out.
 """
 
@@ -44,7 +44,8 @@ class NaoQiBridge(ProcessingPlugin):
     PORTS = Ports(inputs={"camera": MAPPING, "head_yaw": NUMBER, "head_pitch": NUMBER, "*": MAPPING},
                   outputs={"*": MAPPING})  # an Image and two angles in; Image, PanTilt, NaoStatus out
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("timeout", 0.5, "Age after which an input without new samples is stale.", unit="s", above=0.0),
+        P("timeout", 1.5, "Age after which an input without new samples is stale (three periods of the use "
+          "case's simulated camera, D126).", unit="s", above=0.0),
         P("encoding", "rgb8", "Encoding of frames that name none: rgb8, bgr8 or mono8.", choices=tuple(CHANNELS)),
     )
 
