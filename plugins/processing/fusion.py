@@ -4,7 +4,10 @@ Input: ``{input name: latest result or None}`` of the recognition services feedi
 Each input is declared (Param ``inputs``) as ``line`` (2D: ``keypoint-matching``, objects with
 normalized image ``x``, ``y``) or ``point`` (3D: ``kdtree-shape-classifier``, objects with ``x y
 z`` in metres). A 2D object becomes the projection ray of eq. 6.32–6.34 through its pixel; a 3D
-object a point. Both are put in one common frame by the sensor's pose (``sensor_pose``).
+object a point. Both are put in one common frame by the sensor's pose (``sensor_pose``): a
+static Param (``poses``), or, for inputs mounted on a robot (``mounts``), the MAP frame: the
+robot's pose (the ``pose`` input fed by ``/nav/pose``, or a fixed ``bases`` entry) composed with
+the sensor's URDF mount at the head angles of the ``head`` input (``placement.py``, D118).
 Noise: a point is isotropic, σ = ``pointSigma`` (3 cm: the depth service reports the visible
 surface's centroid, a few cm off the solid's centre); a ray's error is angular, ``lineSigma``
 (0.01 rad, ~5 px at VGA), so its lateral σ grows with range.
@@ -77,12 +80,15 @@ class FeatureFusion(ProcessingPlugin):
     (r_th of eq. 6.31); ``minRange`` (m, nearest feature along a ray); ``objects`` (``"name: shape
     [texture]; …"``) and ``environment`` (an environment XML file, relative to the configuration
     file, read in ``setup()``; ``objects`` entries win); ``maxSensors`` (most observations per fused
-    object, Table 7.1; the service Parameter ``max_sensors`` overrides it at run time).
+    object, Table 7.1; the service Parameter ``max_sensors`` overrides it at run time); ``mounts``,
+    ``bases``, ``poseInput``, ``headInput``, ``headJoints`` (the map frame, see ``placement.py``).
 
     Output (msgpack-able): ``{"objects": [{"name", "shape", "texture", "x", "y", "z", "sigma",
-    "origin", "direction", "reliability", "reinforcement", "sources", "observations"}],
-    "reliability"}``. A lone 2D observation has no position (``x y z sigma`` None) but its ray's
-    ``origin`` and ``direction``; a positioned object has ``sigma`` (RMS per axis, m) and no ray.
+    "origin", "direction", "frame", "reliability", "reinforcement", "sources", "observations"}],
+    "reliability"}`` (plus ``"unplaced"``, the observations left out for want of a sensor pose,
+    when inputs are mounted). ``frame`` is ``"map"`` with mounted inputs, else ``"sensor"``. A
+    lone 2D observation has no position (``x y z sigma`` None) but its ray's ``origin`` and
+    ``direction``; a positioned object has ``sigma`` (RMS per axis, m) and no ray.
     ``reliability`` is the mean fused reliability, 0 with no object.
     """
 
