@@ -246,9 +246,9 @@ def _sources(run: Run, data: BagData, notes: list[str]) -> str:
     files = sorted({e.source.split(":", 1)[0] for e in run.events})
     out = f"<p>Recordings: {escape(', '.join(files))} in {escape(str(run.run_dir))}.</p>"
     if data.bags:
-        rows = [[escape(t), escape(k), str(data.counts.get(t, 0))] for t, k in sorted(data.topics.items())]
+        rows = [[escape(t), escape(k), str(data.stored.get(t, 0))] for t, k in sorted(data.topics.items())]
         out += f"<p>Bags: {escape(', '.join(str(b) for b in data.bags))}.</p>"
-        out += _table(["Topic", "Type", "Messages read"], rows, "topics")
+        out += _table(["Topic", "Type", "Messages"], rows, "topics")
     else:
         out += note("No bag in the run directory (record one with ckm-run --record TOPICS): no map trajectories, "
                     "no recognition plot, no camera frames.")  # fmt: skip

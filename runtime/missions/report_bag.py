@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rosbags.rosbag2 import Reader
 
 from ..ros.bag import BagSource
 from ..ros.convert import IMAGE_ENCODINGS
@@ -75,7 +76,8 @@ class BagData:
 
     bags: list[Path] = field(default_factory=list)
     topics: dict[str, str] = field(default_factory=dict)  # topic → ROS type, over every bag
-    counts: dict[str, int] = field(default_factory=dict)  # messages per topic
+    stored: dict[str, int] = field(default_factory=dict)  # messages per topic, as the bags' metadata counts them
+    counts: dict[str, int] = field(default_factory=dict)  # messages read per wanted topic
     poses: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)  # topic → (t, x, y)
     zoom: list[tuple[float, float, float, float, float]] = field(default_factory=list)  # t, x, y, width, depth
     detections: dict[str, list[list[Sighting]]] = field(default_factory=dict)  # topic → per message
@@ -196,7 +198,12 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
     for bag in bags:
         data.bags.append(bag)
         try:
-            types = BagSource(bag).topic_types()
+            if not (bag / "metadata.yaml").is_file():
+                raise ValueError(f"{bag}: not a rosbag2 bag (no metadata.yaml)")
+            with Reader(bag) as reader:  # the catalogue: types and message counts of metadata.yaml
+                types = {c.topic: c.msgtype for c in reader.connections}
+                for connection in reader.connections:
+                    data.stored[connection.topic] = data.stored.get(connection.topic, 0) + connection.msgcount
         except Exception as error:  # rosbags raises several kinds for a broken bag: name the files
             data.errors.append(f"{_storage_files(bag)}: not a readable rosbag2 bag: {_first_line(error)}")
             continue

@@ -78,6 +78,7 @@ def compare(agent: AgentReport) -> list[Comparison]:
         matched = [r for group in groups for r in group]
         if not matched:
             continue
+        groups = [group for group in groups if group]  # a visit the run never made is left out, not 0 s
         times = tuple(sum(r.time for r in group) for group in groups)
         contributions = tuple(sum(sum(r.contribution) for r in group) for group in groups)
         found.append(Comparison(thesis, times, contributions, _weighted(matched), tuple(r.label for r in matched)))

@@ -36,8 +36,14 @@ def note(text: str, kind: str = "note") -> str:
 
 
 def _missing(what: str, topics: Sequence[str], data: BagData) -> str:
-    where = "no bag in the run" if not data.bags else f"not in the bag{'s' if len(data.bags) > 1 else ''}"
-    return note(f"No {what}: topic {' / '.join(topics)} {where}.")
+    """Why ``what`` is not shown: no bag, none of ``topics`` in it, or there without (usable) messages."""
+    if not data.bags:
+        return note(f"No {what}: topic {' / '.join(topics)}: no bag in the run.")
+    there = [t for t in topics if t in data.topics]
+    if not there:
+        return note(f"No {what}: topic {' / '.join(topics)} not in the bag{'s' if len(data.bags) > 1 else ''}.")
+    counts = ", ".join(f"{t} {data.stored.get(t, 0)} message(s)" for t in there)
+    return note(f"No {what}: in the bag {counts}, none usable ({' / '.join(topics)} looked for).")
 
 
 def map_section(

@@ -108,10 +108,13 @@ def robot_xy(t: float) -> tuple[float, float]:
     return 1.5 + 6.1 * s, 1.5 + 3.9 * s
 
 
-def write_bag(run_dir: Path, topics: dict[str, str] = TOPICS, storage: Storage = "mcap") -> Path:
+def write_bag(
+    run_dir: Path, topics: dict[str, str] = TOPICS, storage: Storage = "mcap", empty: dict[str, str] | None = None
+) -> Path:
+    """A bag of ``topics`` over the run, and the ``empty`` topics declared without a message."""
     path = run_dir / "bag"
     with BagRecorder(path, storage=storage, types=ros_types()) as bag:
-        for topic, type_name in topics.items():
+        for topic, type_name in {**topics, **(empty or {})}.items():
             bag.add_topic(topic, type_name)
         for t in np.arange(0.0, 151.0, 1.0):
             x, y = robot_xy(t)
@@ -282,7 +285,7 @@ def test_a_run_without_bag_or_configuration_says_what_is_missing(tmp_path: Path)
     notes = " | ".join(page.notes)
     assert "No bag in the run directory" in notes
     assert "no configuration (no stats.json naming it, no --config)" in notes
-    assert "No estimated trajectory: topic /nav/pose no bag in the run." in notes
+    assert "No estimated trajectory: topic /nav/pose: no bag in the run." in notes
     assert "No recognition results" in notes and "No camera images" in notes
     assert {"Fig. 7.23 plan"} <= {alt for alt, _ in page.images}  # the recordings still give Table 7.9 and Fig. 7.23
     assert "Fig. 7.16" not in {alt for alt, _ in page.images}
@@ -292,12 +295,13 @@ def test_a_run_without_bag_or_configuration_says_what_is_missing(tmp_path: Path)
 
 def test_topics_absent_from_the_bag_are_noted_and_others_drawn(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run", bag=False, config=False)
-    write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]})
+    write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]}, empty={"/nav/zoom": TOPICS["/nav/zoom"]})
     (run_dir / "validation.json").write_text('{"ok": true, "missions": [{"mission": "Agent1FetchCoop", "ok": true}]}')
     page = parse(build_html(run_dir)[0])
     notes = " | ".join(page.notes)
     assert "No true trajectory: topic /sim/turtlebot/pose / /sim/turtlebot/true_pose" in notes
-    assert "No zoom-map areas" in notes and "No recognition results" in notes and "No camera images" in notes
+    assert "No zoom-map areas: in the bag /nav/zoom 0 message(s), none usable" in notes
+    assert "No recognition results" in notes and "No camera images" in notes
     assert "Fig. 7.16" in {alt for alt, _ in page.images}
     assert dict(page.table("summary"))["Off-line validation"] == "passed (Agent1FetchCoop coherent)"
     assert ["/nav/pose", "ckm_msgs/msg/PoseEstimate", "151"] in page.table("topics")

@@ -82,3 +82,5 @@ def test_thesis_rows_match_our_states_per_visit() -> None:
     (navigation,) = compare(AgentReport("a", "M", None, 100.0, "ok", rows))
     assert navigation.times == (40.0, 20.0) and navigation.contributions == (0.4, 0.2)
     assert navigation.performance == pytest.approx((10 * 1.0 + 30 * 0.5) / 40)
+    (going,) = compare(AgentReport("a", "M", None, 100.0, None, rows[:2]))
+    assert going.times == (40.0,)  # the return visit never made is left out, not shown as 0 s
