@@ -12,7 +12,7 @@ position through the pinhole model (horizontal field of view ``fov``), moves the
 ``gain`` of it, at most ``speed``·Δt per frame (Δt: the time since the previous frame, the
 service Parameter ``speed`` of Table 7.2 in rad/s), within the Nao's joint limits. A result
 already acted on (the stream hands the newest one again when only the head state is new) does not
-move the head twice; its track and target are still published. The target is the most reliable
+move the head twice: the same goal, track and target are published again. The target is the most reliable
 object matching the Parameters ``target`` (its name or shape contains it) and ``targetTexture``;
 any object when both are empty.
 
@@ -116,6 +116,7 @@ class PanTiltTrack(ProcessingPlugin):
         self.texture: str = v["targetTexture"]
         self.head: HeadModel | None = None
         self._acted: Any = None
+        self._goal: dict[str, float] | None = None
         self._last: float | None = None
         self._track: dict[str, Any] = {"label": "", "moving": False, "in_view": False, "error": None, "target": None}
 
@@ -251,7 +252,9 @@ class PanTiltTrack(ProcessingPlugin):
                     for h, m, (low, high) in zip(head, moves, self.limits, strict=True)]
         target = self._locate(found, right, down, head, now)
         self._track = {"label": found["name"], "moving": True, "in_view": True, "error": error, "target": target}
-        out: dict[str, Any] = {"head_goal": {"pan": goal[0], "tilt": goal[1]}} if fresh else {}
+        if fresh or self._goal is None:
+            self._goal = {"pan": goal[0], "tilt": goal[1]}
+        out: dict[str, Any] = {"head_goal": dict(self._goal)}  # a repeated result: the same goal again
         if target is not None:
             out["target"] = target
         return out
