@@ -127,6 +127,19 @@ def test_scan_points_on_the_path_ahead_make_it_replan_round_them(file: Path) -> 
     assert result["status"]["state"] == "active"
 
 
+def test_a_robot_pushed_off_the_path_gets_a_new_plan_and_a_goal_set_again_replans(file: Path) -> None:
+    nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.05 0.03", goal="Target")
+    first = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)["path"]
+    pushed = (1.0, 3.2, 0.0)  # 1.4 m north of where it was, on neither leg of the plan (odometry agrees)
+    result = frames(nav, grid(file), pushed, (0.0, 1.4, 0.0), 3)
+    assert result["path"]["id"] > first["id"] and result["status"]["state"] == "active"
+    assert result["path"]["points"][0] == pytest.approx([0.0, 1.4])
+    assert max(p[1] for p in result["path"]["points"]) + 1.8 > 2.9  # now round the north end: nearer
+    again = result["path"]["id"]
+    nav.apply_service_parameters({"goal": "Target"})  # the same goal again: a fresh plan
+    assert frames(nav, grid(file), pushed, (0.0, 1.4, 0.0), 1)["path"]["id"] == again + 1
+
+
 def test_a_start_inside_the_inflated_pillar_leaves_by_the_nearest_free_point(file: Path) -> None:
     truth = (2.12, 1.5, 0.0)  # 0.18 m from the pillar: inside its 0.2 m inflation
     nav = navigation(file, initialPose="2.12 1.5 0", initialSpread="0.02 0.02", goal="Start")
