@@ -32,7 +32,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection, Listener, Pipe, wait
+from multiprocessing.connection import Connection, Listener, Pipe, answer_challenge, deliver_challenge, wait
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -79,7 +79,8 @@ class WorldServer:
         self.renderer = renderer
         self._cameras: list[tuple[_Client, ChannelDevice]] = []  # camera reads waiting for the worker
         self._flight: _Flight | None = None
-        self.listener = Listener((host, port), authkey=authkey)
+        self.authkey = authkey
+        self.listener = Listener((host, port))  # authenticated per connection, in a thread of its own
         host, port = self.listener.address
         self.address = f"{host}:{port}"
         self.clients: list[_Client] = []
@@ -96,14 +97,22 @@ class WorldServer:
     def _accept(self) -> None:
         while True:
             try:
-                conn = self.listener.accept()  # the HMAC challenge happens here, off the physics thread
+                conn = self.listener.accept()
             except OSError:  # the listener was closed: the server stops
                 return
-            except Exception as exc:  # a client without the key, or one that hung up mid-handshake
-                LOG.warning("refused a connection: %s: %s", type(exc).__name__, exc)
-                continue
-            with self._lock:
-                self._pending.append(conn)
+            # the HMAC handshake off the physics thread, and apart: a silent peer blocks no one else
+            threading.Thread(target=self._authenticate, args=(conn,), name="ckm-sim-auth", daemon=True).start()
+
+    def _authenticate(self, conn: Connection) -> None:
+        try:
+            deliver_challenge(conn, self.authkey)
+            answer_challenge(conn, self.authkey)
+        except Exception as exc:  # a client without the key, or one that hung up mid-handshake
+            LOG.warning("refused a connection: %s: %s", type(exc).__name__, exc)
+            conn.close()
+            return
+        with self._lock:  # several handshakes may end at once: one writer of the wake-up pipe at a time
+            self._pending.append(conn)
             self._wake_w.send_bytes(b".")
 
     def serve(self, stop: threading.Event) -> None:

@@ -15,6 +15,7 @@ import dataclasses
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -198,7 +199,8 @@ def test_a_killed_world_server_fails_the_run_loudly(config: Path, tmp_path: Path
 
 def test_bad_requests_get_errors_naming_the_channel(config: Path, tmp_path: Path, no_server: None) -> None:
     with ServerProcess(config, tmp_path / "server") as server:
-        link = Link(server.client_address())
+        silent = socket.create_connection(("127.0.0.1", server.client_address()[1]), timeout=5.0)
+        link = Link(server.client_address())  # a peer that never answers the handshake blocks no one
         try:
             with pytest.raises(ValueError, match="bad request"):
                 link.exchange(b"\xff{not json")
@@ -225,6 +227,7 @@ def test_bad_requests_get_errors_naming_the_channel(config: Path, tmp_path: Path
             assert link.request({"op": "ping"})["time"] >= 0.0  # …and the server serves on
         finally:
             link.close()
+            silent.close()
         assert server.process.poll() is None
     assert "stopped after" in server.log.read_text()
 
