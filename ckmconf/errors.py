@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from typing import Protocol
 
 
 @dataclass(frozen=True)
@@ -15,6 +16,19 @@ class Loc:
     line: int
     column: int
     xpath: str
+
+
+MEMORY_FILE = "<memory>"  # the file name of records built in code rather than read from a file
+
+
+class Located(Protocol):
+    """What :meth:`ConfigError.of` needs of a record: where it was read and its element name."""
+
+    @property
+    def loc(self) -> Loc | None: ...
+
+    @property
+    def TAG(self) -> str: ...  # the records' class constant
 
 
 class ConfigError(Exception):
@@ -34,7 +48,18 @@ class ConfigError(Exception):
 
     @classmethod
     def at(cls, loc: Loc, message: str) -> ConfigError:
+        """The problem at ``loc``."""
         return cls(loc.file, loc.line, loc.column, loc.xpath, message)
+
+    @classmethod
+    def of(cls, record: Located, message: str, attr: str | None = None) -> ConfigError:
+        """The problem at a record's element, or at its attribute ``attr`` (``…/@attr``).
+
+        A record built in code has no ``loc``: it is then placed at ``<memory>:1:1: /TAG``.
+        """
+        loc = record.loc or Loc(MEMORY_FILE, 1, 1, f"/{record.TAG}")
+        xpath = f"{loc.xpath}/@{attr}" if attr else loc.xpath
+        return cls(loc.file, loc.line, loc.column, xpath, message)
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -77,4 +102,4 @@ def errors_to_json(errors: Iterable[ConfigError]) -> str:
     return json.dumps([e.as_dict() for e in errors], indent=2)
 
 
-__all__ = ["ConfigError", "ConfigErrors", "Loc", "errors_to_json"]
+__all__ = ["MEMORY_FILE", "ConfigError", "ConfigErrors", "Loc", "Located", "errors_to_json"]

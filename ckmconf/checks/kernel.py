@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from ..binding import Record
-from ..expressions import SWITCH, ExpressionError, parse
 from ..model import Adaptation, Alarm, Clamp, Controller, HWChannel, Lookup, Node, Partition, Switch, System, Topic
 from ..rostypes import is_ros_type, ros_type_problem
 from .report import Reporter, missing
@@ -211,12 +210,11 @@ def _check_adaptation(adaptation: Adaptation | None, report: Reporter) -> None:
 
 
 def _check_switch_condition(switch: Switch, node: Node, scope: Scope, report: Reporter) -> None:
-    text = str(switch.when)
-    try:
-        condition = parse(text, SWITCH)
-    except ExpressionError as exc:
-        report.error(switch, str(exc), "when", exc.column)
+    error = switch.condition_error  # parsed once, when the record was read
+    if error is not None:
+        report.error(switch, str(error), "when", error.column)
         return
+    condition = switch.condition
     alarms = [a.name for a in node.monitor.alarms] if node.monitor else []
     for name, args in condition.calls:
         if name == "alarm" and args[0] not in alarms:

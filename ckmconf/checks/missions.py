@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from ..expressions import TRANSITION, ExpressionError, parse
 from ..model import Behavior, CompositionMatrix, Mission, Plan, State, System, Transition
 from .report import Reporter, missing
 from .resources import check_bounds, check_value
@@ -132,11 +131,11 @@ def _check_mission(mission: Mission, system: System, scope: Scope, report: Repor
 
 
 def _check_condition(transition: Transition, state: State, system: System, scope: Scope, report: Reporter) -> None:
-    try:
-        condition = parse(transition.when, TRANSITION)
-    except ExpressionError as exc:
-        report.error(transition, str(exc), "when", exc.column)
+    error = transition.condition_error  # parsed once, when the record was read
+    if error is not None:
+        report.error(transition, str(error), "when", error.column)
         return
+    condition = transition.condition
     behavior = system.behavior(state.behavior) if state.behavior else None
     nested = system.mission(state.mission) if state.mission else None
     for name, args in condition.calls:
@@ -248,13 +247,12 @@ def _waits_for(system: System, mission_name: str, path: str, signal: str) -> boo
     if behavior is not None and any(port.signal == signal for port in behavior.inputs):
         return True
     for transition in parent.transitions if parent else ():
-        if transition.from_ == state.name:
-            try:
-                calls = parse(transition.when, TRANSITION).calls
-            except ExpressionError:
-                continue
-            if ("signal", (signal,)) in calls:
-                return True
+        if (
+            transition.from_ == state.name
+            and transition.condition_error is None
+            and ("signal", (signal,)) in transition.condition.calls
+        ):
+            return True
     return False
 
 

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
 
 from ..binding import Record, attr, child, children
+from ..expressions import SWITCH, Vocabulary
+from .conditions import ConditionRecord
 
 Scope = Literal["internal", "external"]
 Reliability = Literal["reliable", "best-effort"]
@@ -298,10 +300,11 @@ class OptionalPart(Record):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Switch(Record):
-    """<Switch>: a controller switching criterion (§3.1.2.7)."""
+class Switch(ConditionRecord):
+    """<Switch>: a controller switching criterion (§3.1.2.7), its condition parsed once (``condition``)."""
 
     TAG = "Switch"
+    VOCABULARY: ClassVar[Vocabulary] = SWITCH
     to: str = attr()
     when: str = attr()
 

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
 
 from ..binding import Record, attr, children, text
+from ..expressions import TRANSITION, Vocabulary
+from .conditions import ConditionRecord
 from .kernel import Param
 
 
@@ -144,10 +146,11 @@ class Final(Record):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Transition(Record):
-    """<Transition>: a one-way transition taken when its condition holds."""
+class Transition(ConditionRecord):
+    """<Transition>: a one-way transition taken when its condition holds (parsed once: ``condition``)."""
 
     TAG = "Transition"
+    VOCABULARY: ClassVar[Vocabulary] = TRANSITION
     from_: str = attr(xml="from")
     to: str = attr()
     when: str = attr(default="done()")
