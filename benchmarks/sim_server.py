@@ -64,13 +64,16 @@ def _mean_ms(read: Callable[[], Any], count: int) -> float:
     return 1000 * (time.perf_counter() - start) / count
 
 
-def _round_trips(server: ServerProcess, specs: dict[str, Spec], rounds: int = 3) -> dict[str, dict[str, float]]:
+def _round_trips(
+    server: ServerProcess, specs: dict[str, Spec], rounds: int = 3, reads: dict[str, int] | None = None
+) -> dict[str, dict[str, float]]:
     """Mean read time of each device through ``server`` and in this process, measured in alternate
     rounds (the machine is shared: its load drifts), the median round of each kept."""
     plan = WorldPlan.of([n for n in ckmconf.load(LAB).nodes if n.name in NODES])
     assert plan is not None
     sim: SimWorld = plan.build()
     result = {}
+    counts = reads or READS
     for name, spec in specs.items():
         device = ChannelDevice(sim, spec)
         remote = RemoteDevice(server.client_address(), spec)
@@ -85,8 +88,8 @@ def _round_trips(server: ServerProcess, specs: dict[str, Spec], rounds: int = 3)
 
         local, served = [], []
         for _ in range(rounds):
-            local.append(_mean_ms(here, READS[name]))
-            served.append(_mean_ms(there, READS[name]))
+            local.append(_mean_ms(here, counts[name]))
+            served.append(_mean_ms(there, counts[name]))
         remote.close()
         middle_local, middle_served = statistics.median(local), statistics.median(served)
         result[name] = {"server_ms": round(middle_served, 3), "in_process_ms": round(middle_local, 3),
@@ -140,10 +143,14 @@ def _blocking(server: ServerProcess, specs: dict[str, Spec], seconds: float) -> 
 def run(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.sim_server", description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of each blocking measurement")
+    parser.add_argument("--quick", action="store_true", help="one round of one read per device (a smoke test)")
     args = parser.parse_args(argv)
     specs = _specs()
     with tempfile.TemporaryDirectory() as folder, ServerProcess(LAB, Path(folder), NODES) as server:
-        trips = _round_trips(server, specs)
+        if args.quick:
+            trips = _round_trips(server, specs, rounds=1, reads=dict.fromkeys(READS, 1))
+        else:
+            trips = _round_trips(server, specs)
         blocking = _blocking(server, specs, args.seconds)
     with tempfile.TemporaryDirectory() as folder, ServerProcess(LAB, Path(folder), NODES,
                                                                 options=["--no-render-worker"]) as server:
