@@ -79,6 +79,7 @@ class BagData:
     stored: dict[str, int] = field(default_factory=dict)  # messages per topic, as the bags' metadata counts them
     counts: dict[str, int] = field(default_factory=dict)  # messages read per wanted topic
     poses: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)  # topic → (t, x, y)
+    headings: dict[str, list[tuple[float, float]]] = field(default_factory=dict)  # topic → (t, yaw)
     zoom: list[tuple[float, float, float, float, float]] = field(default_factory=list)  # t, x, y, width, depth
     detections: dict[str, list[list[Sighting]]] = field(default_factory=dict)  # topic → per message
     frames: list[Frame] = field(default_factory=list)
@@ -129,6 +130,22 @@ def pose_xy(payload: Any, depth: int = 0) -> tuple[float, float] | None:
         if key in payload:
             return pose_xy(payload[key], depth + 1)
     return None
+
+
+def pose_yaw(payload: Any, depth: int = 0) -> float | None:
+    """The heading (rad) a pose-like payload holds: ``yaw`` next to ``x``/``y``, or a quaternion
+    ``orientation`` ``{x, y, z, w}``, at the top or under ``pose``."""
+    if not isinstance(payload, Mapping) or depth > 4:
+        return None
+    yaw = _number(payload.get("yaw"))
+    if yaw is not None and _number(payload.get("x")) is not None:
+        return yaw
+    quaternion = payload.get("orientation")
+    if isinstance(quaternion, Mapping):
+        x, y, z, w = (_number(quaternion.get(k)) for k in ("x", "y", "z", "w"))
+        if x is not None and y is not None and z is not None and w is not None and (x, y, z, w) != (0, 0, 0, 0):
+            return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return pose_yaw(payload.get("pose"), depth + 1) if "pose" in payload else None
 
 
 def sightings(payload: Any, t: float) -> list[Sighting]:
@@ -230,6 +247,9 @@ def _take(data: BagData, topics: ReportTopics, topic: str, t: float, payload: An
         xy = pose_xy(payload)
         if xy is not None:
             data.poses.setdefault(topic, []).append((t, *xy))
+            yaw = pose_yaw(payload)
+            if yaw is not None:
+                data.headings.setdefault(topic, []).append((t, yaw))
     if topic in topics.zoom:
         area = _zoom_area(payload)
         if area is not None and (not data.zoom or data.zoom[-1][1:] != area):  # one entry per move

@@ -32,6 +32,7 @@ from ckmconf.model.environment import Rectangle as RectangleRecord
 
 SNAPSHOT_WIDTH = 480
 """Camera frames wider than this (px) are subsampled by a whole step before encoding."""
+Approach = tuple[float, float, float | None, float]  # run time, distance (m), bearing (°), reliability
 Track = tuple[str, str, Sequence[tuple[float, float, float]]]  # label, colour, (t, x, y)
 
 
@@ -149,12 +150,14 @@ def map_png(
 
 def reliability_png(
     series: Sequence[tuple[str, Sequence[tuple[float, float]]]],
-    distance: Sequence[tuple[float, float]],
+    approach: Sequence[Approach],
     spans: Sequence[tuple[str, float, float]] = (),
 ) -> bytes:
-    """Fig. 7.19: reliability vs run time per topic (states shaded), and vs distance to the robot."""
-    fig = Figure(figsize=(10, 7 if distance else 4), layout="constrained")
-    axes = fig.subplots(2 if distance else 1, 1, squeeze=False)[:, 0]
+    """Fig. 7.19: reliability vs run time per topic (states shaded); with ``approach`` samples
+    ``(t, distance, bearing° or None, reliability)`` also the distance and bearing to the target vs
+    run time (the thesis' alignment in distance and angle) and the reliability vs distance."""
+    fig = Figure(figsize=(10, 10 if approach else 4), layout="constrained")
+    axes = fig.subplots(3 if approach else 1, 1, squeeze=False)[:, 0]
     top = axes[0]
     for i, (name, begin, end) in enumerate(spans):
         top.axvspan(begin, end, color=f"C{(i + 3) % 10}", alpha=0.12)
@@ -164,9 +167,18 @@ def reliability_png(
     top.set(ylim=(-0.05, 1.08), xlabel="run time (s)", ylabel="reliability", title="Target recognition reliability")
     if series:
         top.legend(fontsize=8, loc="lower right")
-    if distance:
-        bottom = axes[1]
-        bottom.plot([d for d, _ in distance], [r for _, r in distance], marker=".", markersize=3, lw=0, color="C0")
+    if approach:
+        middle = axes[1]
+        middle.sharex(top)
+        middle.plot([a[0] for a in approach], [a[1] for a in approach], ".", markersize=3, color="C0")
+        middle.set(ylabel="distance robot → target (m)", xlabel="run time (s)", title="Alignment with the target")
+        bearings = [(a[0], a[2]) for a in approach if a[2] is not None]
+        if bearings:
+            twin = middle.twinx()
+            twin.plot([b[0] for b in bearings], [b[1] for b in bearings], ".", markersize=3, color="C1")
+            twin.set_ylabel("bearing of the target (°)", color="C1")
+        bottom = axes[2]
+        bottom.plot([a[1] for a in approach], [a[3] for a in approach], ".", markersize=3, color="C0")
         bottom.set(ylim=(-0.05, 1.05), xlabel="distance robot → target (m)", ylabel="fused reliability")
         bottom.invert_xaxis()  # the approach reads left to right
     return figure_png(fig)

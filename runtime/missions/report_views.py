@@ -9,8 +9,8 @@ axis of Table 7.9 and Fig. 7.23.
 from __future__ import annotations
 
 import base64
+import math
 from bisect import bisect_left
-from collections import Counter
 from collections.abc import Callable, Sequence
 from html import escape
 from pathlib import Path
@@ -19,7 +19,7 @@ from ckmconf.model import System
 
 from .report import Report
 from .report_bag import BagData, ReportTopics, Sighting, image_pixels
-from .report_figures import image_png, map_png, reliability_png
+from .report_figures import Approach, image_png, map_png, reliability_png
 
 APPROACH_STATES = ("SPOT", "APPR", "PICK", "OBJ_TRACK", "OBJ_FIX")
 """States shaded on the reliability plot: where recognition matters (§7.4.1, Fig. 7.19)."""
@@ -77,19 +77,24 @@ def map_section(
 
 
 def choose_target(data: BagData, topics: ReportTopics, target: str | None) -> tuple[list[str], str]:
-    """The terms naming the target object and how it was chosen (given, or recognised most often)."""
+    """The terms naming the target object and how it was chosen: given, or the object with the
+    greatest summed reliability over the results (recognised most often and most reliably)."""
     if target:
         return target.lower().split(), f"target {target!r} (--target)"
-    names: Counter[str] = Counter()
+    score: dict[str, float] = {}
     for topic in [topics.fused, *topics.recognition]:
         for message in data.detections.get(topic, []):
-            names.update({s.name for s in message if s.name})
-        if names:
+            best: dict[str, float] = {}
+            for seen in message:
+                best[seen.name] = max(best.get(seen.name, 0.0), seen.reliability)
+            for name, reliability in best.items():
+                score[name] = score.get(name, 0.0) + reliability
+        if score:
             break
-    if not names:
+    if not score:
         return [], "no object recognised"
-    name = names.most_common(1)[0][0]
-    return name.lower().split(), f"target {name!r}: the object recognised most often (--target to choose another)"
+    name = max(score, key=lambda n: (score[n], n))
+    return name.lower().split(), f"target {name!r}: the object recognised most reliably (--target to choose another)"
 
 
 def _best(message: list[Sighting], terms: list[str]) -> Sighting | None:
@@ -97,20 +102,42 @@ def _best(message: list[Sighting], terms: list[str]) -> Sighting | None:
     return max(matching, key=lambda s: s.reliability) if matching else None
 
 
-def _pose_at(track: list[tuple[float, float, float]], t: float) -> tuple[float, float] | None:
-    times = [p[0] for p in track]
-    i = bisect_left(times, t)
+def _nearest(track: Sequence[tuple[float, ...]], t: float) -> tuple[float, ...] | None:
+    """The sample of a time-sorted ``(t, …)`` track nearest ``t``, if within :data:`POSE_GAP`."""
+    i = bisect_left([p[0] for p in track], t)
     near = [p for p in track[max(0, i - 1) : i + 1] if abs(p[0] - t) <= POSE_GAP]
-    if not near:
-        return None
-    best = min(near, key=lambda p: abs(p[0] - t))
-    return best[1], best[2]
+    return min(near, key=lambda p: abs(p[0] - t)) if near else None
+
+
+def _approach(data: BagData, topics: ReportTopics, terms: list[str], clock: Callable[[float], float]) -> list[Approach]:
+    """(run time, distance, bearing in degrees or None, reliability) of each fused target sighting
+    with a robot pose near it: the estimate, else the ground truth."""
+    source = next((t for t in [topics.estimate, *topics.truth] if data.poses.get(t)), None)
+    if source is None:
+        return []
+    track, headings = data.poses[source], data.headings.get(source, [])
+    found: list[Approach] = []
+    for message in data.detections.get(topics.fused, []):
+        seen = _best(message, terms)
+        if seen is None or seen.x is None or seen.y is None:
+            continue
+        robot = _nearest(track, seen.time)
+        if robot is None:
+            continue
+        dx, dy = seen.x - robot[1], seen.y - robot[2]
+        heading = _nearest(headings, seen.time)
+        bearing = None
+        if heading is not None:  # the target's direction seen from the robot, wrapped to ±180°
+            bearing = math.degrees((math.atan2(dy, dx) - heading[1] + math.pi) % (2 * math.pi) - math.pi)
+        found.append((clock(seen.time), math.hypot(dx, dy), bearing, seen.reliability))
+    return found
 
 
 def reliability_section(
     data: BagData, topics: ReportTopics, report: Report, target: str | None, clock: Callable[[float], float]
 ) -> str:
-    """Fig. 7.19: the target's reliability vs run time on each recognition topic, vs distance (fused)."""
+    """Fig. 7.19: the target's reliability vs run time on each recognition topic; the robot's distance
+    and bearing to the (fused) target vs run time; the fused reliability vs distance."""
     present = [t for t in [topics.fused, *topics.recognition] if data.detections.get(t)]
     if not present:
         return _missing("recognition results", [topics.fused, *topics.recognition], data)
@@ -124,19 +151,13 @@ def reliability_section(
             series.append((topic + (" (fused)" if topic == topics.fused else ""), points))
         missed = sum(1 for s in best if s is None)
         out.append(f"<p>{escape(topic)}: target in {len(points)} of {len(best)} results ({missed} without it).</p>")
-    distance = []
-    track = data.poses.get(topics.estimate) or next((data.poses[t] for t in topics.truth if data.poses.get(t)), [])
-    for message in data.detections.get(topics.fused, []):
-        seen = _best(message, terms)
-        robot = _pose_at(track, seen.time) if seen is not None and seen.x is not None else None
-        if seen is not None and robot is not None and seen.x is not None and seen.y is not None:
-            distance.append((((seen.x - robot[0]) ** 2 + (seen.y - robot[1]) ** 2) ** 0.5, seen.reliability))
-    if not distance:
-        out.append(note("No reliability against distance: no fused target position with a robot pose near it."))
+    approach = _approach(data, topics, terms, clock)
+    if not approach:
+        out.append(note("No distance or angle to the target: no fused target position with a robot pose near it."))
     spans = [(r.state, begin, end) for r in report.rows if r.state in APPROACH_STATES for begin, end in r.spans]
     if not series:
         return "".join(out) + note("The target was never recognised: nothing to plot.")
-    return "".join(out) + png_tag(reliability_png(series, distance, spans), "Fig. 7.19")
+    return "".join(out) + png_tag(reliability_png(series, approach, spans), "Fig. 7.19")
 
 
 def snapshots_section(

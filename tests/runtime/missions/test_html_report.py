@@ -268,6 +268,8 @@ def test_the_page_holds_table_7_9_figures_snapshots_and_problems(
     assert len(frames) == 8  # four moments, two cameras
     spot = [pixels for alt, pixels in frames if "SPOT at 40.0 s" in alt]
     assert {round(float(p.reshape(-1)[0]) * 255) for p in spot} == {40}  # the frame of t = 40 (stamped 40.3 s)
+    text = out.read_text(encoding="utf-8")
+    assert "target &#x27;cylinder_red_stripes cylinder red_stripes&#x27;: the object recognised most reliably" in text
     # problems, counted
     problems = {row[2]: row for row in page.table("problems")[1:]}
     assert problems["ckm.node: remote_pc: task nav failed # times"][3] == "2"

@@ -12,7 +12,7 @@ from matplotlib.image import imread
 
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import AgentReport, StateRow
-from runtime.missions.report_bag import find_bags, image_pixels, pose_xy, sightings
+from runtime.missions.report_bag import find_bags, image_pixels, pose_xy, pose_yaw, sightings
 from runtime.missions.report_figures import image_png
 from runtime.missions.report_problems import collect
 from runtime.missions.report_thesis import TABLE_7_9, compare
@@ -26,6 +26,10 @@ def test_pose_shapes_of_ckm_and_ros_messages() -> None:
     odometry = {"pose": {"pose": {"position": {"x": 6.0, "y": 7.0}}, "covariance": np.zeros(36)}}
     assert pose_xy(odometry) == (6.0, 7.0)  # nav_msgs/Odometry
     assert pose_xy({"x": float("nan"), "y": 1.0}) is None and pose_xy([1, 2]) is None
+    assert pose_yaw({"stamp": 3.0, "pose": {"x": 1.0, "y": 2.0, "yaw": 0.5}}) == 0.5
+    quarter = {"x": 0.0, "y": 0.0, "z": np.sin(np.pi / 4), "w": np.cos(np.pi / 4)}  # 90° about z
+    assert pose_yaw({"pose": {"position": {"x": 0.0, "y": 0.0}, "orientation": quarter}}) == pytest.approx(np.pi / 2)
+    assert pose_yaw(odometry) is None and pose_yaw({"yaw": 1.0}) is None  # no orientation; a yaw without a place
 
 
 def test_sightings_name_an_object_by_every_word_it_has() -> None:
