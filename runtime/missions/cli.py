@@ -176,6 +176,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "validate":
         return _validate(args)
     if args.html:
+        if args.json or args.depth != "leaf":
+            parser.error("--html goes without --json and --depth (the page has leaf rows and no JSON)")
         return _html_report(args)
     return report.main(args.run_dir, out=args.out, json=args.json, depth=args.depth)
 
@@ -189,7 +191,7 @@ def _html_arguments(rep: argparse.ArgumentParser) -> None:
     html.add_argument("--html", action="store_true", help="write the HTML report instead of the table and plots")
     html.add_argument("--config", type=Path, help="the run's System file (default: the one stats.json names)")
     html.add_argument("--bag", type=Path, action="append", help="a rosbag2 bag to read (default: those in RUN_DIR)")
-    html.add_argument("--target", help="words naming the target object (default: the one recognised most often)")
+    html.add_argument("--target", help="words naming the target object (default: the one recognised most reliably)")
     html.add_argument("--pose-topic", default=topics.estimate, help=f"estimated pose topic ({topics.estimate})")
     html.add_argument("--truth-topic", action="append", help=f"ground-truth pose topic ({', '.join(topics.truth)})")
     html.add_argument("--camera-topic", action="append", help=f"camera image topic ({', '.join(topics.cameras)})")

@@ -339,6 +339,15 @@ def test_cli_options_choose_topics_target_and_bag(tmp_path: Path, capsys: pytest
     assert "target &#x27;box orange&#x27; (--target)" in text
 
 
+def test_html_refuses_json_and_depth_and_a_missing_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as refused:
+        cli.main(["report", str(tmp_path), "--html", "--json"])
+    assert refused.value.code == 2 and "--html goes without --json and --depth" in capsys.readouterr().err
+    assert cli.main(["report", str(tmp_path / "none"), "--html"]) == 1
+    assert "none: no such run directory" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
+
+
 def test_options_default_to_the_use_case_topics() -> None:
     topics = Options().topics
     assert topics == ReportTopics() and topics.estimate == "/nav/pose" and "/nao/camera/image" in topics.cameras
