@@ -19,7 +19,8 @@ any object when both are empty.
 Outputs: ``head_goal`` (PanTilt, head angles for the ``pan-tilt-position`` controller, while a
 target is in view), ``track`` (TrackState ``{"stamp", "label", "moving", "in_view", "error",
 "head", "target"}``: ``error`` the target's angular offset, rad), ``target`` (ObjectPosition in
-the MAP frame) and the measure ``moving`` (Table 7.2): 1 while the head follows a target in view.
+the MAP frame) and the measure ``moving`` (Table 7.2): 1 while the head follows a target in view
+(and for ``hold`` seconds after it was last seen: one missed recognition does not end it).
 
 Map position (D114): the camera's pose for the head angles comes from the Nao's URDF (private
 pybullet client, :class:`.head.HeadModel`) placed at the Nao's map pose (Param ``pose``); the
@@ -85,6 +86,8 @@ class PanTiltTrack(ProcessingPlugin):
         P("tolerance", 0.02, "Offset under which the target counts as centred (D90).", unit="rad", above=0.0),
         P("period", 0.5, "Frame period assumed for the first frame (the service rate, Table 7.8).", unit="s",
           above=0.0),
+        P("hold", 1.0, "How long the head keeps following (moving = 1) after the target was last seen.",
+          unit="s", min=0.0),
         P("target", "", "Name or shape of the object to track (empty: the most reliable)."),
         P("targetTexture", "", "Texture of the object to track."),
         P("minReliability", 0.0, "Objects less reliable than this are ignored.", min=0.0, max=1.0),
@@ -117,6 +120,7 @@ class PanTiltTrack(ProcessingPlugin):
         self.head: HeadModel | None = None
         self._acted: Any = None
         self._goal: dict[str, float] | None = None
+        self._seen: float | None = None  # when the target was last in view
         self._last: float | None = None
         self._track: dict[str, Any] = {"label": "", "moving": False, "in_view": False, "error": None, "target": None}
 
@@ -186,9 +190,12 @@ class PanTiltTrack(ProcessingPlugin):
             fresh = recognised != self._acted  # a result already acted on must not move the head twice
             self._acted = recognised
             found = self.choose(recognised)
-            if found is None:
-                self._track = {"label": "", "moving": False, "in_view": False, "error": None, "target": None}
+            if found is None:  # a missed frame or two do not end the following (Param 'hold')
+                following = self._seen is not None and now - self._seen <= self.params["hold"]
+                self._track = {"label": self._track["label"] if following else "", "moving": following,
+                               "in_view": False, "error": None, "target": None}
             else:
+                self._seen = now
                 result.update(self._follow(found, recognised, head, dt, now, fresh))
         moving = bool(self._track["moving"])
         result["track"] = {"stamp": now, **self._track,

@@ -11,6 +11,7 @@ only their messages; the physics is stepped here, in simulated time.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -92,15 +93,26 @@ class HeadLoop:
         self.nao.command(self.pitch, "position", float(commands[1]))
 
     def frame(self, colour: tuple[int, int, int], name: str) -> dict[str, Any]:
-        """One service period: a camera frame through the bridge, the detector and the tracker."""
+        """One service period with the colour detector in the Recog's place."""
+
+        def recognise(image: dict[str, Any]) -> dict[str, Any]:
+            pixels = self.acquire.process(image, Context(self.frames, self.world.time, "PanTiltCamera"))
+            return detect(pixels, colour, name)
+
+        return self.recognised_by(recognise)
+
+    def recognised_by(self, recognise: Callable[[dict[str, Any]], Any], size: tuple[int, int] = (WIDTH, HEIGHT)
+                      ) -> dict[str, Any]:
+        """One service period: a camera frame through the bridge, ``recognise`` (the bridge's Image to a
+        Recog result) and the tracker."""
         now = self.world.time
-        shot = self.camera.render(WIDTH, HEIGHT)
-        raw = {"stamp": now, "width": WIDTH, "height": HEIGHT, "encoding": "rgb8", "data": shot.rgb.tobytes()}
+        width, height = size
+        shot = self.camera.render(width, height)
+        raw = {"stamp": now, "width": width, "height": height, "encoding": "rgb8", "data": shot.rgb.tobytes()}
         pan, tilt = self.angles()
         bridged = self.bridge.process({"camera": raw, "head_yaw": pan, "head_pitch": tilt},
                                       Context(self.frames, now, "Nao"))
-        image = self.acquire.process(bridged["image"], Context(self.frames, now, "PanTiltCamera"))
-        recognised = detect(image, colour, name)
+        recognised = recognise(bridged["image"])
         result = self.track.process({"objects": recognised, "head_state": bridged["head_state"]},
                                     Context(self.frames, now, "PanTiltCamera"))
         self.frames += 1
@@ -110,14 +122,17 @@ class HeadLoop:
         self.results.append(result)
         return result
 
+    def settle(self, seconds: float) -> None:
+        """The head loop alone for ``seconds``."""
+        for _ in range(round(seconds * 240 / CONTROL_STEPS)):
+            self.control()
+            self.world.step(CONTROL_STEPS)
+
     def run(self, seconds: float, colour: tuple[int, int, int], name: str, period: float = 0.5) -> None:
         """``seconds`` of simulated time, a service frame every ``period``."""
-        ticks = round(period * 240 / CONTROL_STEPS)
         for _ in range(round(seconds / period)):
             self.frame(colour, name)
-            for _ in range(ticks):
-                self.control()
-                self.world.step(CONTROL_STEPS)
+            self.settle(period)
 
     def close(self) -> None:
         self.track.stop()
