@@ -68,6 +68,10 @@ from .frames import (
 from .localizer import FILTERS, Localizer
 
 INPUTS = ("scan", "odom")
+RANGE_MAX = 8.0
+"""Longest laser range the filters' models assume (m): the beams' own validity comes from each scan's
+range_min/range_max (invalid ones reach the filters as +inf), so this only scales the likelihood
+field's random-reading term, as AMCL's laser_max_range does."""
 STOPPED = 0.02
 """The base is stopped when its odometry's speeds (m/s, rad/s) are below this."""
 
@@ -166,7 +170,7 @@ class AmclNavigation(ProcessingPlugin):
         self.static_planner = self.planner = Planner(self.model, self.footprint, resolution=p["planResolution"])
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
         self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
-                                   range_max=8.0, seed=p["seed"], owner=self.owner)
+                                   range_max=RANGE_MAX, seed=p["seed"], owner=self.owner)
         initial = self._place(p["initialPose"], "parameter 'initialPose'") if p["initialPose"].strip() else None
         self.localizer.reset(None if initial is None else (initial[0], initial[1], initial[2] or 0.0),
                              self.spread if initial is None or initial[2] is not None else (self.spread[0], math.pi))
