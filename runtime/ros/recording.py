@@ -181,7 +181,8 @@ class RunRecorder:
                 LOG.warning(
                     "recording %s: %d value(s) dropped, first: %s", name, counts["dropped"], counts["firstDrop"]
                 )
-        LOG.info("recording finished: %s", self.path)
+        if self.failure is None:
+            LOG.info("recording finished: %s", self.path)
 
     def statistics(self) -> dict[str, Any]:
         """What was recorded: per topic its bag name, ROS type, written and dropped counts."""

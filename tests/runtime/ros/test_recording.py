@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 import math
 import re
+import resource
 import shutil
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -108,6 +110,26 @@ def test_a_recorded_run_reads_back_with_independent_readers(storage: str, tmp_pa
     assert all(isinstance(m.data, float) and math.isfinite(m.data) for _, m in decoded)
     assert decoded and all(math.isfinite(m.data) for _, m in decoded)
     assert _rosbags_messages(bag) == Counter({t: n for t, n in written.items() if n})
+
+
+def _small_files() -> None:
+    """In the child: files may not grow past 16 KiB (EFBIG instead of SIGXFSZ), a full disk for the bag."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (16384, 16384))
+
+
+@pytest.mark.timeout(60)
+def test_a_failing_bag_reaches_stderr_and_the_exit_code(tmp_path: Path) -> None:
+    config = _private_copy(CLOSED_LOOP, tmp_path)
+    command = [sys.executable, "-m", "runtime.cli", str(config), "--duration", "3", "--log-dir", str(tmp_path / "run")]
+    done = subprocess.run(
+        [*command, "--record", "all"], capture_output=True, text=True, timeout=50, cwd=REPO, preexec_fn=_small_files
+    )
+    assert done.returncode == 5, done.stderr
+    assert "the bag" in done.stderr and "File too large" in done.stderr
+    recording = json.loads((tmp_path / "run" / "stats.json").read_text())["recording"]
+    assert "File too large" in recording["failure"]
+    assert "ERROR ckm.record" in (tmp_path / "run" / "ckm.log").read_text()
 
 
 def test_record_problems_stop_before_the_run_starts(tmp_path: Path) -> None:
