@@ -140,11 +140,17 @@ def _origin(run: Run) -> float | None:
     return min(walls) if walls else None
 
 
-def _header(run: Run, report: Report, system: System | None, config: Path | None, name: str | None) -> str:
+def _header(
+    run: Run, report: Report, system: System | None, config: Path | None, name: str | None, problems: Problems
+) -> str:
     origin = _origin(run)
     begin = min((a.begin for a in run.agents.values()), default=0.0)
     finish = max((a.finish for a in run.agents.values()), default=0.0)
-    date = dt.datetime.fromtimestamp(origin + begin, dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC") if origin else "unknown"
+    date = (
+        dt.datetime.fromtimestamp(origin + begin, dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+        if origin is not None
+        else "unknown"
+    )
     plans = sorted({a.plan for a in report.agents if a.plan}) or ["none recorded"]
     rows = [
         ["System", escape(name or "unknown")],
@@ -153,6 +159,7 @@ def _header(run: Run, report: Report, system: System | None, config: Path | None
         ["Run date", date],
         ["Mission time", f"{finish - begin:.1f} s"],
         ["Off-line validation", _validation(run.run_dir)],
+        ["Problems", f'<a href="#problems">{problems.total} in {len(problems.problems)} kind(s)</a>'],
     ]
     agents = [
         [escape(a.agent), escape(a.mission or "?"), _outcome(a, system), f"{a.total:.1f} s"] for a in report.agents
@@ -280,11 +287,12 @@ def build_html(run_dir: Path, options: Options | None = None) -> tuple[str, list
     def clock(t: float) -> float:
         return t - zero
 
+    problems = collect(run_dir, run)
     plans = ", ".join(sorted({a.plan for a in report.agents if a.plan})) or "-"
     title = f"Run report: {name or 'unknown system'}, plan {plans}"
     sections = [
         f"<h1>{escape(title)}</h1>",
-        _header(run, report, system, config, name),
+        _header(run, report, system, config, name, problems),
         "<h2>Table 7.9: time, contribution and performance per state</h2>",
         _table_7_9(report),
         "<h2>Fig. 7.23: state and mission progress</h2>",
@@ -295,8 +303,8 @@ def build_html(run_dir: Path, options: Options | None = None) -> tuple[str, list
         reliability_section(data, options.topics, report, options.target, clock),
         "<h2>Fig. 7.22 / 7.24: camera frames at the mission's key moments</h2>",
         snapshots_section(data, options.topics, moments, options.snapshot_states),
-        "<h2>Problems seen in the run</h2>",
-        _problems(collect(run_dir, run)),
+        '<h2 id="problems">Problems seen in the run</h2>',
+        _problems(problems),
         "<h2>Data sources and notes</h2>",
         _sources(run, data, notes),
     ]

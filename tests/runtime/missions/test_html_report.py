@@ -263,6 +263,7 @@ def test_the_page_holds_table_7_9_figures_snapshots_and_problems(
     assert summary["System"] == "usecase-lab" and summary["Plan"] == "cooperative"
     assert summary["Mission time"] == "151.0 s" and summary["Run date"].startswith("2027-01-15")
     assert summary["Off-line validation"].startswith("not in the run directory")
+    assert summary["Problems"] == "5 in 3 kind(s)"
     # camera frames: the nearest frame to each entry of SPOT, PICK, PLACE (turtlebot) and OBJ_FIX (nao)
     frames = [(alt, decode(src)) for alt, src in page.images if " enters " in alt]
     assert len(frames) == 8  # four moments, two cameras
