@@ -30,6 +30,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 import ckmconf
+from runtime import cli
 from runtime.network import open_transport
 from runtime.network.api import TopicQoS
 from runtime.ros.recording import RecordingError, RunRecorder, bag_topic_name
@@ -132,15 +133,17 @@ def test_a_failing_bag_reaches_stderr_and_the_exit_code(tmp_path: Path) -> None:
     assert "ERROR ckm.record" in (tmp_path / "run" / "ckm.log").read_text()
 
 
-def test_record_problems_stop_before_the_run_starts(tmp_path: Path) -> None:
-    unknown = _ckm_run(str(CLOSED_LOOP), "--duration", "1", "--log-dir", str(tmp_path / "a"), "--record", "speed,odom")
-    assert unknown.returncode == 1 and "no topic 'odom'" in unknown.stderr and "speed" in unknown.stderr
-    assert not (tmp_path / "a" / "bag").exists()
-    bad_format = _ckm_run(str(CLOSED_LOOP), "--record", "all", "--record-format", "rosbag1")
-    assert bad_format.returncode == 2 and "--record-format" in bad_format.stderr
+def test_record_problems_stop_before_the_run_starts(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # in this process: each case returns before any transport, node or bag exists
+    assert cli.main([str(CLOSED_LOOP), "--log-dir", str(tmp_path / "a"), "--record", "speed,odom"]) == 1
+    assert "no topic 'odom' here (topics: command, setpoint, speed)" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
     (tmp_path / "b" / "bag").mkdir(parents=True)
-    exists = _ckm_run(str(CLOSED_LOOP), "--duration", "1", "--log-dir", str(tmp_path / "b"), "--record", "all")
-    assert exists.returncode == 1 and "exists already" in exists.stderr
+    assert cli.main([str(CLOSED_LOOP), "--log-dir", str(tmp_path / "b"), "--record", "all"]) == 1
+    assert "exists already" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        cli.main([str(CLOSED_LOOP), "--record", "all", "--record-format", "rosbag1"])
+    assert usage.value.code == 2 and "--record-format" in capsys.readouterr().err
 
 
 def test_bag_topic_names_are_ros_names() -> None:
