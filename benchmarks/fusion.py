@@ -12,13 +12,15 @@ ground truth only scores the three results:
   (an untextured object: its shape).
 
 Fig. 7.18 (``--observations`` per object, default 1,000): per object and method the detection
-rate, classification accuracy, reliability mean and standard deviation over the detections, the
+rate, classification accuracy, reliability mean and standard deviation over the results that are
+not wrong (right, or a fused object named by its shape only), the
 cylinders' same-shape discrimination (fused objects named by a texture: the right one?), the
 fused values at the bound 1.0 and their position error. Views are sampled around the workbench
 (camera 0.5–1.0 m from the aimed object, ±40° around its front, the object anywhere in the
 field of view); each render is scored for every workbench object in view. Fig. 7.19: the robot
 approaches one cylinder from 1.8 m and 0.5 rad off its axis to 0.6 m in front of it, aligned.
-Plots (matplotlib) and ``results.json`` go to ``--out``.
+Plots (matplotlib), ``results.json``, ``results.txt`` and ``views.json`` (every scored observation) go
+to ``--out``.
 """
 
 from __future__ import annotations
@@ -206,5 +208,6 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
     plot_reliability(scored, args.out / "fig7_18_reliability.png")
     plot_approach(track, args.approach_object, args.out / "fig7_19_approach.png")
     (args.out / "results.json").write_text(json.dumps(result, indent=2))
+    (args.out / "views.json").write_text(json.dumps(scored))  # every scored observation, for re-analysis
     (args.out / "results.txt").write_text("\n".join(f"{k}: {v}" for k, v in describe(result)) + "\n")
     return result

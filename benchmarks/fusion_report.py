@@ -21,20 +21,30 @@ def _stats(values: Sequence[float]) -> dict[str, float | None]:
     return {"mean": round(float(np.mean(values)), 4), "std": round(float(np.std(values)), 4)}
 
 
-def _method(rows: list[dict[str, Any]], method: str) -> dict[str, Any]:
+def _shape(name: str) -> str:
+    """The shape an object's name starts with (the catalogue names ``shape_print``)."""
+    return name.split("_")[0]
+
+
+def usable(hit: tuple[float, str, bool] | None, name: str) -> bool:
+    """A result about the object that is not wrong: right, or a fused object named by its shape only."""
+    return hit is not None and (hit[2] or hit[1] == _shape(name))
+
+
+def _method(name: str, rows: list[dict[str, Any]], method: str) -> dict[str, Any]:
     hits = [row[method] for row in rows if row[method] is not None]
     right = [h for h in hits if h[2]]
     return {
         "detected": round(len(hits) / len(rows), 4) if rows else 0.0,
         "accuracy": round(len(right) / len(hits), 4) if hits else None,
         "recall": round(len(right) / len(rows), 4) if rows else 0.0,
-        **_stats([h[0] for h in hits]),
+        **_stats([row[method][0] for row in rows if usable(row[method], name)]),
     }
 
 
 def _object(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     entry: dict[str, Any] = {"name": name, "observations": len(rows)}
-    entry |= {method: _method(rows, method) for method in METHODS}
+    entry |= {method: _method(name, rows, method) for method in METHODS}
     fused = [row["fused"][0] for row in rows if row["fused"] is not None]
     entry["fused_at_bound"] = round(share_at_bound(fused), 4)
     entry["fused_near_bound"] = round(share_at_bound(fused, bound=NEAR_BOUND, tolerance=0.0), 4)
@@ -43,7 +53,7 @@ def _object(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     both = [row for row in rows if row["fused"] is not None and row.get("fused_sources") == ["depth", "rgb"]]
     entry["fused_both"] = round(len(both) / len(rows), 4) if rows else 0.0
     # Same-shape discrimination: fused objects named by a texture (not the bare shape): the right one?
-    family = f"{name.split('_')[0]}_"
+    family = f"{_shape(name)}_"
     named = [row["fused"] for row in rows if row["fused"] is not None and row["fused"][1].startswith(family)]
     entry["discrimination"] = round(sum(h[2] for h in named) / len(named), 4) if named else None
     paired = [row for row in both if row["depth"] is not None and row["rgb"] is not None]
@@ -109,7 +119,7 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def plot_reliability(scored: dict[str, list[dict[str, Any]]], png: Path) -> None:
-    """Fig. 7.18: per object, box plots of the depth, RGB and fused reliabilities (their detections)."""
+    """Fig. 7.18: per object, box plots of the depth, RGB and fused reliabilities (results not wrong)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -118,7 +128,7 @@ def plot_reliability(scored: dict[str, list[dict[str, Any]]], png: Path) -> None
     names = list(scored)
     figure, axes = plt.subplots(1, len(names), figsize=(3.0 * len(names), 3.6), sharey=True)
     for ax, name in zip(np.atleast_1d(axes), names, strict=True):
-        data = [[row[m][0] for row in scored[name] if row[m] is not None] for m in METHODS]
+        data = [[row[m][0] for row in scored[name] if usable(row[m], name)] for m in METHODS]
         shown = [d if d else [np.nan] for d in data]
         ax.boxplot(shown, showfliers=True, flierprops={"markersize": 2})
         ax.set_xticks(range(1, len(METHODS) + 1), ["depth", "RGB", "fused"])
