@@ -156,9 +156,7 @@ class BagRecorder:
         """Record an already serialised CDR message of ``topic`` at ``stamp`` seconds."""
         self._type_of(topic)
         if not math.isfinite(stamp) or stamp < 0:
-            raise BagError(
-                f"{self.path}: {topic}: a message time must be non-negative seconds, got {stamp!r}"
-            )
+            raise BagError(f"{self.path}: {topic}: a message time must be non-negative seconds, got {stamp!r}")
         self._open_writer().write(self._connections[topic], round(stamp * 1e9), data)
 
     def close(self) -> None:

@@ -202,16 +202,18 @@ def test_recorder_errors(tmp_path: Path) -> None:
 
 def test_configured_topics_and_received_samples_are_recorded(tmp_path: Path) -> None:
     topics = [
-        Topic(name="/robot1/scan", type="sensor_msgs/msg/LaserScan", reliability="best-effort", history=3,
-              deadline=0.5),
+        Topic(
+            name="/robot1/scan", type="sensor_msgs/msg/LaserScan", reliability="best-effort", history=3, deadline=0.5
+        ),
         Topic(name="/nav/pose", type="Pose2D"),  # a CKM MessageType: not a ROS type, left out
         Topic(name="/cmd_vel", type="geometry_msgs/msg/Twist"),
     ]
     with BagRecorder(tmp_path / "run", storage="sqlite3") as bag:
         assert bag.add_topics(topics) == ["/robot1/scan", "/cmd_vel"]
         assert bag.add_topics(topics) == []  # declared already
-        sample = Sample("/cmd_vel", {"linear": {"x": 0.25}}, stamp=START + 2.0, source=7, seq=1, received=START + 2.1,
-                        offset=0.5)
+        sample = Sample(
+            "/cmd_vel", {"linear": {"x": 0.25}}, stamp=START + 2.0, source=7, seq=1, received=START + 2.1, offset=0.5
+        )
         bag.write_sample(sample)
     info = YAML(typ="safe").load((tmp_path / "run" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     qos = info["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"][0]
