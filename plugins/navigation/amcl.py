@@ -27,7 +27,6 @@ by the nearest free point within ``escape`` metres (decision D107). Top-level ``
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 from collections.abc import Mapping
@@ -35,15 +34,12 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-import shapely
-from shapely.geometry import MultiPoint, Polygon
 
 from ckmconf import ConfigError, ConfigErrors, read_document
-from ckmconf.model.environment import AvoidedArea, Environment, Vertex
+from ckmconf.model.environment import Environment
 from ckmconf.model.resources import Plugin
 from plugins.environment.geometry import Footprint
-from plugins.environment.map_model import MapModel
-from plugins.environment.planner import Planner, Unreachable
+from plugins.environment.planner import Unreachable
 from plugins.localization.estimate import Estimate
 from plugins.localization.raster import GridMap
 from plugins.localization.trajectories import LAB
@@ -66,6 +62,7 @@ from .frames import (
     wrap,
 )
 from .localizer import FILTERS, Localizer
+from .routes import Routes, blocking
 
 INPUTS = ("scan", "odom")
 RANGE_MAX = 8.0
@@ -145,7 +142,6 @@ class AmclNavigation(ProcessingPlugin):
         self.segment = 0
         self.path_id = 0
         self.plan_length = 0.0
-        self.extra: list[AvoidedArea] = []
         self.unlocalized_since: float | None = None
         self.stopped = True
 
@@ -164,10 +160,10 @@ class AmclNavigation(ProcessingPlugin):
         if document.environment is None:
             raise ValueError(f"{self.owner}: environment file {self.environment_file} has no Environment")
         self.env = env = document.environment
-        self.model = MapModel.from_environment(env)
         p = self.params
-        self.footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
-        self.static_planner = self.planner = Planner(self.model, self.footprint, resolution=p["planResolution"])
+        footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
+        self.routes = Routes(env, footprint, p["planResolution"], p["escape"])
+        self.model = self.routes.model
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
         self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
                                    range_max=RANGE_MAX, seed=p["seed"], owner=self.owner)
@@ -207,8 +203,8 @@ class AmclNavigation(ProcessingPlugin):
         self.goal = self._place(text, "service parameter 'goal'") if text.strip() else None
         self.goal_text = text
         self._pending_goal = None
-        self.phase, self.reason, self.plan, self.extra = "planning", "", None, []
-        self.planner = self.static_planner
+        self.phase, self.reason, self.plan = "planning", "", None
+        self.routes.reset()
         self.unlocalized_since = None
 
     # ------------------------------------------------------------------ planning
@@ -218,7 +214,7 @@ class AmclNavigation(ProcessingPlugin):
         assert self.goal is not None
         here, goal = (start[0], start[1]), (self.goal[0], self.goal[1])
         try:
-            points = self._plan_from(here, goal)
+            points = self.routes.plan(here, goal)
         except Unreachable as refused:
             self.phase, self.reason, self.plan = "failed", str(refused), None
             return
@@ -226,57 +222,56 @@ class AmclNavigation(ProcessingPlugin):
         self.plan_length = polyline_length(points)
         self.phase = "active"
 
-    def _plan_from(self, here: Point, goal: Point) -> list[Point]:
-        try:
-            return list(self.planner.plan(here, goal).waypoints)
-        except Unreachable as refused:
-            if "the start collides" not in refused.reason or not self.params["escape"] > 0:
-                raise
-        # the start is inside an inflated obstacle (a close approach): leave by the nearest free cell
-        cells = np.argwhere(self.planner.free)
-        xy = np.stack([self.planner.xs[cells[:, 0]], self.planner.ys[cells[:, 1]]], axis=1)
-        near = np.hypot(xy[:, 0] - here[0], xy[:, 1] - here[1])
-        for k in np.argsort(near)[:20]:
-            if near[k] > self.params["escape"]:
-                break
-            exit_point = (float(xy[k, 0]), float(xy[k, 1]))
-            try:
-                return [here, *self.planner.plan(exit_point, goal).waypoints]
-            except Unreachable:
-                continue
-        return list(self.planner.plan(here, goal).waypoints)  # raises with the start's obstacle
-
     def _blocked(self, pose: Pose, scan: Mapping[str, Any] | None) -> list[Point]:
         """Scan points within the robot's radius of the next ``blockLookahead`` m of the path."""
         if scan is None or self.plan is None or self.localizer is None:
             return []
-        ahead, left = [], self.params["blockLookahead"]
         self.segment, near, _ = project(self.plan, (pose[0], pose[1]), self.segment)
-        ahead.append(near)
-        for point in self.plan[self.segment + 1 :]:
-            step = math.dist(ahead[-1], point)
-            ahead.append(point)
-            left -= step
-            if left <= 0:
-                break
-        line = shapely.LineString(ahead) if len(ahead) > 1 else shapely.Point(ahead[0])
-        hits = self.localizer.endpoints(scan, pose)
-        if not len(hits):
-            return []
-        distance = shapely.distance(line, shapely.points(hits))
-        close = hits[distance < self.params["robotRadius"]]
-        return [(float(x), float(y)) for x, y in close] if len(close) >= self.params["blockPoints"] else []
+        p = self.params
+        return blocking(self.plan, self.segment, near, self.localizer.endpoints(scan, pose), p["robotRadius"],
+                        p["blockLookahead"], p["blockPoints"])
 
-    def _avoid(self, points: list[Point]) -> None:
-        """Plan around ``points`` (scan hits on the path) from now on: they join the map as avoided areas."""
-        assert self.env is not None
-        blob = MultiPoint(points).buffer(0.05, quad_segs=4)
-        parts = [blob] if isinstance(blob, Polygon) else list(getattr(blob, "geoms", []))
-        for part in parts:
-            vertices = tuple(Vertex(x=float(x), y=float(y)) for x, y in list(part.exterior.coords)[:-1])
-            self.extra.append(AvoidedArea(name=f"scan obstacle {len(self.extra) + 1}", vertices=vertices))
-        env = dataclasses.replace(self.env, avoided=self.env.avoided + tuple(self.extra))
-        self.planner = Planner(MapModel.from_environment(env), self.footprint, resolution=self.params["planResolution"])
+    # ------------------------------------------------------------------ delegation
+
+    def state(self) -> dict[str, Any]:
+        """The goal, the plan and the filter (particles included), codec-able: a copy on another node
+        (§3.1.2.5–6 delegation of the Navigation computation) goes on with the same results."""
+        if self.localizer is None:
+            return {}
+        return {
+            "kind": "amcl-navigation", "goal_text": self.goal_text,
+            "goal": None if self.goal is None else list(self.goal), "pending": self._pending_goal,
+            "phase": self.phase, "reason": self.reason,
+            "plan": None if self.plan is None else [list(p) for p in self.plan], "segment": self.segment,
+            "path_id": self.path_id, "plan_length": self.plan_length,
+            "extra": self.routes.areas(),
+            "unlocalized_since": self.unlocalized_since, "stopped": self.stopped,
+            "localizer": self.localizer.state(),
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Go on from :meth:`state` of another copy (after ``setup()``); ValueError naming what is wrong."""
+        if not state:
+            return
+        if self.localizer is None:
+            self.setup()
+        assert self.localizer is not None and self.env is not None
+        try:
+            if state.get("kind") != "amcl-navigation":
+                raise ValueError(f"kind is {state.get('kind')!r}")
+            goal = state["goal"]
+            self.goal = None if goal is None else (float(goal[0]), float(goal[1]), goal[2])
+            self.goal_text, self._pending_goal = str(state["goal_text"]), state["pending"]
+            self.phase, self.reason = str(state["phase"]), str(state["reason"])
+            plan = state["plan"]
+            self.plan = None if plan is None else [(float(x), float(y)) for x, y in plan]
+            self.segment, self.path_id = int(state["segment"]), int(state["path_id"])
+            self.plan_length = float(state["plan_length"])
+            self.unlocalized_since, self.stopped = state["unlocalized_since"], bool(state["stopped"])
+            self.routes.restore(state["extra"])
+            self.localizer.restore(state["localizer"])
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ValueError(f"{self.owner}: not an amcl-navigation state ({exc})") from None
 
     # ------------------------------------------------------------------ frames
 
@@ -348,7 +343,7 @@ class AmclNavigation(ProcessingPlugin):
             self.segment, _, off = project(self.plan, (pose[0], pose[1]), self.segment)
             blocking = self._blocked(pose, scan)
             if blocking:
-                self._avoid(blocking)
+                self.routes.avoid(blocking)
                 self.plan = None
             elif off > self.params["strayDistance"]:
                 self.plan = None

@@ -20,8 +20,9 @@ before the acceleration limits of :class:`Limiter`.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from .frames import Point, Pose, along, project, relative, remaining_length, wrap
 
@@ -96,6 +97,18 @@ class PathFollower:
         self.segment = 0
         self.done = not self.points
 
+    def state(self) -> dict[str, Any]:
+        """Where the follower is (msgpack-able), for :meth:`from_state`."""
+        return {"points": [list(p) for p in self.points], "yaw": self.yaw, "speed": self.speed,
+                "segment": self.segment, "remaining": self.remaining, "done": self.done, "aligning": self.aligning}
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, Any], gains: Gains) -> PathFollower:
+        made = cls([(float(x), float(y)) for x, y in state["points"]], state["yaw"], float(state["speed"]), gains)
+        made.segment, made.remaining = int(state["segment"]), float(state["remaining"])
+        made.done, made.aligning = bool(state["done"]), bool(state["aligning"])
+        return made
+
     def command(self, pose: Pose) -> Command:
         g = self.gains
         if self.done:
@@ -138,6 +151,19 @@ class RelativeMove:
         self.backwards = local[0] < 0 and abs(local[1]) < -local[0]  # mostly behind: reverse into it
         self.phase = "face" if self.total > gains.tolerance else "align"
         self.remaining = self.total
+
+    def state(self) -> dict[str, Any]:
+        """Where the move is (msgpack-able), for :meth:`from_state`."""
+        return {"goal": list(self.goal), "speed": self.speed, "total": self.total, "backwards": self.backwards,
+                "phase": self.phase, "remaining": self.remaining}
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, Any], gains: Gains) -> RelativeMove:
+        x, y, yaw = (float(v) for v in state["goal"])
+        made = cls((x, y, yaw), (x, y, yaw), float(state["speed"]), gains)
+        made.total, made.backwards = float(state["total"]), bool(state["backwards"])
+        made.phase, made.remaining = str(state["phase"]), float(state["remaining"])
+        return made
 
     def _bearing(self, pose: Pose) -> tuple[float, float]:
         """(distance along the heading, bearing error) of the goal point, for the driving direction."""

@@ -126,6 +126,41 @@ class BaseDisplacement(ProcessingPlugin):
         self._seen[name] = value
         return True
 
+    # ------------------------------------------------------------------ delegation
+
+    def state(self) -> dict[str, Any]:
+        """Everything a copy on another node needs to go on (§3.1.2.5–6 delegation), msgpack-able."""
+        return {
+            "kind": "base-displacement", "speed": self.speed, "pose": None if self.pose is None else list(self.pose),
+            "odom": None if self.odom is None else dict(self.odom), "fresh_at": self.fresh_at,
+            "last_frame": self.last_frame, "distance": self.distance, "rotation": self.rotation,
+            "follower": None if self.follower is None else self.follower.state(), "path_id": self.path_id,
+            "dropped": sorted(self.dropped), "move": None if self.move is None else self.move.state(),
+            "move_id": self.move_id, "move_state": self.move_state, "move_deadline": self.move_deadline,
+            "ended": self.ended, "command": list(self.limiter.last), "seen": dict(self._seen),
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Go on from :meth:`state` of another copy; ValueError naming what is wrong."""
+        try:
+            if state.get("kind") != "base-displacement":
+                raise ValueError(f"kind is {state.get('kind')!r}")
+            pose = state["pose"]
+            self.speed = float(state["speed"])
+            self.pose = None if pose is None else (float(pose[0]), float(pose[1]), float(pose[2]))
+            self.odom, self.fresh_at, self.last_frame = state["odom"], state["fresh_at"], state["last_frame"]
+            self.distance, self.rotation = float(state["distance"]), float(state["rotation"])
+            follower, move = state["follower"], state["move"]
+            self.follower = None if follower is None else PathFollower.from_state(follower, self.gains)
+            self.move = None if move is None else RelativeMove.from_state(move, self.gains)
+            self.path_id, self.dropped = state["path_id"], {int(i) for i in state["dropped"]}
+            self.move_id, self.move_state = state["move_id"], str(state["move_state"])
+            self.move_deadline, self.ended = float(state["move_deadline"]), state["ended"]
+            self.limiter.last = (float(state["command"][0]), float(state["command"][1]))
+            self._seen = dict(state["seen"])
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ValueError(f"{self.owner}: not a base-displacement state ({exc})") from None
+
     # ------------------------------------------------------------------ inputs
 
     def _odometry(self, message: Any, now: float) -> None:

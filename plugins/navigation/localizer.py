@@ -34,6 +34,12 @@ Array = npt.NDArray[np.float64]
 FILTERS = ("reliability", "mcl")
 
 
+def tuple_pose(values: Any) -> Pose:
+    """Three numbers as a pose; ValueError otherwise."""
+    x, y, yaw = (float(v) for v in values)
+    return x, y, yaw
+
+
 class Localizer:
     """One filter on one map, fed with Odometry poses and LaserScan messages."""
 
@@ -102,6 +108,56 @@ class Localizer:
         self.correction = compose((float(pose[0]), float(pose[1]), float(wrap(float(pose[2])))), inverse(odom))
         self.odom = odom
         return self.estimate
+
+    def state(self) -> dict[str, Any]:
+        """The filter's particles, memory and random generator, and the last estimate (codec-able)."""
+        f = self.filter
+        rng = f.rng.bit_generator.state  # PCG64's 128-bit integers travel as text (msgpack has 64 bits)
+        state: dict[str, Any] = {
+            "kind": self.kind, "particles": f.particles.copy(),
+            "odometry": None if f.odometry is None else f.odometry.copy(),
+            "rng": {"state": str(rng["state"]["state"]), "inc": str(rng["state"]["inc"]),
+                    "has_uint32": int(rng["has_uint32"]), "uinteger": int(rng["uinteger"])},
+            "estimate": None if self.estimate is None else {
+                "pose": self.estimate.pose.copy(), "covariance": np.asarray(self.estimate.covariance).copy(),
+                "dispersion": float(self.estimate.dispersion)},
+            "correction": None if self.correction is None else list(self.correction),
+            "odom": None if self.odom is None else list(self.odom),
+        }
+        if isinstance(f, AmclFilter):
+            state.update(weights=f.weights.copy(), w_slow=f.w_slow, w_fast=f.w_fast)
+        else:
+            state.update(reliability=f.reliability, filter_estimate=None if f.estimate is None else f.estimate.copy())
+        return state
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Go on from :meth:`state` (of a localizer with the same filter); KeyError/ValueError if it is not one."""
+        if state["kind"] != self.kind:
+            raise ValueError(f"a {state['kind']!r} filter's state, not a {self.kind!r} one")
+        f = self.filter
+        particles = np.asarray(state["particles"], dtype=np.float64)
+        if particles.ndim != 2 or particles.shape[1] != 3:
+            raise ValueError(f"particles of shape {particles.shape}, not (n, 3)")
+        f.particles = particles.copy()
+        f.odometry = None if state["odometry"] is None else np.asarray(state["odometry"], dtype=np.float64)
+        rng = state["rng"]
+        f.rng.bit_generator.state = {
+            "bit_generator": "PCG64", "state": {"state": int(rng["state"]), "inc": int(rng["inc"])},
+            "has_uint32": int(rng["has_uint32"]), "uinteger": int(rng["uinteger"]),
+        }
+        estimate = state["estimate"]
+        self.estimate = None if estimate is None else Estimate(
+            np.asarray(estimate["pose"], dtype=np.float64), np.asarray(estimate["covariance"], dtype=np.float64),
+            float(estimate["dispersion"]))
+        self.correction = None if state["correction"] is None else tuple_pose(state["correction"])
+        self.odom = None if state["odom"] is None else tuple_pose(state["odom"])
+        if isinstance(f, AmclFilter):
+            f.weights = np.asarray(state["weights"], dtype=np.float64)
+            f.w_slow, f.w_fast = float(state["w_slow"]), float(state["w_fast"])
+        else:
+            f.reliability = float(state["reliability"])
+            kept = state["filter_estimate"]
+            f.estimate = None if kept is None else np.asarray(kept, dtype=np.float64)
 
     @property
     def reliability(self) -> float | None:

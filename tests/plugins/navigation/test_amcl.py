@@ -19,6 +19,7 @@ from plugins.navigation.amcl import AmclNavigation
 from plugins.navigation.frames import Pose, compose, inverse, transform_point
 from plugins.navigation.laser_scan import LaserScanService
 from runtime.kernel.interfaces import ParamError
+from runtime.resources import codec
 from runtime.resources.spt import Context
 
 from .loop import plugin, room
@@ -186,3 +187,22 @@ def test_bad_params_and_a_missing_environment_are_refused(file: Path) -> None:
         navigation(file, initialPose="Kitchen")
     with pytest.raises(ValueError, match="cannot use environment file"):
         navigation(file, environment="missing.xml")
+
+
+@pytest.mark.parametrize("filter_name", ["reliability", "mcl"])
+def test_a_copy_restored_from_the_state_goes_on_with_the_same_results(file: Path, filter_name: str) -> None:
+    """Delegation (§3.1.2.5–6) ships the state through the codec; the copy's next frames are the original's."""
+    params = {"filter": filter_name, "initialPose": "1 1.8 0", "initialSpread": "0.1 0.05", "goal": "Target"}
+    nav = navigation(file, **params)
+    world = grid(file, shapely.box(2.2, 0.1, 2.8, 0.7))
+    frames(nav, world, (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)
+    frames(nav, world, (1.7, 0.8, 0.0), (0.7, -1.0, 0.0), 1)  # sees the box: an added obstacle
+    assert nav.routes.extra
+    copy = navigation(file, **params)
+    copy.restore(codec.decode(codec.encode(nav.state())))
+    for k, (truth, odom) in enumerate([((1.8, 0.9, 0.1), (0.8, -0.9, 0.1)), ((1.9, 1.0, 0.2), (0.9, -0.8, 0.2))]):
+        inputs = {"scan": scan(world, truth), "odom": odometry(odom)}
+        mine, theirs = nav.process(inputs, Context(10 + k, 9.0 + k)), copy.process(inputs, Context(10 + k, 9.0 + k))
+        assert theirs == mine
+    with pytest.raises(ValueError, match="not an amcl-navigation state"):
+        copy.restore({"kind": "amcl-navigation", "goal": None})

@@ -87,7 +87,7 @@ def test_an_unmapped_box_on_the_path_is_seen_and_planned_around(tmp_path: Path, 
     assert states[-1] == "arrived", states
     assert max(t[1] for t in trajectory) > 2.9  # it went round the north end instead
     assert bench.latest("/base/path")["id"] >= 2  # replanned, around what the scan showed
-    assert [a.name for a in bench.services["nav"].plugin.extra][:1] == ["scan obstacle 1"]  # type: ignore[attr-defined]
+    assert [a.name for a in bench.services["nav"].plugin.routes.extra][:1] == ["scan obstacle 1"]  # type: ignore[attr-defined]
     assert min(shapely.box(2.2, 0.1, 2.8, 0.7).distance(shapely.Point(t[:2])) for t in trajectory) > 0.15
 
 

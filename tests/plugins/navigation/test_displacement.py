@@ -11,6 +11,7 @@ import pytest
 
 from plugins.navigation.displacement import BaseDisplacement
 from runtime.kernel.interfaces import ParamError
+from runtime.resources import codec
 from runtime.resources.spt import Context
 
 from .loop import plugin
@@ -189,3 +190,21 @@ def test_bad_params_are_refused() -> None:
         base(speed=2.0)
     with pytest.raises(ValueError, match="the input must be a message"):
         base().process([1, 2], Context(0, 0.0))
+
+
+def test_a_copy_restored_from_the_state_goes_on_with_the_same_commands() -> None:
+    """Delegation (§3.1.2.5–6) ships the state through the codec; the copy's next commands are the original's."""
+    robot, service = Unicycle(), base()
+    route = path([[0.0, 0.0], [1.5, 0.0], [1.5, 1.0]], yaw=1.0)
+    for _ in range(30):
+        robot.frame(service, path=route, move_goal=move(4, 0.2))  # the move preempted the path: it ends first
+    copy = base()
+    copy.restore(codec.decode(codec.encode(service.state())))
+    for _ in range(40):
+        inputs = {"path": path([[robot.x, robot.y], [1.5, 1.0]], 9), "move_goal": move(4, 0.2),
+                  "wheel_odom": robot.odometry()}
+        context = Context(robot.frames, robot.time)
+        assert copy.process(inputs, context) == robot.frame(service, **{k: v for k, v in inputs.items()
+                                                                        if k != "wheel_odom"})
+    with pytest.raises(ValueError, match="not a base-displacement state"):
+        copy.restore({"kind": "base-displacement"})

@@ -1,0 +1,118 @@
+"""Routes of the Navigation service on the Environment's map (thesis §6.1.2, §7.4; decision D107).
+
+:class:`Routes` wraps the A* planner of plugins/environment/planner.py for one footprint:
+
+- a start inside the inflated obstacles (the robot stood close to the workbench after APPR) is
+  left by the nearest free A* cell within ``escape`` metres, the robot's position prepended;
+- scan hits on the path (an obstacle the map does not hold) join the map as avoided areas
+  ("scan obstacle N") until the goal changes: :meth:`Routes.avoid` rebuilds the planner with them.
+
+:func:`blocking` finds those hits: scan endpoints within ``radius`` of the next ``lookahead``
+metres of the path. The map's own obstacles are at least the inflated radius from any planned
+path, so only unknown ones (or a localization error larger than the inflation) come that close.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+from shapely.geometry import MultiPoint, Polygon
+
+from ckmconf.model.environment import AvoidedArea, Environment, Vertex
+from plugins.environment.geometry import Footprint
+from plugins.environment.map_model import MapModel
+from plugins.environment.planner import Planner, Unreachable
+
+from .frames import Point
+
+ESCAPE_TRIES = 20
+"""Free cells (nearest first) tried as the way out of an inflated obstacle."""
+
+
+class Routes:
+    """A* routes for ``footprint`` on ``env``, with the obstacles scans added since the last reset."""
+
+    def __init__(self, env: Environment, footprint: Footprint, resolution: float, escape: float) -> None:
+        self.env, self.footprint, self.resolution, self.escape = env, footprint, resolution, escape
+        self.model = MapModel.from_environment(env)
+        self.static = self.planner = Planner(self.model, footprint, resolution=resolution)
+        self.extra: list[AvoidedArea] = []
+
+    def reset(self) -> None:
+        """Forget the obstacles scans added (a new goal)."""
+        self.extra, self.planner = [], self.static
+
+    def plan(self, here: Point, goal: Point) -> list[Point]:
+        """Waypoints from ``here`` to ``goal``; :class:`Unreachable` naming why when there are none."""
+        try:
+            return list(self.planner.plan(here, goal).waypoints)
+        except Unreachable as refused:
+            if "the start collides" not in refused.reason or not self.escape > 0:
+                raise
+        planner = self.planner
+        cells = np.argwhere(planner.free)
+        xy = np.stack([planner.xs[cells[:, 0]], planner.ys[cells[:, 1]]], axis=1)
+        near = np.hypot(xy[:, 0] - here[0], xy[:, 1] - here[1])
+        for k in np.argsort(near)[:ESCAPE_TRIES]:
+            if near[k] > self.escape:
+                break
+            try:
+                return [here, *planner.plan((float(xy[k, 0]), float(xy[k, 1])), goal).waypoints]
+            except Unreachable:
+                continue
+        return list(planner.plan(here, goal).waypoints)  # raises, naming the start's obstacle
+
+    def avoid(self, points: Sequence[Point]) -> None:
+        """Plan around ``points`` from now on: they join the map as avoided areas (5 cm around each)."""
+        blob = MultiPoint(list(points)).buffer(0.05, quad_segs=4)
+        parts = [blob] if isinstance(blob, Polygon) else list(getattr(blob, "geoms", []))
+        for part in parts:
+            vertices = tuple(Vertex(x=float(x), y=float(y)) for x, y in list(part.exterior.coords)[:-1])
+            self.extra.append(AvoidedArea(name=f"scan obstacle {len(self.extra) + 1}", vertices=vertices))
+        self._rebuild()
+
+    def areas(self) -> list[list[list[float]]]:
+        """The added areas' vertices (for a plugin's state)."""
+        return [[[v.x, v.y] for v in area.vertices] for area in self.extra]
+
+    def restore(self, areas: Sequence[Sequence[Sequence[float]]]) -> None:
+        """The added areas of :meth:`areas`, planned around again."""
+        self.extra = [
+            AvoidedArea(name=f"scan obstacle {i + 1}", vertices=tuple(Vertex(x=float(x), y=float(y)) for x, y in area))
+            for i, area in enumerate(areas)
+        ]
+        self._rebuild()
+
+    def _rebuild(self) -> None:
+        if not self.extra:
+            self.planner = self.static
+            return
+        env = dataclasses.replace(self.env, avoided=self.env.avoided + tuple(self.extra))
+        self.planner = Planner(MapModel.from_environment(env), self.footprint, resolution=self.resolution)
+
+
+def blocking(
+    plan: Sequence[Point], segment: int, near: Point, hits: npt.NDArray[np.float64], radius: float,
+    lookahead: float, count: int,
+) -> list[Point]:
+    """The ``hits`` (k, 2) within ``radius`` of the path ahead of ``near`` (on ``segment``), if at least ``count``.
+
+    The path ahead runs from ``near`` through the next waypoints until it is ``lookahead`` long
+    (the waypoint that crosses it included: a leg is checked whole).
+    """
+    if not len(hits):
+        return []
+    ahead, left = [near], lookahead
+    for point in plan[segment + 1 :]:
+        left -= math.dist(ahead[-1], point)
+        ahead.append(point)
+        if left <= 0:
+            break
+    line = shapely.LineString(ahead) if len(ahead) > 1 else shapely.Point(ahead[0])
+    close = hits[shapely.distance(line, shapely.points(hits)) < radius]
+    return [(float(x), float(y)) for x, y in close] if len(close) >= count else []
