@@ -31,6 +31,11 @@ class Located(Protocol):
     def TAG(self) -> str: ...  # the records' class constant
 
 
+def located(record: Located) -> Loc:
+    """Where a record was read; a record built in code is placed at ``<memory>:1:1: /TAG``."""
+    return record.loc or Loc(MEMORY_FILE, 1, 1, f"/{record.TAG}")
+
+
 class ConfigError(Exception):
     """One problem in a configuration file.
 
@@ -57,7 +62,7 @@ class ConfigError(Exception):
 
         A record built in code has no ``loc``: it is then placed at ``<memory>:1:1: /TAG``.
         """
-        loc = record.loc or Loc(MEMORY_FILE, 1, 1, f"/{record.TAG}")
+        loc = located(record)
         xpath = f"{loc.xpath}/@{attr}" if attr else loc.xpath
         return cls(loc.file, loc.line, loc.column, xpath, message)
 
@@ -102,4 +107,4 @@ def errors_to_json(errors: Iterable[ConfigError]) -> str:
     return json.dumps([e.as_dict() for e in errors], indent=2)
 
 
-__all__ = ["MEMORY_FILE", "ConfigError", "ConfigErrors", "Loc", "Located", "errors_to_json"]
+__all__ = ["MEMORY_FILE", "ConfigError", "ConfigErrors", "Loc", "Located", "errors_to_json", "located"]

@@ -15,7 +15,7 @@ from typing import Any
 
 from ckmconf.binding import Record
 from ckmconf.checks.report import missing
-from ckmconf.errors import ConfigError, Loc
+from ckmconf.errors import MEMORY_FILE, ConfigError
 
 GROUP = "ckm.plugins"
 CATEGORIES = ("hardware", "controller", "function", "plugin", "behavior")
@@ -99,9 +99,10 @@ class Registry:
         """The class registered for ``kind``, or a ConfigError located at ``record``."""
         target = self._targets.get((category, kind))
         if target is None:
-            loc = record.loc if record is not None and record.loc else Loc("<memory>", 1, 1, "/")
             message = self.missing(category, kind)
-            raise ConfigError(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}", message)
+            if record is None:
+                raise ConfigError(MEMORY_FILE, 1, 1, f"/@{attr}", message)
+            raise ConfigError.of(record, message, attr)
         if isinstance(target, str):
             module, _, name = target.partition(":")
             target = getattr(importlib.import_module(module), name)

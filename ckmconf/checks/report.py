@@ -6,7 +6,7 @@ import difflib
 from collections.abc import Iterable
 
 from ..binding import Record
-from ..errors import ConfigError, Loc
+from ..errors import ConfigError, Loc, located
 from ..source import SourceFile
 
 
@@ -19,9 +19,7 @@ class Reporter:
 
     def error(self, record: Record, message: str, attr: str | None = None, offset: int | None = None) -> None:
         """Report at the record, or at one of its attributes (``offset``: a character of its value)."""
-        loc = record.loc
-        if loc is None:
-            loc = Loc("<memory>", 1, 1, f"/{record.TAG}")
+        loc = located(record)
         if attr is not None:
             source = self.sources.get(loc.file)
             if source is None:
