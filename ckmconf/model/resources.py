@@ -142,6 +142,9 @@ class Scenario(Record):
     policies: tuple[Policy, ...] = children()
 
 
+TCM_PERIOD = 0.5  # s, the TCM's evaluation period when <TCM period> is absent (resources.xsd says the same)
+
+
 @dataclass(frozen=True, kw_only=True)
 class TCM(Record):
     """<TCM>: Task Configuring Module settings (eq. 4.7-4.10)."""
@@ -151,7 +154,7 @@ class TCM(Record):
     penalty: float = attr(default=0.0)
     penalty_step: float = attr(default=0.1)
     c: float = attr(xml="C", default=1.0)
-    period: float = attr(default=0.5)
+    period: float = attr(default=TCM_PERIOD)
     learning: Literal["svm", "none"] = attr(default="svm")
     initial: str | None = attr(default=None)
 

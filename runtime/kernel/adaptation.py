@@ -35,7 +35,7 @@ from collections import deque
 from collections.abc import Sequence
 
 from ckmconf.binding import Record
-from ckmconf.errors import ConfigError, Loc
+from ckmconf.errors import ConfigError
 from ckmconf.model import kernel as model
 from runtime.kernel.interfaces import AdaptationFunction
 from runtime.registry import Registry
@@ -239,7 +239,7 @@ class Chain:
 
 
 def _error(record: Record, message: str) -> ConfigError:
-    return ConfigError.at(record.loc or Loc("<memory>", 1, 1, f"/{record.TAG}"), message)
+    return ConfigError.of(record, message)
 
 
 def _make(step: model.AdaptationStep, registry: Registry) -> AdaptationFunction:

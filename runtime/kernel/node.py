@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ckmconf.errors import ConfigError
-from ckmconf.expressions import SWITCH, Condition, Environment, evaluate, parse
+from ckmconf.expressions import Condition, Environment, evaluate
 from ckmconf.model import Alarm, Node, System, Topic
 from ckmconf.model.kernel import Controller as ControllerRecord
 
@@ -29,7 +29,7 @@ from .interfaces import Backend, Controller, ParamError
 from .monitor import MonitorService
 from .partitions import PartitionSupervisor
 from .scheduler import Scheduler, Task
-from .services import ActuationService, ControlService, FutureActions, SensorService
+from .services import ActuationService, ControlService, FutureActions, SensorService, stale_after
 from .vectors import chain_refusal, is_vector, shaper
 
 LOG = logging.getLogger("ckm.node")
@@ -176,7 +176,7 @@ class NodeRuntime:
         extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in node.sensors}
         for record in node.controllers:
             self.controllers[record.name] = self._control_service(record, extrapolation)
-            self._switches[record.name] = [(sw.to, parse(sw.when, SWITCH)) for sw in record.switches]
+            self._switches[record.name] = [(sw.to, sw.condition) for sw in record.switches]
             for _, condition in self._switches[record.name]:
                 for function, args in condition.calls:
                     if function in ("stale", "value"):
@@ -224,10 +224,8 @@ class NodeRuntime:
                     )
             runtime = SmartResourceRuntime(resource, self.transport, node=self.node.name, registry=self.registry)
             try:
-                runtime.setup()
-            except (OSError, ValueError) as exc:  # a model file, a plugin's own check
-                if isinstance(exc, ConfigError):
-                    raise
+                runtime.setup()  # a stream its records cannot make is a ConfigError already
+            except (OSError, ValueError) as exc:  # a model file, a plugin's own check in its set-up
                 raise self._error(resource, f"Smart Resource {resource.name!r}: {exc}") from None
             self.resources[resource.name] = runtime
 
@@ -340,8 +338,9 @@ class NodeRuntime:
             history = subscription.history() if subscription is not None else []
             if not history:
                 return True
-            limit = subscription.qos.lifespan or subscription.qos.deadline or 3 * control.record.period  # type: ignore[union-attr]
-            return time.time() - (history[-1].stamp - history[-1].offset) > limit
+            assert subscription is not None  # history is empty without one
+            age = time.time() - (history[-1].stamp - history[-1].offset)
+            return age > stale_after(subscription.qos, control.record.period)
 
         def value(topic: str) -> Any:
             subscription = self._watched.get(topic)
@@ -401,7 +400,7 @@ class NodeRuntime:
             raise ValueError(f"node {self.node.name!r} already runs a controller named {record.name!r}")
         extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in self.node.sensors}
         control = self._control_service(record, extrapolation)
-        self._switches[record.name] = [(sw.to, parse(sw.when, SWITCH)) for sw in record.switches]
+        self._switches[record.name] = [(sw.to, sw.condition) for sw in record.switches]
         self.controllers[record.name] = control
         if record.active:
             control.active = False
@@ -482,7 +481,4 @@ class NodeRuntime:
         self._alarm_publisher.publish(event)
 
     def _error(self, record: Any, message: str) -> ConfigError:
-        loc = record.loc
-        if loc is None:
-            return ConfigError("<memory>", 1, 1, f"/{record.TAG}", message)
-        return ConfigError.at(loc, message)
+        return ConfigError.of(record, message)

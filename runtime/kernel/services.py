@@ -19,7 +19,8 @@ from typing import Any
 from ckmconf.model import Actuator, Sensor
 from ckmconf.model.kernel import Controller as ControllerRecord
 
-from ..network.api import Publisher, Subscription
+from ..network.api import Publisher, Subscription, TopicQoS
+from ..resources import codec
 from .extrapolate import extrapolate
 from .interfaces import Backend, Controller
 from .vectors import Shaper
@@ -68,7 +69,18 @@ class SensorService:
         if self.shape is not None:
             value = self.shape(value, stamp)
         self.samples.append((stamp, value))
-        self.publisher.publish(value, stamp=stamp)
+        # a vector's arrays travel in the codec's plain form, as service outputs do: another
+        # process (a partition, another node) decodes the same arrays a local subscriber gets
+        self.publisher.publish(value if self.shape is None else codec.encode(value), stamp=stamp)
+
+
+def stale_after(qos: TopicQoS, period: float) -> float:
+    """The age after which a topic's newest sample is lost: the topic's lifespan, else three periods.
+
+    One rule for a controller's inputs (``ControlService.read_inputs``) and for ``stale(topic)`` in
+    a ``<Switch>`` condition (§3.1.2.7), ``period`` being the controller's (decision D141).
+    """
+    return qos.lifespan or 3 * period
 
 
 @dataclass
@@ -117,7 +129,7 @@ class ControlService:
 
     def stale_after(self, subscription: Subscription) -> float:
         """An input older than this is lost: three controller periods, or the topic's lifespan."""
-        return subscription.qos.lifespan or 3 * self.record.period
+        return stale_after(subscription.qos, self.record.period)
 
     def read_inputs(self) -> dict[str, Any] | None:
         now = time.time()
@@ -129,7 +141,7 @@ class ControlService:
                     continue  # a missing setpoint means the controller's default (zero) setpoint
                 return None
             if not isinstance(history[-1].value, int | float):  # a message (mapping) or a vector: held as is
-                values[role] = history[-1].value
+                values[role] = codec.decode(history[-1].value)
                 continue
             samples = [(s.stamp - s.offset, float(s.value)) for s in history[-3:]]
             values[role] = extrapolate(samples, now, self.extrapolation.get(role, "hold"))

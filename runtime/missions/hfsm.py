@@ -23,15 +23,16 @@ time in the off-line validation (the same code runs both).
 
 from __future__ import annotations
 
-import collections
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from ckmconf.expressions import TRANSITION, Condition, Environment, evaluate, parse
+import networkx as nx  # type: ignore[import-untyped]
+
+from ckmconf.expressions import Condition, Environment, evaluate
 from ckmconf.model import System
-from ckmconf.model.missions import Mission, State
+from ckmconf.model.missions import Mission, State, Transition
 
 from .behaviors import Behavior, BehaviorStatus, ServiceHandle
 from .composition import behavior_performance
@@ -89,19 +90,12 @@ def distances_to_success(mission: Mission) -> dict[str, int]:
     """Fewest transitions from each state to the first declared final (absent: unreachable)."""
     if not mission.finals:
         return {}
-    incoming: dict[str, list[str]] = collections.defaultdict(list)
-    for t in mission.transitions:
-        incoming[t.to].append(t.from_)
+    graph = nx.DiGraph()
+    graph.add_edges_from((t.from_, t.to) for t in mission.transitions)
     goal = mission.finals[0].name
-    distance = {goal: 0}
-    queue = collections.deque([goal])
-    while queue:
-        node = queue.popleft()
-        for source in incoming[node]:
-            if source not in distance:
-                distance[source] = distance[node] + 1
-                queue.append(source)
-    return distance
+    if goal not in graph:
+        return {goal: 0}
+    return dict(nx.single_source_shortest_path_length(graph.reverse(copy=False), goal))
 
 
 class MissionRun:
@@ -118,7 +112,7 @@ class MissionRun:
         self.finals = {f.name for f in mission.finals}
         self.distance = distances_to_success(mission)
         self.transitions = [
-            (t, engine.condition(t.when, f"{mission.name}: {t.from_} -> {t.to}")) for t in mission.transitions
+            (t, engine.condition(t, f"{mission.name}: {t.from_} -> {t.to}")) for t in mission.transitions
         ]
 
     # ------------------------------------------------------------------ states
@@ -283,7 +277,6 @@ class MissionEngine:
         self._types = {t.name: t for t in system.message_types}
         self._related = related  # the services eq. 5.1 weighs that a behavior does not use itself
         self._stopping = False
-        self._conditions: dict[str, Condition] = {}
         self._start = 0.0
         self._last_progress = -1e9
         self.top = MissionRun(self, record, record.name)
@@ -301,13 +294,12 @@ class MissionEngine:
         """A service the composition weighs though the active behavior does not use it (eq. 5.1)."""
         return self._related(ref) if self._related is not None else None
 
-    def condition(self, text: str, where: str) -> Condition:
-        if text not in self._conditions:
-            try:
-                self._conditions[text] = parse(text, TRANSITION)
-            except ValueError as exc:
-                raise MissionError(f"{where}: {exc}") from None
-        return self._conditions[text]
+    def condition(self, transition: Transition, where: str) -> Condition:
+        """The transition's condition, parsed when its record was read; a MissionError if it does not parse."""
+        error = transition.condition_error
+        if error is not None:
+            raise MissionError(f"{where}: {error}")
+        return transition.condition
 
     def emit(self, path: str, when: str) -> None:
         relative = path.split("/", 1)[1] if "/" in path else path

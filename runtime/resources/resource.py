@@ -44,7 +44,8 @@ from typing import Any
 
 import psutil
 
-from ckmconf.model.resources import Service, SmartResource
+from ckmconf.errors import ConfigError
+from ckmconf.model.resources import TCM_PERIOD, Service, SmartResource
 
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry
@@ -173,10 +174,11 @@ class SmartResourceRuntime:
         by_root: dict[str, list[Service]] = {}
         for service in self.services.values():
             roots = self._roots(service)
-            if len(roots) != 1:
-                raise ValueError(
+            if len(roots) != 1:  # verify reports it first (ckm-validate, ckm-run before anything starts)
+                raise ConfigError.of(
+                    service,
                     f"service {self.resource.name}.{service.name}: its profiles must share one acquisition plugin, "
-                    f"found {sorted(roots) or 'none'}"
+                    f"found {sorted(roots) or 'none'}",
                 )
             by_root.setdefault(roots.pop(), []).append(service)
         for root, services in by_root.items():
@@ -205,8 +207,10 @@ class SmartResourceRuntime:
         if source is not None:
             return source
         inputs = {i.name: i.topic for s in services for i in s.inputs}
-        if not inputs:
-            raise ValueError(f"resource {self.resource.name}: stream {root!r} has no input topic and no source")
+        if not inputs:  # verify reports it first: "has no Input: its stream … would have nothing to process"
+            raise ConfigError.of(
+                services[0], f"resource {self.resource.name}: stream {root!r} has no input topic and no source"
+            )
         subscriptions = {
             name: self.transport.subscribe(TopicQoS(topic, "ckm/raw", reliability="best-effort"))
             for name, topic in inputs.items()
@@ -229,6 +233,7 @@ class SmartResourceRuntime:
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
+        """Build the streams and their plugins; a stream the records cannot make is a ConfigError at its service."""
         self._build_streams()
         for stream in self.streams.values():
             stream.topology.setup()
@@ -241,6 +246,7 @@ class SmartResourceRuntime:
     def start(self) -> None:
         self._start_time = time.monotonic()
         for service in self.services.values():
+            # A default only the plugin can judge (no min/max on the Parameter): refused here, at start.
             defaults = {p.name: typed_default(p) for p in service.parameters if p.default is not None}
             problems = self._forward(service, defaults)
             if problems:
@@ -425,7 +431,7 @@ class SmartResourceRuntime:
     # ------------------------------------------------------------------ periodic work
 
     def _tcm_loop(self) -> None:
-        periods = {name: (s.tcm.period if s.tcm else 0.5) for name, s in self.services.items()}
+        periods = {name: (s.tcm.period if s.tcm else TCM_PERIOD) for name, s in self.services.items()}
         due = dict.fromkeys(periods, time.monotonic())
         cpu_mark = {name: (time.monotonic(), 0.0) for name in periods}  # per service: its own TCM period
         while not self._stop.is_set():

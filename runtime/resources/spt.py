@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from ckmconf.binding import Record
-from ckmconf.errors import ConfigError, Loc
+from ckmconf.errors import ConfigError
 from ckmconf.model.resources import Plugin, Profile, SmartResource, Use
 from runtime.registry import Registry, default_registry
 from runtime.verification.manifest import read_params  # below the kernel: resources never import it
@@ -185,8 +185,7 @@ class Frame:
 
 
 def _error(record: Record, message: str, attr: str | None = None) -> ConfigError:
-    loc = record.loc or Loc("<memory>", 1, 1, f"/{record.TAG}")
-    return ConfigError(loc.file, loc.line, loc.column, f"{loc.xpath}/@{attr}" if attr else loc.xpath, message)
+    return ConfigError.of(record, message, attr)
 
 
 class Topology:

@@ -44,7 +44,6 @@ from dataclasses import dataclass, field
 import networkx as nx  # type: ignore[import-untyped]
 
 from ckmconf.binding import Record
-from ckmconf.expressions import TRANSITION, ExpressionError, parse
 from ckmconf.model import Behavior, Mission, Service, State, System, Validation
 from ckmconf.model.missions import Require
 from ckmconf.model.resources import Scenario
@@ -217,13 +216,9 @@ class _Flows:
                 name = f"{uses.alias}.{provided[1].performance or 'result'}"
                 found.setdefault(name, (name, node, uses, ()))
         for transition in mission.transitions:
-            if transition.from_ != state.name:
+            if transition.from_ != state.name or transition.condition_error is not None:
                 continue
-            try:
-                attributes = parse(transition.when, TRANSITION).attributes
-            except ExpressionError:
-                continue
-            for alias, field_name in attributes:
+            for alias, field_name in transition.condition.attributes:
                 if alias in aliases:
                     node, requires, _ = aliases[alias]
                     name = f"{alias}.{field_name}"

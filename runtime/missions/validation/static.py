@@ -34,7 +34,6 @@ from typing import Any
 
 import networkx as nx  # type: ignore[import-untyped]
 
-from ckmconf.expressions import TRANSITION, ExpressionError, parse
 from ckmconf.model import Final, Mission, State, System, Transition
 
 from .conditions import Atom, Conjunction, Interval, Literal, contradictory, describe, dnf, implies
@@ -180,11 +179,11 @@ class _Checker:
         """The conjunctions of the transition's condition that can make it fire; None: not analysable."""
         label = arrow(transition.from_, transition.to)
         where = {"mission": mission.name, "state": state.name, "transition": label}
-        try:
-            condition = parse(transition.when, TRANSITION)
-        except ExpressionError as exc:
-            self.add(finding("invalid-condition", "error", f"transition {label}: {exc}", transition, **where))
+        error = transition.condition_error  # parsed once, when the record was read
+        if error is not None:
+            self.add(finding("invalid-condition", "error", f"transition {label}: {error}", transition, **where))
             return None  # reported; assume nothing about it rather than cascade
+        condition = transition.condition
         behavior = self.system.behavior(state.behavior) if state.behavior else None
         if behavior is not None or state.mission is not None:  # a missing behavior is reported on the state
             self.add(*check_fields(self.system, behavior, condition.attributes, transition, mission=mission.name))
