@@ -392,7 +392,11 @@ class _Verifier:
                     continue
                 ports = ports_of(cls)
                 value = ports.output("*") if len(service.outputs) == 1 else ports.outputs.get(out.name, ANY)
-                if not fits(value, carried, self.types):
+                if is_ros_type(carried):  # a ROS type: its fields decide (runtime.ros.config, D131)
+                    misfit = bool(self._ros().value_problems(value, carried))
+                else:
+                    misfit = not fits(value, carried, self.types)
+                if misfit:
                     writers.setdefault(value, {})[plugin.name] = plugin.kind
             for value, plugins in writers.items():
                 names = ", ".join(repr(name) for name in plugins)

@@ -166,3 +166,9 @@ def test_an_array_on_an_image_like_message_type_fills_its_size_fields() -> None:
         types.ros, ros_type, types.ros.encode(ros_type, to_message(types.ros, ros_type, types.payload(ros_type, frame)))
     )
     assert back["width"] == 5 and list(back["data"]) == [1234] * 15
+
+
+def test_smart_resource_topics_are_checked_against_ros_types() -> None:
+    errors = _lines(verify(ckmconf.load(DATA / "ros_typed_service.xml")))
+    assert len(errors) == 1 and errors[0].startswith("tests/data/ros/ros_typed_service.xml:13:28:")
+    assert "publishes arrays onto topic '/camera/grey' of type sensor_msgs/msg/LaserScan" in errors[0]
