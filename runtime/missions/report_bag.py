@@ -35,13 +35,15 @@ STORAGE_SUFFIXES = (".mcap", ".db3")
 
 @dataclass(frozen=True)
 class ReportTopics:
-    """The topics the report looks for in the bags (all configurable on the command line)."""
+    """The topics the report looks for in the bags (all configurable on the command line). An
+    internal topic is in the bag under its node's name (``xtion_rgb_raw`` of node ``turtlebot`` is
+    ``/turtlebot/xtion_rgb_raw``, runtime.ros.recording)."""
 
     estimate: str = "/nav/pose"
     truth: tuple[str, ...] = ("/sim/turtlebot/pose", "/sim/turtlebot/true_pose", "/sim/truth/turtlebot")
     fused: str = "/recog/objects"
     recognition: tuple[str, ...] = ("/rgbd/rgb/objects", "/rgbd/depth/objects", "/pantilt/objects")
-    cameras: tuple[str, ...] = ("xtion_rgb_raw", "/rgbd/rgb/image", "/nao/camera/image")
+    cameras: tuple[str, ...] = ("/turtlebot/xtion_rgb_raw", "/nao/camera/image", "/nao/camera_raw")
     zoom: tuple[str, ...] = ("/nav/zoom", "/env/zoom", "/zoom_map/area")
 
     def wanted(self) -> set[str]:

@@ -8,7 +8,8 @@ Sources (what ``ckm-run`` writes, issue G, and the mission recordings of :mod:`.
 - ``events*.jsonl``: node events that are problems (alarms raised, partitions crashed or given up,
   reactions unavailable, delegations refused or timed out, stale or bad commands, network peers
   lost or unlinked…), grouped by node, kind and what they name;
-- ``stats*.json``: tasks that missed deadlines or failed;
+- ``stats*.json``: tasks that missed deadlines or failed; ``ckm-run --record``'s bag failure and
+  each topic's dropped samples;
 - the mission recordings: ``agent-lost``, ``error``, ``signal-dropped`` events, agents whose
   recording ends without an ``end`` event, and the lines the reader skipped.
 """
@@ -20,6 +21,7 @@ import re
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from .recording import Run
 
@@ -115,6 +117,7 @@ def _statistics(run_dir: Path) -> list[Problem]:
             stats = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             continue
+        found += _recording(str(path.relative_to(run_dir)), stats.get("recording") if isinstance(stats, dict) else None)
         nodes = stats.get("nodes") if isinstance(stats, dict) else None
         for node in (nodes or {}).values():
             tasks = (node.get("tasks") or {}) if isinstance(node, dict) else {}
@@ -128,6 +131,23 @@ def _statistics(run_dir: Path) -> list[Problem]:
                         found.append(
                             Problem(str(path.relative_to(run_dir)), severity, f"task {task}: {key}", count, example)
                         )
+    return found
+
+
+def _recording(source: str, recording: Any) -> list[Problem]:
+    """``ckm-run --record``'s statistics: a failed bag, and each topic's dropped samples."""
+    if not isinstance(recording, dict):
+        return []
+    found = []
+    if recording.get("failure"):
+        found.append(
+            Problem(source, "error", f"recording into {recording.get('bag')} failed", 1, str(recording["failure"]))
+        )
+    for topic, figures in (recording.get("topics") or {}).items():
+        dropped = figures.get("dropped") if isinstance(figures, dict) else None
+        if isinstance(dropped, int) and dropped > 0:
+            what = f"recording: samples of {topic} dropped"
+            found.append(Problem(source, "warning", what, dropped, str(figures.get("firstDrop") or "")))
     return found
 
 

@@ -42,7 +42,7 @@ TOPICS = {
     "/sim/turtlebot/pose": "geometry_msgs/msg/PoseStamped",
     "/recog/objects": "ckm_msgs/msg/Detections",
     "/nav/zoom": "ckm_msgs/msg/ZoomArea",
-    "xtion_rgb_raw": "ckm_msgs/msg/Image",
+    "/turtlebot/xtion_rgb_raw": "ckm_msgs/msg/Image",
     "/nao/camera/image": "sensor_msgs/msg/Image",
 }
 TURTLEBOT = [  # (enter, exit, path, nested mission or None, performance)
@@ -135,10 +135,10 @@ def write_bag(
             if "/nav/zoom" in topics and t % 20 == 0:
                 bag.write("/nav/zoom", {"x": x, "y": y, "width": 4.0, "depth": 4.0}, stamp)
             level = int(t) % 256
-            if "xtion_rgb_raw" in topics:
+            if "/turtlebot/xtion_rgb_raw" in topics:
                 pixels = np.full((6, 8, 3), level, dtype=np.uint8)
                 image = {"stamp": stamp, "width": 8, "height": 6, "encoding": "rgb8", "data": pixels.tobytes()}
-                bag.write("xtion_rgb_raw", image, stamp + 0.3)
+                bag.write("/turtlebot/xtion_rgb_raw", image, stamp + 0.3)
             if "/nao/camera/image" in topics:
                 bag.write("/nao/camera/image", np.full((4, 5), level, dtype=np.uint8), stamp + 0.3)
     return path

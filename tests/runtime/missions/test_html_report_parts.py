@@ -69,6 +69,8 @@ def test_task_failures_and_misses_count_from_the_statistics(tmp_path: Path) -> N
     with RunRecorder(tmp_path, "a") as rec:
         rec.write("start", mission="M")
     stats = {"nodes": {"n": {"tasks": {"n.loop": {"failures": 3, "misses": 7, "first_failure": "ZeroDivisionError"}}}}}
+    topics = {"/scan": {"written": 5, "dropped": 2, "firstDrop": "ranges: not a float32[]"}, "/x": {"dropped": 0}}
+    stats["recording"] = {"bag": "run/bag", "failure": "disk full", "topics": topics}
     (tmp_path / "stats.json").write_text(json.dumps(stats))
     (tmp_path / "part").mkdir()
     (tmp_path / "part" / "ckm.log").write_text("2026-01-01 00:00:00,000 CRITICAL ckm.part: out of memory\n")
@@ -76,6 +78,9 @@ def test_task_failures_and_misses_count_from_the_statistics(tmp_path: Path) -> N
     assert found[("stats.json", "task n.loop: failures")].count == 3
     assert found[("stats.json", "task n.loop: misses")].count == 7
     assert found[("part/ckm.log", "ckm.part: out of memory")].severity == "critical"
+    assert found[("stats.json", "recording: samples of /scan dropped")].count == 2
+    assert found[("stats.json", "recording into run/bag failed")].example == "disk full"
+    assert not [what for _, what in found if "/x" in what]
     assert found[("recording", "a: the recording ends without an end event (crashed or killed)")].count == 1
 
 
