@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import socket
 import threading
 from multiprocessing.connection import Client, Connection
 from typing import Any
@@ -37,6 +38,15 @@ _ERRORS: dict[str, type[Exception]] = {
     "KeyError": KeyError, "ParamError": ParamError, "ValueError": ValueError, "TypeError": ValueError,
     "FileNotFoundError": FileNotFoundError, "JSONDecodeError": ValueError, "UnicodeDecodeError": ValueError,
 }
+
+
+def no_delay(conn: Connection) -> None:
+    """Send each message at once (TCP_NODELAY): a request or reply is one write, and Nagle's wait
+    for an acknowledgement made a wheel read's round trip 0.4 ms instead of 0.03 ms (measured)."""
+    with contextlib.suppress(OSError):
+        sock = socket.socket(fileno=os.dup(conn.fileno()))  # the same socket, through a duplicate
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.close()
 
 
 class ServerError(RuntimeError):
@@ -71,6 +81,7 @@ class Link:
             self._conn: Connection | None = Client((host, port), authkey=key)
         except (OSError, EOFError) as exc:
             raise ConnectionError(f"{owner}: cannot reach the world server at {host}:{port}: {exc}") from None
+        no_delay(self._conn)
 
     def request(self, message: dict[str, Any]) -> dict[str, Any]:
         """Send ``message``, return the reply; raise what an error reply says."""

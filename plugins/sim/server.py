@@ -41,7 +41,7 @@ from ckmconf import ConfigError, load
 from ckmconf.model import System
 from runtime.kernel.interfaces import ParamError
 
-from .client import ENV_KEY
+from .client import ENV_KEY, no_delay
 from .devices import ChannelDevice, SimWorld, Spec
 from .plan import WorldPlan
 from .render import RenderWorker, job_of
@@ -104,6 +104,7 @@ class WorldServer:
             threading.Thread(target=self._authenticate, args=(conn,), name="ckm-sim-auth", daemon=True).start()
 
     def _authenticate(self, conn: Connection) -> None:
+        no_delay(conn)
         try:
             deliver_challenge(conn, self.authkey)
             answer_challenge(conn, self.authkey)
