@@ -164,10 +164,13 @@ def approach(lab: Lab, name: str, steps: int) -> list[dict[str, Any]]:
         view = lab.observe(base_for(camera, yaw, offset))
         row = score(lab, view, target)
         # a result counts when it is about the object and not wrong (a fused object named by its shape only)
-        track.append({"step": k, "distance": row["distance"], "angle": row["bearing"]} | {
-            m: (row[m][0] if row[m] is not None and (row[m][2] or row[m][1] == target.shape) else 0.0)
-            for m in METHODS
-        })
+        track.append(
+            {"step": k, "distance": row["distance"], "angle": row["bearing"]}
+            | {
+                m: (row[m][0] if row[m] is not None and (row[m][2] or row[m][1] == target.shape) else 0.0)
+                for m in METHODS
+            }
+        )
     return track
 
 

@@ -64,18 +64,25 @@ def _object(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     means = {m: entry["paired"][m]["mean"] for m in METHODS}
     spreads = {m: entry["paired"][m]["std"] for m in METHODS}
     singles = [m for m in ("depth", "rgb") if means[m] is not None]
-    entry["fused_mean_above"] = bool(means["fused"] is not None and singles and
-                                     all(means["fused"] > means[m] for m in singles))
-    entry["fused_spread_below"] = bool(spreads["fused"] is not None and singles and
-                                       all(spreads["fused"] < spreads[m] for m in singles))
+    entry["fused_mean_above"] = bool(
+        means["fused"] is not None and singles and all(means["fused"] > means[m] for m in singles)
+    )
+    entry["fused_spread_below"] = bool(
+        spreads["fused"] is not None and singles and all(spreads["fused"] < spreads[m] for m in singles)
+    )
     return entry
 
 
 def summarise(scored: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     """Per-object statistics (Fig. 7.18), and the cylinders' discrimination taken together."""
     objects = [_object(name, rows) for name, rows in scored.items()]
-    cylinders = [row["fused"] for name, rows in scored.items() if name.startswith("cylinder_") for row in rows
-                 if row["fused"] is not None and row["fused"][1].startswith("cylinder_")]
+    cylinders = [
+        row["fused"]
+        for name, rows in scored.items()
+        if name.startswith("cylinder_")
+        for row in rows
+        if row["fused"] is not None and row["fused"][1].startswith("cylinder_")
+    ]
     fused = [row["fused"][0] for rows in scored.values() for row in rows if row["fused"] is not None]
     return {
         "objects": objects,
@@ -95,24 +102,33 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
     for obj in result["objects"]:
         for method in METHODS:
             m = obj[method]
-            rows.append((
-                f"{obj['name']} {method}",
-                f"r {_fmt(m['mean'])} ± {_fmt(m['std'])}, detected {m['detected']:.0%}, "
-                f"accuracy {_fmt(m['accuracy'], 3)}, recall {m['recall']:.0%}",
-            ))
-        rows.append((
-            f"{obj['name']} fused: both inputs / discrimination",
-            f"{obj['fused_both']:.0%} / {_fmt(obj['discrimination'])}, error {_fmt(obj['fused_error_m']['mean'])} m, "
-            f"at 1.0 {obj['fused_at_bound']:.1%}, ≥{NEAR_BOUND} {obj['fused_near_bound']:.1%}, "
-            f"paired views {obj['paired']['views']}: mean above {obj['fused_mean_above']}, "
-            f"spread below {obj['fused_spread_below']}",
-        ))
+            rows.append(
+                (
+                    f"{obj['name']} {method}",
+                    f"r {_fmt(m['mean'])} ± {_fmt(m['std'])}, detected {m['detected']:.0%}, "
+                    f"accuracy {_fmt(m['accuracy'], 3)}, recall {m['recall']:.0%}",
+                )
+            )
+        rows.append(
+            (
+                f"{obj['name']} fused: both inputs / discrimination",
+                f"{obj['fused_both']:.0%} / {_fmt(obj['discrimination'])}, "
+                f"error {_fmt(obj['fused_error_m']['mean'])} m, "
+                f"at 1.0 {obj['fused_at_bound']:.1%}, ≥{NEAR_BOUND} {obj['fused_near_bound']:.1%}, "
+                f"paired views {obj['paired']['views']}: mean above {obj['fused_mean_above']}, "
+                f"spread below {obj['fused_spread_below']}",
+            )
+        )
     rows.append(("cylinders told apart (fused, by texture)", _fmt(result["discrimination_cylinders"])))
     rows.append(("fused values at 1.0 / ≥ 0.999", f"{result['fused_at_bound']:.1%} / {result['fused_near_bound']:.1%}"))
     track = result["approach"]["track"]
     last = track[-1]
-    rows.append((f"approach to {result['approach']['object']} (Fig. 7.19), at {last['distance']:.2f} m",
-                 ", ".join(f"{m} {last[m]:.3f}" for m in METHODS)))
+    rows.append(
+        (
+            f"approach to {result['approach']['object']} (Fig. 7.19), at {last['distance']:.2f} m",
+            ", ".join(f"{m} {last[m]:.3f}" for m in METHODS),
+        )
+    )
     rows.append(("renders, time", f"{result['renders']} in {result['seconds']} s ({result['ms_per_render']} ms each)"))
     rows.append(("plots", ", ".join(result["plots"])))
     return rows

@@ -186,8 +186,14 @@ class Lab:
     """The use case's lab, the Turtlebot and its recognition and fusion services (see the module doc)."""
 
     def __init__(
-        self, rgb_profile: str = "VGA", depth_profile: str = "QVGA", *, noise: bool = True, seed: int = 0,
-        nao: tuple[float, float, float] | None = None, nao_profile: str = "VGA",
+        self,
+        rgb_profile: str = "VGA",
+        depth_profile: str = "QVGA",
+        *,
+        noise: bool = True,
+        seed: int = 0,
+        nao: tuple[float, float, float] | None = None,
+        nao_profile: str = "VGA",
     ) -> None:
         system = ckmconf.load(USECASE / "lab.xml", strict=False).system
         assert system is not None and system.environment is not None
@@ -205,16 +211,29 @@ class Lab:
         resource = next(r for r in system.resources if r.name == "RGBDCamera")
         plugins = {plugin.name: plugin for plugin in resource.plugins}
         suffix = {"VGA": "vga", "QVGA": "qvga", "QQVGA": "qqvga"}
-        rgb_names = ["rgb_acquire", f"rgb_resize_{suffix[rgb_profile]}", f"orb_{suffix[rgb_profile]}",
-                     f"match_{suffix[rgb_profile]}"]
+        rgb_names = [
+            "rgb_acquire",
+            f"rgb_resize_{suffix[rgb_profile]}",
+            f"orb_{suffix[rgb_profile]}",
+            f"match_{suffix[rgb_profile]}",
+        ]
         focal = (self.size[0] / 2) / math.tan(self.camera.fov / 2)  # Camera.matrices' focal length
         cx, cy = (self.size[0] - 1) / 2, (self.size[1] - 1) / 2
-        intrinsics = {"fx": focal, "fy": focal, "cx": cx, "cy": cy,
-                      "calibrationWidth": self.size[0], "calibrationHeight": self.size[1]}
+        intrinsics = {
+            "fx": focal,
+            "fy": focal,
+            "cx": cx,
+            "cy": cy,
+            "calibrationWidth": self.size[0],
+            "calibrationHeight": self.size[1],
+        }
         d = suffix[depth_profile]
-        depth_records = [_record(plugins, "depth_acquire"), _record(plugins, f"depth_resize_{d}"),
-                         dataclasses.replace(_record(plugins, f"cluster_{d}", **intrinsics), kind=TABLETOP),
-                         _record(plugins, f"shape_{d}")]
+        depth_records = [
+            _record(plugins, "depth_acquire"),
+            _record(plugins, f"depth_resize_{d}"),
+            dataclasses.replace(_record(plugins, f"cluster_{d}", **intrinsics), kind=TABLETOP),
+            _record(plugins, f"shape_{d}"),
+        ]
         self.rgb = [KINDS[r.kind](r) for r in (_record(plugins, n) for n in rgb_names)]
         self.depth = [KINDS[r.kind](r) for r in depth_records]
         for plugin in (*self.rgb, *self.depth):
@@ -227,8 +246,12 @@ class Lab:
             "cameras": f"rgb: {focal} {focal} {cx} {cy} {self.size[0]} {self.size[1]}",
             "mounts": f"rgb: turtlebot {LINK}; depth: turtlebot camera_depth_optical_frame",
         }
-        record = Plugin(name="fusion", kind="feature-fusion", loc=loc,
-                        params=tuple(Param(name=k, value=str(v)) for k, v in given.items()))
+        record = Plugin(
+            name="fusion",
+            kind="feature-fusion",
+            loc=loc,
+            params=tuple(Param(name=k, value=str(v)) for k, v in given.items()),
+        )
         self.fusion = FeatureFusion(record)
         self.fusion.setup()
         self.nao: Robot | None = None
@@ -238,8 +261,9 @@ class Lab:
         self.targets = {t.name: t for t in self._targets()}
         self.frames = 0
 
-    def _add_nao(self, system: Any, pose: tuple[float, float, float], profile: str, given: dict[str, Any],
-                 loc: Any) -> None:
+    def _add_nao(
+        self, system: Any, pose: tuple[float, float, float], profile: str, given: dict[str, Any], loc: Any
+    ) -> None:
         """The Nao at ``pose`` with its top camera, PanTiltCamera's RGB pipeline, and the fusion's
         ``pantilt`` line input mounted on its head (map pose Param ``bases``, angles from ``head``)."""
         self.nao = Robot(self.world, "nao", self.world.load_robot("nao", "nao", pose))
@@ -248,8 +272,10 @@ class Lab:
         resource = next(r for r in system.resources if r.name == "PanTiltCamera")
         plugins = {plugin.name: plugin for plugin in resource.plugins}
         low = profile.lower()
-        self.nao_pipeline = [KINDS[r.kind](r) for r in (plugins[n] for n in
-                             ("nao_acquire", f"resize_{low}", f"orb_{low}", f"match_{low}"))]
+        self.nao_pipeline = [
+            KINDS[r.kind](r)
+            for r in (plugins[n] for n in ("nao_acquire", f"resize_{low}", f"orb_{low}", f"match_{low}"))
+        ]
         for plugin in self.nao_pipeline:
             plugin.setup()
         width, height = self.nao_size
@@ -257,12 +283,16 @@ class Lab:
         given = given | {
             "inputs": "rgb: line; depth: point; pantilt: line",
             "cameras": f"{given['cameras']}; pantilt: {focal} {focal} {(width - 1) / 2} {(height - 1) / 2} "
-                       f"{width} {height}",
+            f"{width} {height}",
             "mounts": f"{given['mounts']}; pantilt: nao {NAO_LINK}",
             "bases": f"pantilt: {pose[0]} {pose[1]} {pose[2]}",
         }
-        record = Plugin(name="fusion", kind="feature-fusion", loc=loc,
-                        params=tuple(Param(name=k, value=str(v)) for k, v in given.items()))
+        record = Plugin(
+            name="fusion",
+            kind="feature-fusion",
+            loc=loc,
+            params=tuple(Param(name=k, value=str(v)) for k, v in given.items()),
+        )
         self.fusion = FeatureFusion(record)
         self.fusion.setup()
 

@@ -282,9 +282,7 @@ class FeatureFusion(ProcessingPlugin):
             r = number(item.get("reliability"), bad, f"{where} field 'reliability'")
             if not 0 <= r <= 1:
                 raise bad(f"{where} field 'reliability'", f"= {r} is not in [0, 1]")
-            coords = [
-                number(item.get(axis), bad, f"{where} field {axis!r}") for axis in "xyz"[: 2 + (kind == "point")]
-            ]
+            coords = [number(item.get(axis), bad, f"{where} field {axis!r}") for axis in "xyz"[: 2 + (kind == "point")]]
             if name == UNKNOWN or r < self.params["minReliability"]:
                 continue
             if kind == "point":

@@ -85,7 +85,12 @@ def share_at_bound(reliabilities: Iterable[float], bound: float = 1.0, tolerance
 
 
 def fused_object(
-    model: str, knowledge: dict[str, str], theta: Geometry, r_hat: float, raw: float, members: list[Observation],
+    model: str,
+    knowledge: dict[str, str],
+    theta: Geometry,
+    r_hat: float,
+    raw: float,
+    members: list[Observation],
     frame: str,
 ) -> dict[str, Any]:
     """f̂ and r̂ of eq. 6.39 as a msgpack-able dict, placed in ``frame``."""

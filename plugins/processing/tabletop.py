@@ -39,9 +39,7 @@ def _heights(points: np.ndarray[Any, Any], plane: Plane) -> np.ndarray[Any, Any]
     return heights
 
 
-def support_planes(
-    sample: np.ndarray[Any, Any], *, count: int, distance: float, max_angle: float
-) -> list[Plane]:
+def support_planes(sample: np.ndarray[Any, Any], *, count: int, distance: float, max_angle: float) -> list[Plane]:
     """Up to ``count`` near-horizontal planes of ``sample``, the dominant first, each found among the
     points the previous ones did not explain and holding ``MIN_SHARE`` of the whole sample (a table
     top; not a slice through the objects left once the floor and the table are gone)."""
@@ -60,8 +58,15 @@ def support_planes(
 
 
 def tabletop_segment(
-    depth: Depth, camera: Camera, *, tolerance: float, min_points: int, max_range: float, planes: int,
-    plane_distance: float, plane_angle: float,
+    depth: Depth,
+    camera: Camera,
+    *,
+    tolerance: float,
+    min_points: int,
+    max_range: float,
+    planes: int,
+    plane_distance: float,
+    plane_angle: float,
 ) -> list[Cluster]:
     """The clusters of a depth image (metres) above its support planes, each with its own plane."""
     with np.errstate(invalid="ignore"):
@@ -111,6 +116,12 @@ class TabletopClustering(EuclideanClustering):
             )
         p = self.params
         return tabletop_segment(
-            depth, self.camera, tolerance=p["tolerance"], min_points=p["minPoints"], max_range=p["maxRange"],
-            planes=p["planes"], plane_distance=p["planeDistance"], plane_angle=p["planeAngle"],
+            depth,
+            self.camera,
+            tolerance=p["tolerance"],
+            min_points=p["minPoints"],
+            max_range=p["maxRange"],
+            planes=p["planes"],
+            plane_distance=p["planeDistance"],
+            plane_angle=p["planeAngle"],
         )

@@ -54,10 +54,15 @@ def test_the_dominant_plane_alone_leaves_the_objects_on_the_table_top(frame: tup
     rotation, position = lab.camera_pose()
     plain = plugin(EuclideanClustering, lab).process(depth, CTX)
     assert {which(lab, c.centroid, rotation, position) for c in plain} == {None}
-    clusters = [c for c in plugin(TabletopClustering, lab).process(depth, CTX)
-                if which(lab, c.centroid, rotation, position) is not None]
+    clusters = [
+        c
+        for c in plugin(TabletopClustering, lab).process(depth, CTX)
+        if which(lab, c.centroid, rotation, position) is not None
+    ]
     assert {which(lab, c.centroid, rotation, position) for c in clusters} == {
-        "cylinder_red_stripes", "cylinder_blue_dots", "cylinder_green_checker"
+        "cylinder_red_stripes",
+        "cylinder_blue_dots",
+        "cylinder_green_checker",
     }
     for cluster in clusters:  # each stands on the workbench top: 0.30 m above the floor
         assert cluster.plane is not None
