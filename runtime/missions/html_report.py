@@ -43,7 +43,7 @@ table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding
 th{background:#eee}td.num{text-align:right;font-family:monospace}
 .note{color:#7d6608;background:#fef9e7;padding:2px 6px}.error{color:#922b21;background:#fdedec;padding:2px 6px}
 .ok{color:#1e8449;font-weight:bold}.bad{color:#922b21;font-weight:bold}
-figure{display:inline-block;margin:4px;vertical-align:top}figcaption{font-size:.8em;max-width:330px}
+table.snapshots td{vertical-align:top;text-align:center}table.snapshots img{max-width:330px}
 img{max-width:100%}
 """
 

@@ -18,11 +18,13 @@ from pathlib import Path
 from ckmconf.model import System
 
 from .report import Report
-from .report_bag import BagData, ReportTopics, Sighting, image_pixels
+from .report_bag import BagData, Frame, ReportTopics, Sighting, image_pixels
 from .report_figures import Approach, image_png, map_png, reliability_png
 
 APPROACH_STATES = ("SPOT", "APPR", "PICK", "OBJ_TRACK", "OBJ_FIX")
 """States shaded on the reliability plot: where recognition matters (§7.4.1, Fig. 7.19)."""
+MAX_MOMENTS = 20
+"""Most moments with camera frames shown (a run that re-spots often enters SPOT many times)."""
 POSE_GAP = 1.0
 """Longest time (s) between a recognition and the robot pose it is measured from."""
 
@@ -169,13 +171,28 @@ def snapshots_section(
     cameras = [t for t in topics.cameras if t in data.topics]
     if not cameras:
         return _missing("camera images", topics.cameras, data)
-    out = []
-    for frame in data.frames:
-        try:
-            picture = png_tag(image_png(image_pixels(frame.payload)), frame.label)
-        except ValueError as error:
-            out.append(note(f"{frame.topic}: frame at {frame.time:.3f} not shown: {error}", "error"))
-            continue
-        caption = f"{frame.label} — {frame.topic}, frame {frame.time - frame.moment:+.2f} s from it"
-        out.append(f"<figure>{picture}<figcaption>{escape(caption)}</figcaption></figure>")
-    return "".join(out) or note(f"No frame on {', '.join(cameras)}.")
+    shown = [c for c in cameras if any(f.topic == c for f in data.frames)]
+    if not shown:
+        return note(f"No frame on {', '.join(cameras)}.")
+    frames = {(f.moment, f.label, f.topic): f for f in data.frames}
+    rows = []
+    for moment, label in moments[:MAX_MOMENTS]:
+        cells = [f'<td class="moment">{escape(label)}</td>']
+        for camera in shown:
+            frame = frames.get((moment, label, camera))
+            cells.append(f"<td>{_frame_cell(frame) if frame is not None else 'no frame'}</td>")
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    head = "<tr><th>Moment</th>" + "".join(f"<th>{escape(c)}</th>" for c in shown) + "</tr>"
+    out = f'<table class="snapshots">{head}{"".join(rows)}</table>'
+    if len(moments) > MAX_MOMENTS:
+        out += note(f"{len(moments) - MAX_MOMENTS} later moment(s) not shown (the first {MAX_MOMENTS} are).")
+    return out
+
+
+def _frame_cell(frame: Frame) -> str:
+    """One snapshot: the frame as PNG and how far from the moment it was taken, or why it is not shown."""
+    try:
+        picture = png_tag(image_png(image_pixels(frame.payload)), frame.label)
+    except ValueError as error:
+        return f'<span class="error">frame not shown: {escape(str(error))}</span>'
+    return f"{picture}<br><small>frame {frame.time - frame.moment:+.2f} s from it</small>"

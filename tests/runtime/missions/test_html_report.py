@@ -269,6 +269,15 @@ def test_the_page_holds_table_7_9_figures_snapshots_and_problems(
     assert len(frames) == 8  # four moments, two cameras
     spot = [pixels for alt, pixels in frames if "SPOT at 40.0 s" in alt]
     assert {round(float(p.reshape(-1)[0]) * 255) for p in spot} == {40}  # the frame of t = 40 (stamped 40.3 s)
+    snapshots = page.table("snapshots")
+    assert snapshots[0] == ["Moment", "/turtlebot/xtion_rgb_raw", "/nao/camera/image"]
+    assert [row[0] for row in snapshots[1:]] == [
+        "nao enters Agent2Spot/OBJ_FIX at 20.0 s",
+        "turtlebot enters Agent1FetchCoop/ObjectInteraction/SPOT at 40.0 s",
+        "turtlebot enters Agent1FetchCoop/ObjectInteraction/PICK at 80.0 s",
+        "turtlebot enters Agent1FetchCoop/ObjectPlace/PLACE at 135.0 s",
+    ]
+    assert {cell for row in snapshots[1:] for cell in row[1:]} == {"frame +0.30 s from it"}
     text = out.read_text(encoding="utf-8")
     assert "target &#x27;cylinder_red_stripes cylinder red_stripes&#x27;: the object recognised most reliably" in text
     # problems, counted
