@@ -16,6 +16,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from ckmconf.model import Actuator, Sensor
 from ckmconf.model.kernel import Controller as ControllerRecord
 
@@ -141,7 +143,8 @@ class ControlService:
                     continue  # a missing setpoint means the controller's default (zero) setpoint
                 return None
             if not isinstance(history[-1].value, int | float):  # a message (mapping) or a vector: held as is
-                values[role] = codec.decode(history[-1].value)
+                value = history[-1].value  # a local publisher may hand an array itself
+                values[role] = value if isinstance(value, np.ndarray) else codec.decode(value)
                 continue
             samples = [(s.stamp - s.offset, float(s.value)) for s in history[-3:]]
             values[role] = extrapolate(samples, now, self.extrapolation.get(role, "hold"))

@@ -17,6 +17,7 @@ from ckmconf.model import System
 from plugins.hardware.simulation import PlantScope, plant_scope
 from runtime.kernel.node import NodeRuntime
 from runtime.network import Sample, Transport, open_transport
+from runtime.resources import codec
 from runtime.verification.verify import verify
 from tests.runtime.network.conftest import private_network
 
@@ -103,7 +104,7 @@ def test_whole_scans_frames_and_joint_vectors_reach_their_topics(tmp_path: Path,
 
     def keep(name: str) -> Any:
         def on(sample: Sample) -> None:
-            received[name] = sample.value
+            received[name] = codec.decode(sample.value)  # how every consumer reads a vector topic (D127)
         return on
 
     runtime = NodeRuntime(made.nodes[0], made, transport)
