@@ -70,11 +70,13 @@ def _table(header: list[str], rows: list[list[str]], css: str = "") -> str:
 
 
 def _system(run_dir: Path, options: Options, notes: list[str]) -> tuple[System | None, Path | None, str | None]:
-    """The run's configuration (``--config``, else what ``stats.json`` names) and the system name."""
+    """The run's configuration (``--config``, else what ``stats.json`` names, or a ``stats-NODE.json``
+    of a ``--node`` process sharing the run directory) and the system name."""
     named: str | None = None
     name: str | None = None
-    stats = run_dir / "stats.json"
-    if stats.is_file():
+    for stats in [run_dir / "stats.json", *sorted(run_dir.glob("stats-*.json"))]:
+        if not stats.is_file() or named:
+            continue
         try:
             record = json.loads(stats.read_text(encoding="utf-8"))
             named, name = record.get("config"), record.get("system")

@@ -349,6 +349,31 @@ def test_cli_options_choose_topics_target_and_bag(tmp_path: Path, capsys: pytest
     assert "target &#x27;box orange&#x27; (--target)" in text
 
 
+def test_the_configuration_named_by_a_node_process_statistics_gives_the_map(tmp_path: Path) -> None:
+    run_dir = make_run(tmp_path / "run", bag=False, config=False)
+    write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]})
+    environment = (REPO / "configs" / "usecase" / "environment.xml").read_text(encoding="utf-8")
+    (tmp_path / "environment.xml").write_text(environment, encoding="utf-8")  # it includes nothing
+    system = '<System xmlns="urn:ckm:1" version="1.0" name="tiny"><Include href="environment.xml"/></System>'
+    (tmp_path / "tiny.xml").write_text(system)
+    (run_dir / "stats-remote_pc.json").write_text(json.dumps({"config": "tiny.xml", "system": "tiny"}))
+    page = parse(build_html(run_dir)[0])  # tiny.xml is found next to the run directory
+    summary = dict(page.table("summary"))
+    assert summary["System"] == "tiny" and summary["Configuration"] == str(run_dir.parent / "tiny.xml")
+    assert "Fig. 7.16" in {alt for alt, _ in page.images}
+    assert not [n for n in page.notes if "<Environment>" in n]
+
+
+def test_a_configuration_that_does_not_load_or_is_gone_is_noted(tmp_path: Path) -> None:
+    run_dir = make_run(tmp_path / "run", bag=False, config=False)
+    (tmp_path / "broken.xml").write_text("<System")
+    (run_dir / "stats.json").write_text(json.dumps({"config": str(tmp_path / "broken.xml"), "system": "lab"}))
+    notes = " | ".join(parse(build_html(run_dir)[0]).notes)
+    assert f"configuration {tmp_path / 'broken.xml'} does not load: " in notes
+    (run_dir / "stats.json").write_text(json.dumps({"config": "gone.xml", "system": "lab"}))
+    assert "configuration gone.xml (stats.json) not found; give it with --config" in parse(build_html(run_dir)[0]).notes
+
+
 def test_html_refuses_json_and_depth_and_a_missing_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as refused:
         cli.main(["report", str(tmp_path), "--html", "--json"])
