@@ -89,6 +89,7 @@ class _State:
     sampled: float = 0.0
     console_from: int = 0  # where the current process's output starts in console.log
     first_error: str | None = None  # the first error a crashed process of this partition printed
+    verdict: str | None = None  # what a process asked to stop reported failing (its exit code > 0)
 
 
 class PartitionSupervisor:
@@ -197,12 +198,15 @@ class PartitionSupervisor:
         return stats
 
     def failures(self) -> list[tuple[str, str]]:
-        """(partition, its first error) of every partition that crashed (ckm-run reports them)."""
-        return [
+        """(partition, its first error) of every partition that crashed, or that reported a failure
+        (a positive exit code) when asked to stop (ckm-run reports them)."""
+        crashed = [
             (name, state.first_error or f"crashed {state.crashes} time(s), no error printed")
             for name, state in self.states.items()
             if state.crashes
         ]
+        return crashed + [(name, state.verdict) for name, state in self.states.items()
+                          if state.verdict is not None and not state.crashes]  # fmt: skip
 
     # ------------------------------------------------------------------ the watcher thread
 
@@ -291,7 +295,10 @@ class PartitionSupervisor:
         life.ended, life.exit_code = time.time(), code
         asked, state.asked = state.asked, None
         state.process, state.kill_at = None, None
-        if asked is not None:  # an exit the supervisor asked for is never a crash
+        if asked is not None:  # an exit the supervisor asked for is never a crash ...
+            if code > 0:  # ... but its own verdict may say something failed while it ran (issue G)
+                error = first_error(self.run_dir / state.record.name / "console.log", state.console_from)
+                state.verdict = state.verdict or error or f"exited with code {code} when stopped"
             if asked == "restart" and not self._stopping:
                 state.due = time.monotonic()
             return

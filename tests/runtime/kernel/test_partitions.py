@@ -375,3 +375,26 @@ def test_memory_watch_reports_growth_past_the_budget() -> None:
         assert exceeded.wait(5)
     finally:
         del ballast
+
+
+def test_a_partition_that_reports_failures_when_stopped_fails_the_run(
+    supervise: Callable[..., tuple[PartitionSupervisor, Events]],
+) -> None:
+    """A partition asked to stop never crashed, but its own verdict (exit code > 0, the first error on
+    its console) says a task failed while it ran: ckm-run must hear of it (issue G, fail loudly)."""
+    code = (
+        "import signal, sys, time\n"
+        "def bye(*_):\n"
+        "    print('x.xml:3:4: task t failed 7 time(s)', file=sys.stderr, flush=True)\n"
+        "    sys.exit(5)\n"
+        "signal.signal(signal.SIGTERM, bye)\n"
+        "time.sleep(60)\n"
+    )
+    partition = Partition(name="p", restart="never")
+    supervisor, events = supervise(partition, sleeper(code))
+    assert until(lambda: supervisor.pid("p") is not None, 10)
+    time.sleep(0.5)  # the child has installed its handler
+    assert "partition-started" in events.kinds()
+    supervisor.stop()
+    assert supervisor.crashes("p") == 0
+    assert supervisor.failures() == [("p", "x.xml:3:4: task t failed 7 time(s)")]
