@@ -21,7 +21,8 @@ stopped within ``tolerance``, and ``yawTolerance`` for a pose goal: the path is 
 keeps it stopped; D109), ``failed`` with a ``reason``: the planner's (unreachable goal: it collides
 with an obstacle, lies outside the map, or no free path joins it) or no localization for
 ``localizeTimeout`` seconds. A start inside an inflated obstacle (after a close approach) is left
-by the nearest free point within ``escape`` metres (decision D107). Top-level ``dispersion`` is the
+by the nearest free point within ``escape`` metres, a goal inside one is replaced by the nearest
+free point within ``goalEscape`` (decision D107). Top-level ``dispersion`` is the
 "Localization Dispersion" measure.
 """
 
@@ -118,6 +119,7 @@ class AmclNavigation(ProcessingPlugin):
         P("blockLookahead", 1.5, "Scan points on this much of the path ahead block it.", unit="m", above=0.0),
         P("blockPoints", 3, "Scan points on the path ahead that make it blocked.", min=1),
         P("escape", 0.6, "How far a start inside an inflated obstacle looks for free space.", unit="m", min=0.0),
+        P("goalEscape", 0.3, "How far a goal inside an inflated obstacle may move to free space.", unit="m", min=0.0),
         P("seed", 0, "Random seed of the filter.", min=0),
     )
 
@@ -139,6 +141,7 @@ class AmclNavigation(ProcessingPlugin):
         self._pending_goal: str | None = p["goal"] or None
         self.phase, self.reason = "planning", ""
         self.plan: list[Point] | None = None
+        self.target: Point | None = None
         self.segment = 0
         self.path_id = 0
         self.plan_length = 0.0
@@ -162,7 +165,7 @@ class AmclNavigation(ProcessingPlugin):
         self.env = env = document.environment
         p = self.params
         footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
-        self.routes = Routes(env, footprint, p["planResolution"], p["escape"])
+        self.routes = Routes(env, footprint, p["planResolution"], p["escape"], p["goalEscape"])
         self.model = self.routes.model
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
         self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
@@ -203,7 +206,7 @@ class AmclNavigation(ProcessingPlugin):
         self.goal = self._place(text, "service parameter 'goal'") if text.strip() else None
         self.goal_text = text
         self._pending_goal = None
-        self.phase, self.reason, self.plan = "planning", "", None
+        self.phase, self.reason, self.plan, self.target = "planning", "", None, None
         self.routes.reset()
         self.unlocalized_since = None
 
@@ -219,6 +222,7 @@ class AmclNavigation(ProcessingPlugin):
             self.phase, self.reason, self.plan = "failed", str(refused), None
             return
         self.plan, self.segment, self.path_id = points, 0, self.path_id + 1
+        self.target = points[-1]  # the goal, or the free point standing in for it (goalEscape)
         self.plan_length = polyline_length(points)
         self.phase = "active"
 
@@ -243,6 +247,7 @@ class AmclNavigation(ProcessingPlugin):
             "goal": None if self.goal is None else list(self.goal), "pending": self._pending_goal,
             "phase": self.phase, "reason": self.reason,
             "plan": None if self.plan is None else [list(p) for p in self.plan], "segment": self.segment,
+            "target": None if self.target is None else list(self.target),
             "path_id": self.path_id, "plan_length": self.plan_length,
             "extra": self.routes.areas(),
             "unlocalized_since": self.unlocalized_since, "stopped": self.stopped,
@@ -266,6 +271,8 @@ class AmclNavigation(ProcessingPlugin):
             plan = state["plan"]
             self.plan = None if plan is None else [(float(x), float(y)) for x, y in plan]
             self.segment, self.path_id = int(state["segment"]), int(state["path_id"])
+            target = state["target"]
+            self.target = None if target is None else (float(target[0]), float(target[1]))
             self.plan_length = float(state["plan_length"])
             self.unlocalized_since, self.stopped = state["unlocalized_since"], bool(state["stopped"])
             self.routes.restore(state["extra"])
@@ -333,8 +340,9 @@ class AmclNavigation(ProcessingPlugin):
 
     def _navigate(self, pose: Pose, scan: Mapping[str, Any] | None) -> None:
         assert self.goal is not None
-        gx, gy, gyaw = self.goal
-        if self.stopped and math.dist(pose[:2], (gx, gy)) <= self.params["tolerance"] and (
+        gyaw = self.goal[2]
+        target = self.target or (self.goal[0], self.goal[1])
+        if self.stopped and math.dist(pose[:2], target) <= self.params["tolerance"] and (
             gyaw is None or abs(wrap(gyaw - pose[2])) <= self.params["yawTolerance"]
         ):  # the base has stopped at the path's end (odometry): arrived, if localization agrees
             self.phase, self.plan = "arrived", None

@@ -3,7 +3,9 @@
 :class:`Routes` wraps the A* planner of plugins/environment/planner.py for one footprint:
 
 - a start inside the inflated obstacles (the robot stood close to the workbench after APPR) is
-  left by the nearest free A* cell within ``escape`` metres, the robot's position prepended;
+  left by the nearest free A* cell within ``escape`` metres, the robot's position prepended; a
+  goal inside them (a pose short of an object on a table) is replaced by the nearest free cell
+  within ``goal_escape`` metres, so only a goal deeper in (or walled off) is unreachable;
 - scan hits on the path (an obstacle the map does not hold) join the map as avoided areas
   ("scan obstacle N") until the goal changes: :meth:`Routes.avoid` rebuilds the planner with them.
 
@@ -37,8 +39,11 @@ ESCAPE_TRIES = 20
 class Routes:
     """A* routes for ``footprint`` on ``env``, with the obstacles scans added since the last reset."""
 
-    def __init__(self, env: Environment, footprint: Footprint, resolution: float, escape: float) -> None:
+    def __init__(
+        self, env: Environment, footprint: Footprint, resolution: float, escape: float, goal_escape: float = 0.0
+    ) -> None:
         self.env, self.footprint, self.resolution, self.escape = env, footprint, resolution, escape
+        self.goal_escape = goal_escape
         self.model = MapModel.from_environment(env)
         self.static = self.planner = Planner(self.model, footprint, resolution=resolution)
         self.extra: list[AvoidedArea] = []
@@ -48,24 +53,42 @@ class Routes:
         self.extra, self.planner = [], self.static
 
     def plan(self, here: Point, goal: Point) -> list[Point]:
-        """Waypoints from ``here`` to ``goal``; :class:`Unreachable` naming why when there are none."""
+        """Waypoints from ``here`` to ``goal`` (or the nearest free point within ``goal_escape`` of a goal
+        inside an obstacle's inflation); :class:`Unreachable` naming why when there are none."""
+        try:
+            return self._from(here, goal)
+        except Unreachable as refused:
+            if "the goal collides" not in refused.reason or not self.goal_escape > 0:
+                raise
+            for near in self._free_near(goal, self.goal_escape):
+                try:
+                    return self._from(here, near)
+                except Unreachable:
+                    continue
+            raise
+
+    def _from(self, here: Point, goal: Point) -> list[Point]:
+        """A plan, leaving a start inside an inflated obstacle by the nearest free cell within ``escape``."""
         try:
             return list(self.planner.plan(here, goal).waypoints)
         except Unreachable as refused:
             if "the start collides" not in refused.reason or not self.escape > 0:
                 raise
+            for exit_point in self._free_near(here, self.escape):
+                try:
+                    return [here, *self.planner.plan(exit_point, goal).waypoints]
+                except Unreachable:
+                    continue
+            raise
+
+    def _free_near(self, where: Point, reach: float) -> list[Point]:
+        """The free A* cells within ``reach`` of ``where``, nearest first (at most ``ESCAPE_TRIES``)."""
         planner = self.planner
         cells = np.argwhere(planner.free)
         xy = np.stack([planner.xs[cells[:, 0]], planner.ys[cells[:, 1]]], axis=1)
-        near = np.hypot(xy[:, 0] - here[0], xy[:, 1] - here[1])
-        for k in np.argsort(near)[:ESCAPE_TRIES]:
-            if near[k] > self.escape:
-                break
-            try:
-                return [here, *planner.plan((float(xy[k, 0]), float(xy[k, 1])), goal).waypoints]
-            except Unreachable:
-                continue
-        return list(planner.plan(here, goal).waypoints)  # raises, naming the start's obstacle
+        near = np.hypot(xy[:, 0] - where[0], xy[:, 1] - where[1])
+        order = [k for k in np.argsort(near)[:ESCAPE_TRIES] if near[k] <= reach]
+        return [(float(xy[k, 0]), float(xy[k, 1])) for k in order]
 
     def avoid(self, points: Sequence[Point]) -> None:
         """Plan around ``points`` from now on: they join the map as avoided areas (5 cm around each)."""

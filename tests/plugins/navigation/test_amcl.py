@@ -152,6 +152,19 @@ def test_a_start_inside_the_inflated_pillar_leaves_by_the_nearest_free_point(fil
     assert failed["state"] == "failed" and "the start collides with 'Pillar'" in failed["reason"]
 
 
+def test_a_goal_just_inside_an_obstacle_inflation_moves_to_free_space_a_deeper_one_fails(file: Path) -> None:
+    goal = "2.15 1.5 0"  # 0.15 m from the pillar, inside its 0.2 m inflation (a pose short of an object)
+    nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.02 0.02", goal=goal)
+    result = frames(nav, grid(file), (1.0, 1.8, 0.0), (1.0, 1.8, 0.0), 2)
+    assert result["status"]["state"] == "active" and result["status"]["goal"] == goal
+    end = tuple(result["path"]["points"][-1])  # the odom frame is the map's here
+    assert 0.0 < math.dist(end, (2.15, 1.5)) <= 0.3 and nav.target == pytest.approx(end, abs=0.05)
+    assert shapely.box(2.3, 1.1, 2.7, 2.9).distance(shapely.Point(end)) >= 0.2
+    strict = navigation(file, initialPose="1 1.8 0", initialSpread="0.02 0.02", goal=goal, goalEscape=0.0)
+    failed = frames(strict, grid(file), (1.0, 1.8, 0.0), (1.0, 1.8, 0.0), 1)["status"]
+    assert failed["state"] == "failed" and "the goal collides with 'Pillar'" in failed["reason"]
+
+
 def test_without_a_localization_it_waits_stopped_then_fails_with_the_reason(file: Path) -> None:
     nav = navigation(file, initialPose="1 1.8 0", goal="Target", localizeTimeout=2.0)
     result: dict[str, Any] = {}
