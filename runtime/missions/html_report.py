@@ -59,14 +59,14 @@ class Options:
     snapshot_states: tuple[str, ...] = SNAPSHOT_STATES
 
 
-def _table(header: list[str], rows: list[list[str]], css: str = "") -> str:
+def _table(header: list[str] | None, rows: list[list[str]], css: str = "") -> str:
     """A table whose cells are already escaped HTML; numeric-looking cells right-aligned."""
-    head = "".join(f"<th>{h}</th>" for h in header)
+    head = "<tr>" + "".join(f"<th>{h}</th>" for h in header) + "</tr>" if header else ""
     body = "".join(
         "<tr>" + "".join(f'<td class="num">{c}</td>' if c[:1].isdigit() else f"<td>{c}</td>" for c in row) + "</tr>"
         for row in rows
     )
-    return f'<table class="{css}"><tr>{head}</tr>{body}</table>'
+    return f'<table class="{css}">{head}{body}</table>'
 
 
 def _system(run_dir: Path, options: Options, notes: list[str]) -> tuple[System | None, Path | None, str | None]:
@@ -166,7 +166,7 @@ def _header(
     agents = [
         [escape(a.agent), escape(a.mission or "?"), _outcome(a, system), f"{a.total:.1f} s"] for a in report.agents
     ]
-    return _table(["", ""], rows, "summary") + _table(["Agent", "Mission", "Outcome", "Time"], agents, "agents")
+    return _table(None, rows, "summary") + _table(["Agent", "Mission", "Outcome", "Time"], agents, "agents")
 
 
 def _joined(values: list[float] | tuple[float, ...], fmt: str) -> str:
