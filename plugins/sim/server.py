@@ -23,6 +23,7 @@ answered ``{"error": …, "type": …}`` naming the channel; it never stops the 
 from __future__ import annotations
 
 import argparse
+import functools
 import itertools
 import json
 import logging
@@ -31,11 +32,12 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, Listener, Pipe, answer_challenge, deliver_challenge, wait
 from pathlib import Path
 from types import FrameType
 from typing import Any
+
+import numpy as np
 
 from ckmconf import ConfigError, load
 from ckmconf.model import System
@@ -46,27 +48,11 @@ from .devices import ChannelDevice, SimWorld, Spec
 from .plan import WorldPlan
 from .render import RenderWorker, job_of
 from .sensors import Frame
+from .serving import LARGE, Client, Flight, frame_reply
 
 LOG = logging.getLogger("ckm.sim.server")
 HOST = "127.0.0.1"
 MAX_REQUEST = 1 << 20  # bytes: a request is a small JSON object; anything larger is malformed
-
-
-@dataclass
-class _Client:
-    number: int
-    conn: Connection
-    devices: dict[int, ChannelDevice] = field(default_factory=dict)
-
-
-@dataclass
-class _Flight:
-    """A frame the render worker is making, and the camera reads waiting for it."""
-
-    key: tuple[int, int, float, int, int]
-    step: int
-    time: float
-    waiters: list[tuple[_Client, ChannelDevice]]
 
 
 class WorldServer:
@@ -77,13 +63,13 @@ class WorldServer:
     ) -> None:
         self.sim = sim
         self.renderer = renderer
-        self._cameras: list[tuple[_Client, ChannelDevice]] = []  # camera reads waiting for the worker
-        self._flight: _Flight | None = None
+        self._cameras: list[tuple[Client, ChannelDevice]] = []  # camera reads waiting for the worker
+        self._flight: Flight | None = None
         self.authkey = authkey
         self.listener = Listener((host, port))  # authenticated per connection, in a thread of its own
         host, port = self.listener.address
         self.address = f"{host}:{port}"
-        self.clients: list[_Client] = []
+        self.clients: list[Client] = []
         self._pending: list[Connection] = []
         self._lock = threading.Lock()
         self._wake_r, self._wake_w = Pipe(duplex=False)
@@ -122,7 +108,7 @@ class WorldServer:
         while not stop.is_set():
             rendering = [self.renderer.conn] if self.renderer is not None and self.renderer.busy else []
             ready = wait([self._wake_r, *rendering, *(c.conn for c in self.clients)], timeout=0.2)
-            batch: list[tuple[_Client, bytes]] = []
+            batch: list[tuple[Client, bytes]] = []
             for conn in ready:
                 if conn is self._wake_r:
                     self._admit()
@@ -148,31 +134,35 @@ class WorldServer:
         with self._lock:
             pending, self._pending = self._pending, []
         for conn in pending:
-            client = _Client(next(self._numbers), conn)
+            client = Client(next(self._numbers), conn)
             self.clients.append(client)
             LOG.info("client %d connected", client.number)
 
-    def _drop(self, client: _Client, why: str) -> None:
+    def _drop(self, client: Client, why: str) -> None:
         LOG.info("client %d left (%s), %d channel(s) released", client.number, why, len(client.devices))
         self.clients.remove(client)
-        client.conn.close()
+        client.close()
 
-    def _receive(self, client: _Client) -> bytes | None:
+    def _receive(self, client: Client) -> bytes | None:
         try:
             return client.conn.recv_bytes(MAX_REQUEST)
         except (EOFError, OSError) as exc:  # gone, or a request over MAX_REQUEST (unreadable after it)
             self._drop(client, f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__)
             return None
 
-    def _reply(self, client: _Client, reply: dict[str, Any]) -> None:
+    def _reply(self, client: Client, reply: dict[str, Any]) -> None:
         if client not in self.clients:
+            return
+        value = reply.get("value")
+        if isinstance(value, np.ndarray) and value.nbytes > LARGE:
+            client.later(lambda: reply)
             return
         try:
             client.conn.send(reply)
         except (OSError, ValueError) as exc:
             self._drop(client, f"reply not sent: {exc}")
 
-    def _renders(self, client: _Client, data: bytes) -> bool:
+    def _renders(self, client: Client, data: bytes) -> bool:
         """Whether the request reads a camera (the one costly kind of request)."""
         try:
             message = json.loads(data)
@@ -183,7 +173,7 @@ class WorldServer:
 
     # ------------------------------------------------------------------ requests
 
-    def handle(self, client: _Client, data: bytes) -> dict[str, Any] | None:
+    def handle(self, client: Client, data: bytes) -> dict[str, Any] | None:
         """The reply to one request (None: a camera read handed to the render worker); an error reply
         for anything wrong, never an exception."""
         self.requests += 1
@@ -243,7 +233,7 @@ class WorldServer:
             with self.sim.lock:
                 self.sim.sync()
                 world = self.sim.world
-                flight = _Flight(key, world.steps, world.time, [(client, device)])
+                flight = Flight(key, world.steps, world.time, [(client, device)])
                 flight.waiters += [(c, d) for c, d in self._cameras if d.camera == key]
                 self._cameras = [(c, d) for c, d in self._cameras if d.camera != key]
                 try:
@@ -264,7 +254,7 @@ class WorldServer:
                 self._lose_renderer(result)
         self._finish(flight, result if isinstance(result, Frame) else None)
 
-    def _finish(self, flight: _Flight, frame: Frame | None) -> None:
+    def _finish(self, flight: Flight, frame: Frame | None) -> None:
         self._flight = None
         client, device = flight.waiters[0]
         try:
@@ -275,7 +265,8 @@ class WorldServer:
                 else:
                     self.sim.keep_frame(flight.key, flight.step, frame)
             for client, device in flight.waiters:
-                self._reply(client, {"value": device.from_frame(frame), "time": flight.time})
+                if client in self.clients:
+                    client.later(functools.partial(frame_reply, device, frame, flight.time))
         except Exception as exc:  # never the server's end
             for client, device in flight.waiters:
                 self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
@@ -294,7 +285,7 @@ class WorldServer:
             except Exception as exc:  # never the server's end
                 self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
 
-    def _open(self, client: _Client, spec: Spec) -> int:
+    def _open(self, client: Client, spec: Spec) -> int:
         world = spec.values.get("world")
         if world and world != self.sim.source:
             raise ParamError(f"sim channel {spec.name!r}: Param 'world' names {world}, but the run's simulated "
