@@ -83,7 +83,7 @@ class BagData:
     poses: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)  # topic → (t, x, y)
     headings: dict[str, list[tuple[float, float]]] = field(default_factory=dict)  # topic → (t, yaw)
     zoom: list[tuple[float, float, float, float, float]] = field(default_factory=list)  # t, x, y, width, depth
-    detections: dict[str, list[list[Sighting]]] = field(default_factory=dict)  # topic → per message
+    detections: dict[str, list[tuple[float, list[Sighting]]]] = field(default_factory=dict)  # topic → (t, objects)
     frames: list[Frame] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
 
@@ -193,8 +193,11 @@ def image_pixels(payload: Any) -> np.ndarray:
             raise ValueError(f"image encoding {encoding!r} is not supported ({', '.join(IMAGE_ENCODINGS)})")
         code, channels = IMAGE_ENCODINGS[encoding]
         width, height = int(payload.get("width") or 0), int(payload.get("height") or 0)
-        raw = np.asarray(payload["data"], dtype=np.uint8) if not isinstance(payload["data"], bytes | bytearray) \
-            else np.frombuffer(bytes(payload["data"]), dtype=np.uint8)  # fmt: skip
+        data = payload["data"]
+        if isinstance(data, bytes | bytearray):
+            raw = np.frombuffer(bytes(data), dtype=np.uint8)
+        else:
+            raw = np.asarray(data, dtype=np.uint8).reshape(-1)
         size = width * height * channels * np.dtype(code).itemsize
         if width <= 0 or height <= 0 or raw.size < size:
             raise ValueError(f"image of {width}×{height} {encoding}: {raw.size} bytes do not hold it")
@@ -214,6 +217,8 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
     an error naming its files to :attr:`BagData.errors`; what was read before it is kept.
     """
     data = BagData()
+    # one frame per camera and moment over every bag (several --node processes each keep a bag)
+    frames = {(c, m, label): Frame(c, m, label) for c in topics.cameras for m, label in moments}
     for bag in bags:
         data.bags.append(bag)
         try:
@@ -230,16 +235,19 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
         wanted = sorted(set(types) & topics.wanted())
         if not wanted:
             continue
-        frames = {(t, m): Frame(t, m, label) for t in topics.cameras if t in types for m, label in moments}
         try:
             for message in BagSource(bag, topics=wanted).messages():
                 _take(data, topics, message.topic, message.time, message.payload, frames)
         except Exception as error:
             data.errors.append(f"{_storage_files(bag)}: corrupt rosbag2 bag, reading stopped: {_first_line(error)}")
-        for frame in frames.values():
-            if frame.payload is not None:
-                data.frames.append(frame)
-    data.frames.sort(key=lambda f: (f.moment, f.topic))
+    data.frames = sorted((f for f in frames.values() if f.payload is not None), key=lambda f: (f.moment, f.topic))
+    for track in data.poses.values():  # bags of several processes interleave: time order for lookups
+        track.sort()
+    for headings in data.headings.values():
+        headings.sort()
+    for messages in data.detections.values():
+        messages.sort(key=lambda message: message[0])
+    data.zoom.sort()
     return data
 
 
@@ -257,8 +265,8 @@ def _take(data: BagData, topics: ReportTopics, topic: str, t: float, payload: An
         if area is not None and (not data.zoom or data.zoom[-1][1:] != area):  # one entry per move
             data.zoom.append((t, *area))
     if topic == topics.fused or topic in topics.recognition:
-        data.detections.setdefault(topic, []).append(sightings(payload, t))
+        data.detections.setdefault(topic, []).append((t, sightings(payload, t)))
     if topic in topics.cameras:
-        for (camera, moment), frame in frames.items():
+        for (camera, moment, _), frame in frames.items():
             if camera == topic and (frame.payload is None or abs(t - moment) < abs(frame.time - moment)):
                 frame.time, frame.payload = t, payload

@@ -70,7 +70,7 @@ def map_section(
     if not data.zoom:
         out.append(_missing("zoom-map areas", topics.zoom, data))
     zoom = [(clock(t), x, y, w, d) for t, x, y, w, d in data.zoom]
-    sightings = [s for message in data.detections.get(topics.fused, []) for s in message]
+    sightings = [s for _, message in data.detections.get(topics.fused, []) for s in message]
     target = [(s.x, s.y) for s in sightings if s.x is not None and s.y is not None]
     if env is None and not tracks and not zoom:
         return "".join(out) + note("Nothing to draw for Fig. 7.16.")
@@ -85,7 +85,7 @@ def choose_target(data: BagData, topics: ReportTopics, target: str | None) -> tu
         return target.lower().split(), f"target {target!r} (--target)"
     score: dict[str, float] = {}
     for topic in [topics.fused, *topics.recognition]:
-        for message in data.detections.get(topic, []):
+        for _, message in data.detections.get(topic, []):
             best: dict[str, float] = {}
             for seen in message:
                 best[seen.name] = max(best.get(seen.name, 0.0), seen.reliability)
@@ -119,7 +119,7 @@ def _approach(data: BagData, topics: ReportTopics, terms: list[str], clock: Call
         return []
     track, headings = data.poses[source], data.headings.get(source, [])
     found: list[Approach] = []
-    for message in data.detections.get(topics.fused, []):
+    for _, message in data.detections.get(topics.fused, []):
         seen = _best(message, terms)
         if seen is None or seen.x is None or seen.y is None:
             continue
@@ -147,7 +147,7 @@ def reliability_section(
     out = [f"<p>{escape(chosen)}.</p>"]
     series = []
     for topic in present:
-        best = [_best(m, terms) for m in data.detections[topic]]
+        best = [_best(m, terms) for _, m in data.detections[topic]]
         points = [(clock(s.time), s.reliability) for s in best if s is not None]
         if points:
             series.append((topic + (" (fused)" if topic == topics.fused else ""), points))

@@ -17,7 +17,7 @@ from runtime.missions import cli
 from runtime.missions.html_report import Options, build_html, main
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import build_report
-from runtime.missions.report_bag import ReportTopics
+from runtime.missions.report_bag import ReportTopics, find_bags, read_bags
 from runtime.ros.bag import BagRecorder, Storage
 from runtime.ros.types import RosTypes
 
@@ -372,6 +372,19 @@ def test_a_configuration_that_does_not_load_or_is_gone_is_noted(tmp_path: Path) 
     assert f"configuration {tmp_path / 'broken.xml'} does not load: " in notes
     (run_dir / "stats.json").write_text(json.dumps({"config": "gone.xml", "system": "lab"}))
     assert "configuration gone.xml (stats.json) not found; give it with --config" in parse(build_html(run_dir)[0]).notes
+
+
+def test_the_bags_of_several_processes_are_merged_in_time_order(tmp_path: Path) -> None:
+    run_dir = make_run(tmp_path / "run", bag=False, config=False)
+    write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]}).rename(run_dir / "bag-remote_pc")
+    write_bag(run_dir, {"/nao/camera/image": TOPICS["/nao/camera/image"], "/recog/objects": TOPICS["/recog/objects"]})
+    data = read_bags(find_bags(run_dir), ReportTopics(), [(WALL + 20.0, "OBJ_FIX")])
+    assert data.bags == [run_dir / "bag", run_dir / "bag-remote_pc"] and data.errors == []
+    assert [t for t, _, _ in data.poses["/nav/pose"]] == sorted(t for t, _, _ in data.poses["/nav/pose"])
+    assert [(f.topic, f.time - WALL) for f in data.frames] == [("/nao/camera/image", pytest.approx(20.3))]
+    page = parse(build_html(run_dir)[0])
+    assert {"Fig. 7.16", "Fig. 7.19"} <= {alt for alt, _ in page.images}
+    assert not [n for n in page.notes if n.startswith("No distance")]  # poses of one bag, objects of the other
 
 
 def test_html_refuses_json_and_depth_and_a_missing_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
