@@ -65,6 +65,7 @@ class WorldServer:
         self.renderer = renderer
         self._cameras: list[tuple[Client, ChannelDevice]] = []  # camera reads waiting for the worker
         self._flight: Flight | None = None
+        self._unmirrored: set[tuple[int, int, float, int, int]] = set()  # renders the worker could not make
         self.authkey = authkey
         self.listener = Listener((host, port))  # authenticated per connection, in a thread of its own
         host, port = self.listener.address
@@ -201,7 +202,7 @@ class WorldServer:
             if op == "close":
                 del client.devices[handle]
                 return {}
-            if op == "read" and device.camera is not None and self.renderer is not None:
+            if op == "read" and self.renderer is not None and device.camera not in (None, *self._unmirrored):
                 self._cameras.append((client, device))
                 return None
             with self.sim.lock:
@@ -249,7 +250,8 @@ class WorldServer:
         assert self.renderer is not None and self._flight is not None
         flight, result = self._flight, self.renderer.result()
         if isinstance(result, str):
-            LOG.warning("render worker: %s; rendering in the physics thread", result)
+            LOG.warning("render worker: %s; this camera renders in the physics thread", result)
+            self._unmirrored.add(flight.key)
             if not self.renderer.alive():
                 self._lose_renderer(result)
         self._finish(flight, result if isinstance(result, Frame) else None)

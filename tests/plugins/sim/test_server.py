@@ -269,7 +269,7 @@ def test_client_mode_reads_what_the_in_process_world_reads(
     differences = [abs(a - b) for a, b in zip(served_depth, depth, strict=True)]
     assert sum(differences) / len(differences) < 5.0  # mm: the mirror's render is the world's
     assert isinstance(away, tuple) and len(away) == 4800 and min(away) > 0.0
-    assert "rendering in the physics thread" in log
+    assert "this camera renders in the physics thread" in log
 
 
 def test_the_plan_follows_the_channels_and_refuses_two_worlds(config: Path, tmp_path: Path) -> None:
