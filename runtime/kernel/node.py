@@ -1,8 +1,13 @@
-"""A running CKM node, built from its configuration record through the registry.
+"""A running CKM node, built from its configuration record through the registry (§3.1.2).
 
 ``NodeRuntime(node, system, transport)`` only resolves plugins (unknown names are
 ConfigErrors at their element); ``setup()`` opens the hardware; ``start()`` schedules the
 services; ``stop()`` drives every actuator to its safe value and closes the hardware.
+
+The node builds its services and schedules them; its other parts each have their module and a
+narrow interface: controller switching (:mod:`.switching`), alarm reactions (:mod:`.reactions`,
+through the ``ReactionHost`` protocol), the Smart Resources it hosts (:mod:`.hosting`), its event
+log (:mod:`.events`) and code delegation (:mod:`.delegation`, through ``DelegationHost``).
 """
 
 from __future__ import annotations
@@ -10,13 +15,10 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
-import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
 from ckmconf.errors import ConfigError
-from ckmconf.expressions import Condition, Environment, evaluate
 from ckmconf.model import Alarm, Node, System, Topic
 from ckmconf.model.kernel import Controller as ControllerRecord
 
@@ -25,15 +27,19 @@ from ..registry import Registry, default_registry
 from ..resources.resource import SmartResourceRuntime
 from .adaptation import build_chain
 from .delegation import Delegation
+from .events import EVENTS_KEPT, EventLog
+from .hosting import ResourceHost
 from .interfaces import Backend, Controller, ParamError
 from .monitor import MonitorService
 from .partitions import PartitionSupervisor
+from .reactions import react
 from .scheduler import Scheduler, Task
-from .services import ActuationService, ControlService, FutureActions, SensorService, stale_after
+from .services import ActuationService, ControlService, FutureActions, SensorService
+from .switching import ControllerSwitching
 from .vectors import chain_refusal, is_vector, shaper
 
 LOG = logging.getLogger("ckm.node")
-EVENTS_KEPT = 10000  # recent events kept in memory; every event also goes to the event sinks
+__all__ = ["EVENTS_KEPT", "NodeRuntime"]
 
 
 def _only_partition(node: Node, partition: str) -> Node:
@@ -83,17 +89,17 @@ class NodeRuntime:
         self.controllers: dict[str, ControlService] = {}
         self.actuators: dict[str, ActuationService] = {}
         self.futures: dict[str, FutureActions] = {}
-        self.events: list[dict[str, Any]] = []  # the recent ones (bounded); all go to event_sinks
-        self.event_sinks: list[Callable[[dict[str, Any]], None]] = []  # e.g. the run directory's events file
+        self.log = EventLog(node.name, transport.publisher(TopicQoS(node.alarm_topic(), "event", history=16)))
+        self.events: list[dict[str, Any]] = self.log.events  # the recent ones (bounded); all go to event_sinks
+        self.event_sinks: list[Callable[[dict[str, Any]], None]] = self.log.sinks  # e.g. the run's events file
         self.monitor: MonitorService | None = None
         self.delegation: Delegation | None = None
         self.partitions: PartitionSupervisor | None = None  # the partition processes (ckm-run sets it)
-        self.resources: dict[str, SmartResourceRuntime] = {}  # Smart Resources hosted here (main process)
+        self.hosting = ResourceHost(node, system, transport, self.registry)
+        self.resources: dict[str, SmartResourceRuntime] = self.hosting.resources  # hosted here (main process)
         self._final_tasks: dict[str, Any] | None = None
-        self._final_resources: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
-        self._switches: dict[str, list[tuple[str, Condition]]] = {}
-        self._alarm_publisher = transport.publisher(TopicQoS(node.alarm_topic(), "event", history=16))
+        self.switching = ControllerSwitching(self.controllers, self._watch, self._watched, self.report)
         self._controller_classes = {c.name: self.registry.resolve("controller", c.kind, c) for c in node.controllers}
         self._backend_classes = {
             ch.name: self.registry.resolve("hardware", ch.backend, ch, "backend") for ch in node.channels
@@ -170,17 +176,13 @@ class NodeRuntime:
         for actuator in node.actuators:
             # kernel.xsd: an actuator's steps are applied in order, engineering units → raw.
             inverse = build_chain(actuator.adaptation, self.registry, inverse=False)
-            service = ActuationService(actuator, self.backends[actuator.channel], inverse, self.futures, self._report)
+            service = ActuationService(actuator, self.backends[actuator.channel], inverse, self.futures, self.report)
             self.actuators[actuator.name] = service
             self.transport.subscribe(self.topic(actuator.topic), _commands_to(service))
         extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in node.sensors}
         for record in node.controllers:
             self.controllers[record.name] = self._control_service(record, extrapolation)
-            self._switches[record.name] = [(sw.to, sw.condition) for sw in record.switches]
-            for _, condition in self._switches[record.name]:
-                for function, args in condition.calls:
-                    if function in ("stale", "value"):
-                        self._watch(str(args[0]))
+            self.switching.add_criteria(record)
         if node.monitor is not None:
             for alarm in node.monitor.alarms:
                 if alarm.measure == "staleness" and alarm.topic:
@@ -191,43 +193,13 @@ class NodeRuntime:
                 scheduler=self.scheduler,
                 subscriptions=self._watched,
                 crashes=lambda partition: self.partitions.crashes(partition) if self.partitions is not None else 0,
-                report=self._report,
+                report=self.report,
                 react=self._react,
             )
+            self.switching.monitor = self.monitor
 
         if self.partition in (None, ""):
-            self._setup_resources()
-
-    def _setup_resources(self) -> None:
-        """The SPT services of the Smart Resources this node hosts on the CKM kernel.
-
-        What this runtime cannot run is refused at its element rather than skipped (issue G):
-        a resource on a ROS kernel (none runs here) and a service without scenarios (services
-        run only through their scenarios' SPT processing).
-        """
-        for resource in self.system.resources:
-            if resource.node != self.node.name:
-                continue
-            if resource.kernel != "ckm":
-                raise self._error(
-                    resource,
-                    f"Smart Resource {resource.name!r} runs on a {resource.kernel!r} kernel, "
-                    "which this runtime does not provide: it cannot run on node "
-                    f"{self.node.name!r}",
-                )
-            for service in resource.services:
-                if not service.scenarios:
-                    raise self._error(
-                        service,
-                        f"service '{resource.name}.{service.name}' has no Scenario: the runtime runs "
-                        "services only through their scenarios' SPT processing",
-                    )
-            runtime = SmartResourceRuntime(resource, self.transport, node=self.node.name, registry=self.registry)
-            try:
-                runtime.setup()  # a stream its records cannot make is a ConfigError already
-            except (OSError, ValueError) as exc:  # a model file, a plugin's own check in its set-up
-                raise self._error(resource, f"Smart Resource {resource.name!r}: {exc}") from None
-            self.resources[resource.name] = runtime
+            self.hosting.setup()
 
     def _watch(self, topic: str) -> Subscription:
         if topic not in self._watched:
@@ -283,8 +255,7 @@ class NodeRuntime:
             )
         if self._own_scheduler:
             self.scheduler.start()
-        for resource in self.resources.values():
-            resource.start()
+        self.hosting.start()
 
     def stop(self) -> None:
         """Drive every actuator to its safe value first, then stop the services and close the hardware.
@@ -301,7 +272,7 @@ class NodeRuntime:
         if self._own_scheduler:
             self._step("stop the scheduler", self.scheduler.stop)
         self._step("take the task statistics", functools.partial(self._keep_task_statistics, mine))
-        self._step("take the Smart Resource statistics", self._keep_resource_statistics)
+        self._step("take the Smart Resource statistics", self.hosting.keep_statistics)
         for resource in self.resources.values():
             self._step(f"stop Smart Resource {resource.resource.name}", resource.stop)
         for channel, backend in self.backends.items():
@@ -316,61 +287,10 @@ class NodeRuntime:
     def _keep_task_statistics(self, tasks: list[Task]) -> None:
         self._final_tasks = self.scheduler.statistics(tasks)
 
-    def _keep_resource_statistics(self) -> None:
-        self._final_resources = self._resource_statistics()
-
-    # ------------------------------------------------------------------ switching and alarms
-
-    def _control_tick(self, control: ControlService) -> Callable[[], None]:
-        def tick() -> None:
-            if control.active:
-                for target, condition in self._switches.get(control.record.name, ()):
-                    if evaluate(condition, self._switch_environment(control)):
-                        self.switch(target, reason=f"criterion of {control.record.name}")
-                        return
-            control.compute()
-
-        return tick
-
-    def _switch_environment(self, control: ControlService) -> Environment:
-        def stale(topic: str) -> bool:
-            subscription = self._watched.get(topic)
-            history = subscription.history() if subscription is not None else []
-            if not history:
-                return True
-            assert subscription is not None  # history is empty without one
-            age = time.time() - (history[-1].stamp - history[-1].offset)
-            return age > stale_after(subscription.qos, control.record.period)
-
-        def value(topic: str) -> Any:
-            subscription = self._watched.get(topic)
-            history = subscription.history() if subscription is not None else []
-            return history[-1].value if history else None
-
-        monitor = self.monitor
-        return Environment(
-            functions={
-                "alarm": lambda name: monitor is not None and monitor.active(name),
-                "stale": stale,
-                "value": value,
-            },
-            names={"elapsed": time.monotonic() - control.since},
-        )
+    # ------------------------------------------------------------------ alarms
 
     def _react(self, alarm: Alarm) -> None:
-        if alarm.action == "safe-stop":
-            for actuation in self.actuators.values():
-                actuation.safe_stop()
-        elif alarm.action == "switch" and alarm.target is not None:
-            self.switch(alarm.target, reason=f"alarm {alarm.name}")
-        elif alarm.action == "delegate" and alarm.target in self.controllers and self.delegation is not None:
-            taker = self.idle_node()
-            if taker is not None:  # handing over waits for the taker: not on the monitor's thread
-                threading.Thread(target=self.delegation.give, args=(alarm.target, taker), daemon=True).start()
-        elif alarm.action == "restart" and self.partitions is not None:
-            self.partitions.on_alarm(alarm)
-        else:
-            self._report("reaction-unavailable", {"alarm": alarm.name, "action": alarm.action})
+        react(self, alarm)
 
     def idle_node(self) -> str | None:
         """Where delegated work goes: the first other service node of the system (FCKM, §3.1.1.2)."""
@@ -386,7 +306,7 @@ class NodeRuntime:
             Task(
                 f"{self.node.name}.{record.name}",
                 record.period,
-                self._control_tick(control),
+                self.switching.tick(control),
                 priority=record.priority,
                 optional=control.compute_optional if optional is not None else None,
                 min_idle=optional.min_idle if optional is not None else 0.0,
@@ -400,7 +320,7 @@ class NodeRuntime:
             raise ValueError(f"node {self.node.name!r} already runs a controller named {record.name!r}")
         extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in self.node.sensors}
         control = self._control_service(record, extrapolation)
-        self._switches[record.name] = [(sw.to, sw.condition) for sw in record.switches]
+        self.switching.add_criteria(record)
         self.controllers[record.name] = control
         if record.active:
             control.active = False
@@ -413,20 +333,12 @@ class NodeRuntime:
         control = self.controllers.pop(name)
         control.deactivate()
         self.scheduler.remove(f"{self.node.name}.{name}")
-        self._switches.pop(name, None)
+        self.switching.forget(name)
         self.report("controller-removed", {"controller": name})
 
     def switch(self, to: str, reason: str = "command") -> None:
         """Hand the outputs of the active controller(s) sharing ``to``'s outputs over to ``to``, bumplessly."""
-        target = self.controllers[to]
-        outputs = {p.topic for p in target.record.outputs}
-        previous = None
-        for control in self.controllers.values():
-            if control is not target and control.active and outputs & {p.topic for p in control.record.outputs}:
-                previous = control.last_output
-                control.deactivate()
-        target.activate(previous)
-        self._report("controller-switched", {"to": to, "reason": reason})
+        self.switching.switch(to, reason)
 
     def _task_statistics(self) -> dict[str, Any]:
         return {k: v for k, v in self.scheduler.statistics().items() if k.startswith(f"{self.node.name}.")}
@@ -442,43 +354,14 @@ class NodeRuntime:
                 n: {"active": c.active, "skipped": c.skipped, "optional_used": c.optional_used}
                 for n, c in self.controllers.items()
             },
-            "resources": self._final_resources if self._final_resources is not None else self._resource_statistics(),
-        }
-
-    def _resource_statistics(self) -> dict[str, Any]:
-        return {
-            name: {
-                "instances": {
-                    i.key: {"scenario": i.scenario, "published": i.published, "switches": i.tcm.switches}
-                    for i in runtime.instances()
-                },
-                "streams": {
-                    root: {"frames": s.topology.frames, "errors": s.errors, "dropped": s.buffer.stats().dropped}
-                    for root, s in runtime.streams.items()
-                },
-            }
-            for name, runtime in self.resources.items()
+            "resources": self.hosting.statistics(),
         }
 
     # ------------------------------------------------------------------ events
 
     def report(self, kind: str, detail: dict[str, Any]) -> None:
         """Record a node event: kept, logged, and published on the node's alarm topic."""
-        self._report(kind, detail)
-
-    def _report(self, kind: str, detail: dict[str, Any]) -> None:
-        event = {"node": self.node.name, "kind": kind, "time": time.time(), **detail}
-        self.events.append(event)
-        if len(self.events) > EVENTS_KEPT:
-            del self.events[: EVENTS_KEPT // 2]
-        for sink in self.event_sinks:
-            try:
-                sink(event)
-            except Exception:
-                LOG.exception("%s: an event sink failed", self.node.name)
-        level = logging.INFO if kind == "controller-switched" else logging.WARNING
-        LOG.log(level, "%s: %s %s", self.node.name, kind, detail)
-        self._alarm_publisher.publish(event)
+        self.log.report(kind, detail)
 
     def _error(self, record: Any, message: str) -> ConfigError:
         return ConfigError.of(record, message)

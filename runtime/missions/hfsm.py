@@ -28,8 +28,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-import networkx as nx  # type: ignore[import-untyped]
-
 from ckmconf.expressions import Condition, Environment, evaluate
 from ckmconf.model import System
 from ckmconf.model.missions import Mission, State, Transition
@@ -90,6 +88,8 @@ def distances_to_success(mission: Mission) -> dict[str, int]:
     """Fewest transitions from each state to the first declared final (absent: unreachable)."""
     if not mission.finals:
         return {}
+    import networkx as nx  # type: ignore[import-untyped]  # here: ckm-run imports this module and rarely runs a mission
+
     graph = nx.DiGraph()
     graph.add_edges_from((t.from_, t.to) for t in mission.transitions)
     goal = mission.finals[0].name

@@ -102,6 +102,10 @@ class Instance:
         self.alarms: list[Alarm] = []
         self._now = 0.0
 
+    def statistics(self) -> dict[str, Any]:
+        """The figures a run record keeps of this instance: active scenario, results published, scenario switches."""
+        return {"scenario": self.scenario, "published": self.published, "switches": self.tcm.switches}
+
     # ------------------------------------------------------------------ TCM
 
     @property

@@ -90,6 +90,10 @@ class Stream:
             name=f"stream-{root}",
         )
 
+    def statistics(self) -> dict[str, Any]:
+        """Frames processed, frames whose processing raised, frames the triple buffer dropped."""
+        return {"frames": self.topology.frames, "errors": self.errors, "dropped": self.buffer.stats().dropped}
+
     def _acquire(self, reuse: _Input | None) -> _Input:
         data = self.source()
         if data is not None:
@@ -304,6 +308,13 @@ class SmartResourceRuntime:
         with stream.lock:
             stream.instances[instance.key] = instance
         stream.topology.select(instance.key, instance.profile, share=self.share)
+
+    def statistics(self) -> dict[str, Any]:
+        """Per instance (by key) and per stream (by acquisition plugin): what a run record keeps (stats.json)."""
+        return {
+            "instances": {i.key: i.statistics() for i in self.instances()},
+            "streams": {root: stream.statistics() for root, stream in self.streams.items()},
+        }
 
     def instances(self) -> list[Instance]:
         return [i for stream in self.streams.values() for i in list(stream.instances.values())]
