@@ -16,11 +16,13 @@ from html import escape
 from pathlib import Path
 
 from ckmconf.model import System
+from ckmconf.model.environment import ZoomMap
 
 from .report import Report
 from .report_bag import BagData, Frame, ReportTopics, Sighting, image_pixels
 from .report_figures import Approach, image_png, map_png, reliability_png
 
+ZoomArea = tuple[float, float, float, float, float]  # run time, centre x, y, width, depth
 APPROACH_STATES = ("SPOT", "APPR", "PICK", "OBJ_TRACK", "OBJ_FIX")
 """States shaded on the reliability plot: where recognition matters (§7.4.1, Fig. 7.19)."""
 MAX_MOMENTS = 20
@@ -67,15 +69,38 @@ def map_section(
         tracks.append((f"true ({truth})", "tab:green", [(clock(t), x, y) for t, x, y in data.poses[truth]]))
     else:
         out.append(_missing("true trajectory", topics.truth, data))
-    if not data.zoom:
-        out.append(_missing("zoom-map areas", topics.zoom, data))
     zoom = [(clock(t), x, y, w, d) for t, x, y, w, d in data.zoom]
+    if not zoom:
+        out.append(_missing("zoom-map areas recorded", topics.zoom, data))
+        settings = env.zoom if env is not None else None
+        if settings is not None and estimate and settings.max_objects is None:
+            zoom = replay_zoom([(clock(t), x, y) for t, x, y in estimate], settings)
+            size = f"{settings.width:g} × {settings.depth:g} m"
+            rule = f"re-centred within {settings.border:.0%} of its border or after {settings.timeout:g} s, §6.1.3"
+            what = "The zoom-map areas drawn are replayed from the estimated trajectory with the configuration's"
+            out.append(note(f"{what} <ZoomMap> ({size}, {rule})."))
     sightings = [s for _, message in data.detections.get(topics.fused, []) for s in message]
     target = [(s.x, s.y) for s in sightings if s.x is not None and s.y is not None]
     if env is None and not tracks and not zoom:
         return "".join(out) + note("Nothing to draw for Fig. 7.16.")
     base = config.parent if config is not None else None
     return "".join(out) + png_tag(map_png(env, tracks, zoom, target if len(target) < 5000 else [], base), "Fig. 7.16")
+
+
+def replay_zoom(track: Sequence[tuple[float, float, float]], settings: ZoomMap) -> list[ZoomArea]:
+    """The zoom-map areas a robot following ``track`` ((t, x, y)) gets from ``<ZoomMap>`` (§6.1.3): centred
+    on it at the start, again when it comes within ``border`` × the size of the area's edge, and
+    after ``timeout`` s (the triggers of plugins/environment/zoom.py; fixed size, no ``maxObjects``)."""
+    areas: list[ZoomArea] = []
+    for t, x, y in track:
+        if areas:
+            since, cx, cy, width, depth = areas[-1]
+            margin_x, margin_y = width / 2 - abs(x - cx), depth / 2 - abs(y - cy)
+            border = margin_x < settings.border * width or margin_y < settings.border * depth
+            if not border and t - since < settings.timeout:
+                continue
+        areas.append((t, x, y, settings.width, settings.depth))
+    return areas
 
 
 def choose_target(data: BagData, topics: ReportTopics, target: str | None) -> tuple[list[str], str]:

@@ -312,7 +312,8 @@ def test_topics_absent_from_the_bag_are_noted_and_others_drawn(tmp_path: Path) -
     page = parse(build_html(run_dir)[0])
     notes = " | ".join(page.notes)
     assert "No true trajectory: topic /sim/turtlebot/pose / /sim/turtlebot/true_pose" in notes
-    assert "No zoom-map areas: in the bag /nav/zoom 0 message(s), none usable" in notes
+    assert "No zoom-map areas recorded: in the bag /nav/zoom 0 message(s), none usable" in notes
+    assert "replayed" not in notes  # no configuration, no <ZoomMap>
     assert "No recognition results" in notes and "No camera images" in notes
     assert "Fig. 7.16" in {alt for alt, _ in page.images}
     assert dict(page.table("summary"))["Off-line validation"] == "passed (Agent1FetchCoop coherent)"
@@ -362,6 +363,9 @@ def test_the_configuration_named_by_a_node_process_statistics_gives_the_map(tmp_
     assert summary["System"] == "tiny" and summary["Configuration"] == str(run_dir.parent / "tiny.xml")
     assert "Fig. 7.16" in {alt for alt, _ in page.images}
     assert not [n for n in page.notes if "<Environment>" in n]
+    replayed = "The zoom-map areas drawn are replayed from the estimated trajectory with the configuration's "
+    replayed += "<ZoomMap> (4 × 4 m, re-centred within 10% of its border or after 10 s, §6.1.3)."
+    assert replayed in page.notes
 
 
 def test_a_configuration_that_does_not_load_or_is_gone_is_noted(tmp_path: Path) -> None:

@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from ckmconf.model.environment import ZoomMap
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import AgentReport, StateRow
 from runtime.missions.report_bag import find_bags, image_pixels, pose_xy, pose_yaw, sightings
 from runtime.missions.report_figures import image_png
 from runtime.missions.report_problems import collect
 from runtime.missions.report_thesis import TABLE_7_9, compare
+from runtime.missions.report_views import replay_zoom
 
 
 def test_pose_shapes_of_ckm_and_ros_messages() -> None:
@@ -93,3 +95,13 @@ def test_thesis_rows_match_our_states_per_visit() -> None:
     assert navigation.performance == pytest.approx((10 * 1.0 + 30 * 0.5) / 40)
     (going,) = compare(AgentReport("a", "M", None, 100.0, None, rows[:2]))
     assert going.times == (40.0,)  # the return visit never made is left out, not shown as 0 s
+
+
+def test_zoom_map_areas_are_replayed_with_the_border_and_timeout_triggers() -> None:
+    settings = ZoomMap(width=4.0, depth=2.0, border=0.1, timeout=10.0)
+    driving = [(t * 0.25, t * 0.25, 0.0) for t in range(17)]  # 1 m/s along x for 4 s
+    assert [a[:3] for a in replay_zoom(driving, settings)] == [(0.0, 0.0, 0.0), (1.75, 1.75, 0.0), (3.5, 3.5, 0.0)]
+    sideways = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.75), (2.0, 0.0, 0.85)]  # 0.2 m of the 2 m depth is the border
+    assert [a[0] for a in replay_zoom(sideways, settings)] == [0.0, 2.0]
+    standing = [(float(t), 5.0, 5.0) for t in range(25)]
+    assert replay_zoom(standing, settings) == [(t, 5.0, 5.0, 4.0, 2.0) for t in (0.0, 10.0, 20.0)]
