@@ -239,7 +239,8 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
             for message in BagSource(bag, topics=wanted).messages():
                 _take(data, topics, message.topic, message.time, message.payload, frames)
         except Exception as error:
-            data.errors.append(f"{_storage_files(bag)}: corrupt rosbag2 bag, reading stopped: {_first_line(error)}")
+            stopped = "reading the rosbag2 bag stopped (corrupt or undecodable)"
+            data.errors.append(f"{_storage_files(bag)}: {stopped}: {_first_line(error)}")
     data.frames = sorted((f for f in frames.values() if f.payload is not None), key=lambda f: (f.moment, f.topic))
     for track in data.poses.values():  # bags of several processes interleave: time order for lookups
         track.sort()
