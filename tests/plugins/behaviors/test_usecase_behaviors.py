@@ -127,14 +127,14 @@ def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -
     rig = Rig(lab, "APPR", {"target": {"x": 1.0, "y": 0.0}})
     rig.behavior.step()
     arm, move = rig.last("arm_goal"), rig.last("move")
-    assert arm["pose"] == "pre_grasp" and move["x"] == pytest.approx(1.0 - 0.22)
+    assert arm["pose"] == "pre_grasp" and move["x"] == pytest.approx(1.0 - 0.28)
     rig.services["base"].outputs["move_status"] = {"id": move["id"] + 100, "state": "done"}
     assert not rig.behavior.step().done  # a stale status of another goal
     rig.services["base"].outputs["move_status"] = {
         "id": move["id"],
         "state": "moving",
-        "total": 0.78,
-        "remaining": 0.39,
+        "total": 0.72,
+        "remaining": 0.36,
     }
     assert rig.behavior.step().progress == pytest.approx(0.4)
     rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "done"}
@@ -192,7 +192,7 @@ def test_approach_places_a_map_target_relative_to_the_robot(lab: System) -> None
     rig.inputs["pose"] = {"pose": {"x": 2.0, "y": 2.0, "yaw": math.pi / 2}}  # facing +y, 1 m short of it
     rig.behavior.step()
     move = rig.last("move")
-    assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.22, 0.0), abs=1e-6)
+    assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.28, 0.0), abs=1e-6)
     assert move["yaw"] == pytest.approx(0.0, abs=1e-6)
 
 
