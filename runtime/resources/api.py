@@ -235,6 +235,12 @@ def parse_request(service: Service, message: Any) -> tuple[Request | None, list[
     return Request(str(op), str(client), int(request_id), parameters, requirements), []
 
 
+def request_id(message: Any) -> int | None:
+    """The id of a refused request, when it has a usable one (so its client gets the refusal)."""
+    value = message.get("id") if isinstance(message, Mapping) else None
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
 def preferred_scenario(service: Service, parameters: Mapping[str, Any]) -> str | None:
     """The scenario an enum parameter names when its values are scenario names (e.g. ``resolution``)."""
     names = {s.name for s in service.scenarios}

@@ -1,11 +1,7 @@
 """A Smart Resource at run time (thesis §3.2, §4.2–4.3): SPT streams, service instances, the service API.
 
-Streams. Every profile tree starts at an acquisition plugin (its root). The profiles that share
-a root form a *stream*: one Topology (the plugins of those trees), one triple buffer (§3.2.3)
-whose acquisition takes the newest value of the stream's input — the first Input topic of its
-services, or a ``source`` callable given by the caller (a camera driver, a benchmark) — and
-whose processing runs the profiles every instance of the stream has selected, so frames are
-grabbed once for all clients (§3.2.2).
+Streams (:mod:`runtime.resources.stream`). The profiles that share an acquisition plugin form a
+stream: one Topology, one triple buffer (§3.2.3), frames grabbed once for all clients (§3.2.2).
 
 Instances. Each service with scenarios runs one :class:`Instance` per client: its own TCM picks
 the instance's scenario, hence the profile it selects in the stream's topology. With
@@ -39,7 +35,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import psutil
@@ -49,82 +44,16 @@ from ckmconf.model.resources import TCM_PERIOD, Service, SmartResource
 
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry
-from . import codec
+from . import api
 from .api import DIRECTORY_TOPIC, Request, describe, parse_request, preferred_scenario, topics, typed_default
-from .buffers import Supplied, TripleBuffer
 from .instance import Instance
 from .selection import SelectorFactory
-from .spt import Frame, Topology
+from .spt import Topology
+from .stream import Source, Stream, newest_of
 from .tcm import TaskConfiguringModule
 
 LOG = logging.getLogger("ckm.resources")
 DEFAULT_FRAME_PERIOD = 1 / 30
-Source = Callable[[], Any]
-
-
-@dataclass
-class _Input:
-    seq: int
-    stamp: float  # acquisition time, wall clock
-    data: Any
-
-
-class Stream:
-    """The profiles rooted at one acquisition plugin: a Topology, a triple buffer and its instances."""
-
-    def __init__(self, root: str, topology: Topology, period: float, supply: float, source: Source) -> None:
-        self.root, self.topology, self.period, self.source = root, topology, period, source
-        self.instances: dict[str, Instance] = {}
-        self.lock = threading.Lock()
-        self._seq = 0
-        self._last_processed = -1
-        self.busy_cpu = 0.0
-        self.errors = 0
-        self.buffer: TripleBuffer[_Input, tuple[_Input, Frame, float] | None] = TripleBuffer(
-            self._acquire,
-            self._process,
-            self._supply,
-            acquire_period=period,
-            supply_period=supply,
-            repeat=False,
-            name=f"stream-{root}",
-        )
-
-    def statistics(self) -> dict[str, Any]:
-        """Frames processed, frames whose processing raised, frames the triple buffer dropped."""
-        return {"frames": self.topology.frames, "errors": self.errors, "dropped": self.buffer.stats().dropped}
-
-    def _acquire(self, reuse: _Input | None) -> _Input:
-        data = self.source()
-        if data is not None:
-            self._seq += 1
-        return _Input(self._seq if data is not None else -1, time.time(), data)
-
-    def _process(self, item: _Input) -> tuple[_Input, Frame, float] | None:
-        if item.data is None or item.seq == self._last_processed:
-            return None
-        self._last_processed = item.seq
-        start, began = time.thread_time(), time.perf_counter()
-        try:
-            frame = self.topology.run(item.data, item.stamp)
-            return item, frame, time.perf_counter() - began
-        except Exception:
-            self.errors += 1
-            raise
-        finally:
-            self.busy_cpu += time.thread_time() - start
-
-    def _supply(self, supplied: Supplied[tuple[_Input, Frame, float] | None]) -> None:
-        if supplied.value is None:
-            return
-        item, frame, latency = supplied.value
-        with self.lock:
-            instances = dict(self.instances)
-        now = time.time()
-        for key, value in frame.outputs.items():
-            instance = instances.get(key)
-            if instance is not None:
-                instance.deliver(value, item.stamp, now, latency)
 
 
 class SmartResourceRuntime:
@@ -203,9 +132,7 @@ class SmartResourceRuntime:
     def _source_for(self, root: str, services: list[Service]) -> Source:
         """The stream's acquisition: a given source, or the newest sample of its input topics.
 
-        One input: its newest value. Several (a fusion service): ``{input name: newest value or
-        None}``. Either way None — nothing to process — until a sample arrives that the stream has
-        not taken yet, so a frame is never processed twice. Values are decoded with the codec.
+        See :func:`runtime.resources.stream.newest_of` for what the input topics give.
         """
         source = self._sources.get(root)
         if source is not None:
@@ -220,19 +147,7 @@ class SmartResourceRuntime:
             for name, topic in inputs.items()
         }
         self._inputs.update({f"{root}/{name}": sub for name, sub in subscriptions.items()})
-        taken: dict[str, tuple[int, int]] = {}
-
-        def latest() -> Any:
-            samples = {name: sub.latest() for name, sub in subscriptions.items()}
-            fresh = {n: (s.source, s.seq) for n, s in samples.items() if s is not None}
-            if not fresh or fresh == taken:
-                return None
-            taken.clear()
-            taken.update(fresh)
-            values = {n: None if s is None else codec.decode(s.value) for n, s in samples.items()}
-            return next(iter(values.values())) if len(values) == 1 else values
-
-        return latest
+        return newest_of(subscriptions)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -425,7 +340,7 @@ class SmartResourceRuntime:
             "service": service.name,
             "client": client if isinstance(client, str) else None,
             "op": message.get("op") if isinstance(message, Mapping) else None,
-            "id": request.request_id if request is not None else _request_id(message),
+            "id": request.request_id if request is not None else api.request_id(message),
             "accepted": not errors,
             "errors": errors,
         }
@@ -484,8 +399,3 @@ class SmartResourceRuntime:
             if self._stop.wait(self.announce_period):
                 return
 
-
-def _request_id(message: Any) -> int | None:
-    """The id of a refused request, when it has a usable one (so its client gets the refusal)."""
-    value = message.get("id") if isinstance(message, Mapping) else None
-    return value if isinstance(value, int) and not isinstance(value, bool) else None
