@@ -1,20 +1,7 @@
-"""Delegation of an SPT processing plugin to an idle node (§3.1.2.5–6, "code delegation").
+"""Delegation of an SPT processing plugin to an idle node (§3.1.2.5–6, "code delegation"): the giver.
 
-What moves is data, never code: the plugin's registered kind, its ``<Plugin>`` record as plain
-data (name, kind, params) and its state (``ProcessingPlugin.state()``), with numpy arrays encoded
-by ``codec`` — never pickles. The receiving node must have the kind registered, or it refuses.
-
-Protocol (every message a msgpack-able dict with an ``op``; ``id`` names one delegation):
-
-- OFFER ``{op, id, from, reply, plugin: {name, kind, params: [[name, value]…]}, state}`` giver →
-  ``/ckm/plugin-delegation/TAKER``. The host builds the plugin, ``setup()``s it and restores the
-  offered state (so a state it cannot take is refused now, not mid-stream).
-- READY ``{op, id}`` or REFUSE ``{op, id, reason}`` host → ``reply`` (a topic of the giver's).
-- GO ``{op, id, seq, frame, stamp, resource, data, state}``: the first call after READY; the host
-  restores ``state`` (the giver's state after its last local call), then processes like PROCESS.
-- PROCESS ``{op, id, seq, frame, stamp, resource, data}`` → RESULT ``{op, id, seq, result, state}``
-  or ERROR ``{op, id, seq, reason}``.
-- RELEASE ``{op, id}`` → RELEASED ``{op, id, state}``: the host stops and drops the plugin.
+The messages are :mod:`runtime.resources.delegation_protocol`; the taker that runs a delegated
+plugin is :class:`runtime.resources.plugin_host.PluginHost` (both re-exported here).
 
 Atomic handover. ``DelegatedPlugin`` stands in for the plugin in the Topology and serialises its
 calls and its switches on one lock, so each ``process()`` call runs on exactly one side and a
@@ -36,291 +23,43 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import queue
 import secrets
 import threading
 import time
-from collections import Counter, deque
 from collections.abc import Callable, Hashable, Mapping
-from dataclasses import dataclass, field
 from typing import Any
 
-from ckmconf.errors import ConfigError
-from ckmconf.model import Param
-from ckmconf.model.resources import Plugin
-
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
-from ..registry import Registry, default_registry
 from . import codec
+from .delegation_protocol import (
+    MAX_NAME,
+    PREFIX,
+    BadMessage,
+    DelegationError,
+    DelegationEvent,
+    DelegationRefused,
+    channel,
+    describe,
+    get_field,
+    plugin_record,
+)
+from .plugin_host import PluginHost
 from .spt import Context, ProcessingPlugin, Topology
 
 LOG = logging.getLogger("ckm.plugin-delegation")
-PREFIX = "/ckm/plugin-delegation/"
-MAX_NAME = 256
-
-
-def channel(node: str) -> TopicQoS:
-    """The topic a node's PluginHost listens on."""
-    return TopicQoS(f"{PREFIX}{node}", "plugin-delegation")
-
-
-class DelegationError(RuntimeError):
-    """A delegation that could not happen; the plugin keeps running locally."""
-
-
-class DelegationRefused(DelegationError):
-    """The taker refused the plugin (unknown kind, bad params, failed setup…)."""
-
-
-@dataclass(frozen=True)
-class DelegationEvent:
-    """delegated, delegation-refused, delegation-timeout, delegation-fallback (an alarm), recalled."""
-
-    kind: str
-    plugin: str
-    peer: str
-    reason: str = ""
-    time: float = field(default_factory=time.time)
-
-
-class BadMessage(ValueError):
-    """A delegation message that is not what the protocol says."""
-
-
-def _get(message: Mapping[str, Any], key: str, kind: type | tuple[type, ...] = object) -> Any:
-    """``message[key]`` checked against ``kind`` (a bool is not a number here)."""
-    if key not in message:
-        raise BadMessage(f"field {key!r} is missing")
-    value = message[key]
-    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not object):
-        raise BadMessage(f"field {key!r} has type {type(value).__name__}")
-    if isinstance(value, str) and len(value) > MAX_NAME:
-        raise BadMessage(f"field {key!r} is longer than {MAX_NAME} characters")
-    return value
-
-
-def describe(record: Plugin) -> dict[str, Any]:
-    """A Plugin record as plain data."""
-    return {"name": record.name, "kind": record.kind, "params": [[p.name, p.value] for p in record.params]}
-
-
-def plugin_record(spec: Any) -> Plugin:
-    """The Plugin record a description stands for; BadMessage if it is not one."""
-    if not isinstance(spec, dict):
-        raise BadMessage("field 'plugin' must be a dict")
-    params = _get(spec, "params", list)
-    if len(params) > 1000 or not all(
-        isinstance(p, list) and len(p) == 2 and all(isinstance(s, str) and len(s) <= 4096 for s in p) for p in params
-    ):
-        raise BadMessage("field 'params' must be a list of [name, value] strings")
-    return Plugin(
-        name=_get(spec, "name", str),
-        kind=_get(spec, "kind", str),
-        params=tuple(Param(name=n, value=v) for n, v in params),
-    )
-
-
-# ---------------------------------------------------------------------- the taker
-
-
-@dataclass
-class _Hosted:
-    plugin: ProcessingPlugin
-    giver: str
-    reply: Publisher
-    started: bool = False
-
-
-class PluginHost:
-    """The taker side: runs processing plugins delegated by other nodes, one worker thread.
-
-    Requests are queued by the transport's thread and served in order by the worker, so a slow
-    plugin never stalls the network (heartbeats, other topics). A giver has one request in flight
-    per plugin (plus a RELEASE), so ``queue_size`` 32 serves ``max_plugins`` 16; when it is full a
-    request is dropped and its giver falls back after its timeout. Bad messages are logged, kept in
-    ``rejected``, answered with REFUSE/ERROR when they name a reply topic, and never raise.
-    """
-
-    def __init__(
-        self,
-        transport: Transport,
-        node: str,
-        registry: Registry | None = None,
-        *,
-        max_plugins: int = 16,
-        max_bytes: int = codec.MAX_BYTES,
-        queue_size: int = 32,
-    ) -> None:
-        self.transport = transport
-        self.node = node
-        self.registry = registry or default_registry()
-        self.max_plugins = max_plugins
-        self.max_bytes = max_bytes
-        self.processed: Counter[str] = Counter()  # calls served, by plugin name
-        self.rejected: deque[str] = deque(maxlen=100)  # why messages were refused or ignored
-        self._hosted: dict[str, _Hosted] = {}
-        self._queue: queue.Queue[dict[str, Any] | None] = queue.Queue(queue_size)
-        self._subscription: Subscription | None = None
-        self._worker: threading.Thread | None = None
-
-    def start(self) -> None:
-        self._worker = threading.Thread(target=self._serve, name=f"ckm-plugin-host-{self.node}", daemon=True)
-        self._worker.start()
-        self._subscription = self.transport.subscribe(channel(self.node), self._on_message)
-
-    def stop(self, timeout: float = 2.0) -> None:
-        """Stop listening, finish the queued request, stop every hosted plugin."""
-        if self._subscription is not None:
-            self._subscription.close()
-            self._subscription = None
-        if self._worker is not None:
-            with contextlib.suppress(queue.Full):  # a worker stuck in a plugin: it is a daemon
-                self._queue.put(None, timeout=timeout)
-            self._worker.join(timeout)
-            self._worker = None
-        for hosted in self._hosted.values():
-            self._stop_plugin(hosted)
-        self._hosted.clear()
-
-    def __enter__(self) -> PluginHost:
-        self.start()
-        return self
-
-    def __exit__(self, *_: object) -> None:
-        self.stop()
-
-    @property
-    def hosted(self) -> list[str]:
-        """Names of the plugins run for other nodes."""
-        return [h.plugin.name for h in list(self._hosted.values())]
-
-    # ------------------------------------------------------------------ messages
-
-    def _on_message(self, sample: Sample) -> None:
-        message = sample.value
-        if not isinstance(message, dict) or not isinstance(message.get("op"), str):
-            self._reject(f"not a delegation message: {type(message).__name__}")
-            return
-        try:
-            self._queue.put_nowait(message)
-        except queue.Full:  # the giver times out and falls back: better than unbounded memory
-            self._reject(f"queue full, {message['op']!r} dropped")
-
-    def _serve(self) -> None:
-        while (message := self._queue.get()) is not None:
-            try:
-                self._handle(message)
-            except Exception as exc:  # a hostile request must never take the host down
-                self._reject(f"{str(message.get('op'))[:40]!r}: {exc}")
-
-    def _handle(self, message: dict[str, Any]) -> None:
-        op = message["op"]
-        if op == "offer":
-            self._offer(message)
-            return
-        if op not in ("go", "process", "release"):
-            raise BadMessage(f"unknown op {op[:40]!r}")
-        ident = _get(message, "id", str)
-        hosted = self._hosted.get(ident)
-        if hosted is None:
-            raise BadMessage(f"no delegation {ident!r} on node {self.node!r}")
-        if op == "release":
-            del self._hosted[ident]
-            state = self._stop_plugin(hosted)
-            hosted.reply.publish({"op": "released", "id": ident, "state": state})
-        else:
-            self._process(ident, hosted, message)
-
-    def _offer(self, message: dict[str, Any]) -> None:
-        ident = _get(message, "id", str)
-        reply = _get(message, "reply", str)
-        if not reply.startswith(PREFIX):
-            raise BadMessage(f"reply topic {reply!r} is not under {PREFIX}")
-        publisher = self.transport.publisher(TopicQoS(reply, "plugin-delegation"))
-        try:
-            giver = _get(message, "from", str)
-            if ident in self._hosted:
-                raise BadMessage(f"delegation {ident!r} already exists")
-            if len(self._hosted) >= self.max_plugins:
-                raise BadMessage(f"node {self.node!r} already runs {self.max_plugins} delegated plugins")
-            plugin = self._build(plugin_record(message.get("plugin")), _get(message, "state", dict))
-        except Exception as exc:
-            self._reject(f"offer {ident!r} refused: {exc}")
-            publisher.publish({"op": "refuse", "id": ident, "reason": str(exc)})
-            return
-        self._hosted[ident] = _Hosted(plugin, giver, publisher)
-        # The giver subscribed to ``reply`` before offering; on a link that is already known.
-        self.transport.wait_for_subscribers(reply, 1, 1.0)
-        publisher.publish({"op": "ready", "id": ident})
-
-    def _build(self, record: Plugin, state: Any) -> ProcessingPlugin:
-        try:
-            cls = self.registry.resolve("plugin", record.kind, record)
-        except ConfigError as exc:
-            raise BadMessage(f"node {self.node!r} cannot run plugin {record.name!r}: {exc.message}") from None
-        if not isinstance(cls, type) or not issubclass(cls, ProcessingPlugin):
-            raise BadMessage(f"plugin kind {record.kind!r} is not a ProcessingPlugin on node {self.node!r}")
-        plugin = cls(record)
-        try:
-            plugin.setup()
-        except Exception as exc:
-            raise BadMessage(f"setup of plugin {record.name!r} failed: {type(exc).__name__}: {exc}") from None
-        try:
-            plugin.restore(self._state(state))
-        except Exception as exc:
-            self._stop_plugin(plugin)
-            raise BadMessage(f"plugin {record.name!r} cannot take the offered state: {exc}") from None
-        return plugin
-
-    def _process(self, ident: str, hosted: _Hosted, message: dict[str, Any]) -> None:
-        seq = message.get("seq")
-        try:
-            seq = _get(message, "seq", int)
-            context = Context(
-                _get(message, "frame", int), float(_get(message, "stamp", (int, float))), _get(message, "resource", str)
-            )
-            data = self._decode(_get(message, "data"))
-            plugin = hosted.plugin
-            if message["op"] == "go":
-                plugin.restore(self._state(_get(message, "state", dict)))
-                hosted.started = True
-            elif not hosted.started:
-                raise BadMessage("PROCESS before GO")
-            result = codec.encode(plugin.process(data, context), max_bytes=self.max_bytes)
-            state = codec.encode(plugin.state(), max_bytes=self.max_bytes)
-        except Exception as exc:
-            self._reject(f"{message['op']} {ident!r}: {exc}")
-            seq = seq if isinstance(seq, int) else None
-            hosted.reply.publish({"op": "error", "id": ident, "seq": seq, "reason": f"{type(exc).__name__}: {exc}"})
-            return
-        self.processed[plugin.name] += 1  # counted before the answer: the giver may read it right after
-        hosted.reply.publish({"op": "result", "id": ident, "seq": seq, "result": result, "state": state})
-
-    def _decode(self, value: Any) -> Any:
-        return codec.decode(value, max_bytes=self.max_bytes)
-
-    def _state(self, value: Any) -> dict[str, Any]:
-        state = self._decode(value)
-        if not isinstance(state, dict):
-            raise BadMessage(f"a state must be a dict, got {type(state).__name__}")
-        return state
-
-    def _stop_plugin(self, hosted: _Hosted | ProcessingPlugin) -> Any:
-        plugin = hosted.plugin if isinstance(hosted, _Hosted) else hosted
-        try:
-            state = codec.encode(plugin.state(), max_bytes=self.max_bytes)
-            plugin.stop()
-        except Exception as exc:
-            self._reject(f"stopping plugin {plugin.name!r}: {exc}")
-            return None
-        return state
-
-    def _reject(self, reason: str) -> None:
-        LOG.warning("plugin host %s: %s", self.node, reason)
-        self.rejected.append(reason)
-
-
-# ---------------------------------------------------------------------- the giver
+__all__ = [
+    "MAX_NAME",
+    "PREFIX",
+    "BadMessage",
+    "DelegatedPlugin",
+    "DelegationError",
+    "DelegationEvent",
+    "DelegationRefused",
+    "PluginHost",
+    "channel",
+    "describe",
+    "plugin_record",
+]
 
 
 class _Mailbox:
@@ -534,8 +273,8 @@ class DelegatedPlugin(ProcessingPlugin):
         if answer["op"] != "result":
             return self._fallback(data, context, f"the taker failed: {answer.get('reason', 'no reason given')}")
         try:
-            result = codec.decode(_get(answer, "result"))
-            if not isinstance(codec.decode(_get(answer, "state")), dict):  # a fallback must be able to restore it
+            result = codec.decode(get_field(answer, "result"))
+            if not isinstance(codec.decode(get_field(answer, "state")), dict):  # a fallback must be able to restore it
                 raise BadMessage("the state is not a dict")
         except ValueError as exc:
             return self._fallback(data, context, f"bad answer: {exc}")
