@@ -10,7 +10,7 @@ flattened into the channel's tuple):
 - ``blocking``: a wheel-encoder client reading as fast as it can while another client asks for
   VGA RGB frames back to back: the wheel read's median, 99th percentile and worst time, with and
   without the renders; with the render worker (the default, D103) and with the renders made in the
-  server's physics thread (``--no-render-worker``), where a render delays every other request.
+  server's physics thread (``--render-workers 0``), where a render delays every other request.
 """
 
 from __future__ import annotations
@@ -153,7 +153,7 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
             trips = _round_trips(server, specs)
         blocking = _blocking(server, specs, args.seconds)
     with tempfile.TemporaryDirectory() as folder, ServerProcess(LAB, Path(folder), NODES,
-                                                                options=["--no-render-worker"]) as server:
+                                                                options=["--render-workers", "0"]) as server:
         in_thread = _blocking(server, specs, args.seconds)
     return {"round_trip_ms": trips, "blocking": blocking, "blocking_without_worker": in_thread}
 

@@ -11,8 +11,8 @@ One thread, the one that built the world, owns the pybullet client and answers e
 turn (it waits on all connections at once and serves one request of each ready one per round), so
 the physics state is never touched concurrently; a thread of its own only accepts connections
 (the HMAC handshake). Camera reads are rendered by a render worker process on a mirror of the
-world (:mod:`plugins.sim.render`, D103) while this thread goes on serving; ``--no-render-worker``
-renders them here. Before each read or write the world advances, in its fixed steps, to the
+world (:mod:`plugins.sim.render`, D103) while this thread goes on serving; ``--render-workers N``
+sets how many (default 2), 0 renders them here. Before each read or write the world advances, in its fixed steps, to the
 server's clock (real time, ``time.monotonic``; started by the first request), as D88 does in
 process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`Spec`) → ``handle``;
 ``read``/``write``/``close`` (``handle``; ``value`` to write); ``state`` (time, steps, robots' true
@@ -32,6 +32,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from multiprocessing.connection import Connection, Listener, Pipe, answer_challenge, deliver_challenge, wait
 from pathlib import Path
 from types import FrameType
@@ -52,6 +53,7 @@ from .serving import LARGE, Client, Flight, frame_reply
 
 LOG = logging.getLogger("ckm.sim.server")
 HOST = "127.0.0.1"
+RENDER_WORKERS = 2  # the use case's two camera partitions rendered in parallel before the server
 MAX_REQUEST = 1 << 20  # bytes: a request is a small JSON object; anything larger is malformed
 
 
@@ -59,12 +61,12 @@ class WorldServer:
     """Serves ``sim``'s devices to authenticated clients (see the module docstring)."""
 
     def __init__(
-        self, sim: SimWorld, authkey: bytes, host: str = HOST, port: int = 0, renderer: RenderWorker | None = None
+        self, sim: SimWorld, authkey: bytes, host: str = HOST, port: int = 0, renderers: Sequence[RenderWorker] = ()
     ) -> None:
         self.sim = sim
-        self.renderer = renderer
-        self._cameras: list[tuple[Client, ChannelDevice]] = []  # camera reads waiting for the worker
-        self._flight: Flight | None = None
+        self.renderers = list(renderers)
+        self._cameras: list[tuple[Client, ChannelDevice]] = []  # camera reads waiting for a worker
+        self._flights: dict[RenderWorker, Flight] = {}
         self._unmirrored: set[tuple[int, int, float, int, int]] = set()  # renders the worker could not make
         self.authkey = authkey
         self.listener = Listener((host, port))  # authenticated per connection, in a thread of its own
@@ -107,15 +109,15 @@ class WorldServer:
         """Answer requests until ``stop`` is set (call from the thread that built the world)."""
         threading.Thread(target=self._accept, name="ckm-sim-accept", daemon=True).start()
         while not stop.is_set():
-            rendering = [self.renderer.conn] if self.renderer is not None and self.renderer.busy else []
+            rendering = {worker.conn: worker for worker in self.renderers if worker.busy}
             ready = wait([self._wake_r, *rendering, *(c.conn for c in self.clients)], timeout=0.2)
             batch: list[tuple[Client, bytes]] = []
             for conn in ready:
                 if conn is self._wake_r:
                     self._admit()
                     continue
-                if rendering and conn is rendering[0]:
-                    self._landed()
+                if conn in rendering:
+                    self._landed(rendering[conn])
                     continue
                 client = next(c for c in self.clients if c.conn is conn)
                 data = self._receive(client)
@@ -202,7 +204,7 @@ class WorldServer:
             if op == "close":
                 del client.devices[handle]
                 return {}
-            if op == "read" and self.renderer is not None and device.camera not in (None, *self._unmirrored):
+            if op == "read" and self.renderers and device.camera not in (None, *self._unmirrored):
                 self._cameras.append((client, device))
                 return None
             with self.sim.lock:
@@ -225,9 +227,11 @@ class WorldServer:
     # ------------------------------------------------------------------ renders (D103)
 
     def _dispatch(self) -> None:
-        """Hand the next waiting camera read to the idle render worker (with the others asking for
+        """Hand the waiting camera reads to the idle render workers (each with the others asking for
         the same frame), at the world's current step."""
-        while self.renderer is not None and not self.renderer.busy and self._cameras:
+        idle = [worker for worker in self.renderers if not worker.busy]
+        while idle and self._cameras:
+            worker = idle.pop(0)
             client, device = self._cameras.pop(0)
             key = device.camera
             assert key is not None
@@ -238,26 +242,23 @@ class WorldServer:
                 flight.waiters += [(c, d) for c, d in self._cameras if d.camera == key]
                 self._cameras = [(c, d) for c, d in self._cameras if d.camera != key]
                 try:
-                    self.renderer.submit(world, job_of(device))
+                    worker.submit(world, job_of(device))
                 except (OSError, ValueError) as exc:
-                    self._lose_renderer(f"{type(exc).__name__}: {exc}")
-                    self._flight = flight
+                    self._lose(worker, f"{type(exc).__name__}: {exc}")
                     self._finish(flight, None)
-                    return
-            self._flight = flight
+                    continue
+            self._flights[worker] = flight
 
-    def _landed(self) -> None:
-        assert self.renderer is not None and self._flight is not None
-        flight, result = self._flight, self.renderer.result()
+    def _landed(self, worker: RenderWorker) -> None:
+        flight, result = self._flights.pop(worker), worker.result()
         if isinstance(result, str):
             LOG.warning("render worker: %s; this camera renders in the physics thread", result)
             self._unmirrored.add(flight.key)
-            if not self.renderer.alive():
-                self._lose_renderer(result)
+            if not worker.alive():
+                self._lose(worker, result)
         self._finish(flight, result if isinstance(result, Frame) else None)
 
     def _finish(self, flight: Flight, frame: Frame | None) -> None:
-        self._flight = None
         client, device = flight.waiters[0]
         try:
             with self.sim.lock:
@@ -273,13 +274,14 @@ class WorldServer:
             for client, device in flight.waiters:
                 self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
 
-    def _lose_renderer(self, why: str) -> None:
-        LOG.error("render worker lost (%s): cameras render in the physics thread from now on", why)
-        if self.renderer is not None:
-            self.renderer.close()
-        self.renderer = None
+    def _lose(self, worker: RenderWorker, why: str) -> None:
+        self.renderers.remove(worker)
+        worker.close()
+        LOG.error("render worker lost (%s); %d left", why, len(self.renderers))
+        if self.renderers:
+            return
         waiting, self._cameras = self._cameras, []
-        for client, device in waiting:  # served here, in order
+        for client, device in waiting:  # none left: served here, in order
             try:
                 with self.sim.lock:
                     self.sim.sync()
@@ -307,8 +309,8 @@ class WorldServer:
 
     def close(self) -> None:
         self.listener.close()
-        if self.renderer is not None:
-            self.renderer.close()
+        for worker in self.renderers:
+            worker.close()
         for client in list(self.clients):
             self._drop(client, "server stopping")
 
@@ -331,7 +333,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ready", type=Path, help="write the address here (JSON) once listening")
     parser.add_argument("--parent", type=int, help="stop when this process is no longer the parent")
     parser.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: any free one)")
-    parser.add_argument("--no-render-worker", action="store_true", help="render cameras in the physics thread")
+    parser.add_argument("--render-workers", type=int, default=RENDER_WORKERS,
+                        help=f"render worker processes (default {RENDER_WORKERS}; 0: render in the physics thread)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
@@ -359,12 +362,12 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
     started = time.perf_counter()
-    renderer = None if args.no_render_worker else RenderWorker(plan)  # builds its mirror meanwhile
+    workers = [RenderWorker(plan) for _ in range(max(0, args.render_workers))]  # build their mirrors meanwhile
     sim = plan.build()
-    if renderer is not None and not renderer.await_ready():
-        LOG.error("the render worker did not start: cameras render in the physics thread")
-        renderer = None
-    server = WorldServer(sim, key, port=args.port, renderer=renderer)
+    renderers = [worker for worker in workers if worker.await_ready()]
+    if len(renderers) < len(workers):
+        LOG.error("%d of %d render workers did not start", len(workers) - len(renderers), len(workers))
+    server = WorldServer(sim, key, port=args.port, renderers=renderers)
     LOG.info("world %s with %s built in %.2f s; listening on %s", plan.world, ", ".join(plan.bodies),
              time.perf_counter() - started, server.address)
     if args.parent is not None:
