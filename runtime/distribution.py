@@ -22,7 +22,6 @@ import sys
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
@@ -43,9 +42,10 @@ from .distribution_protocol import (
     config_topic,
     parse_push,
 )
+from .distribution_staging import ScopedTransport, build_node, describe_error
 from .kernel.node import NodeRuntime
 from .network import open_transport, read_group_key
-from .network.api import GroupKeyError, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
+from .network.api import GroupKeyError, Sample, Subscription, TopicQoS, Transport
 from .network.multipeer import NetworkError
 from .registry import Registry
 from .runrecord import EXIT_NETWORK, write_run
@@ -66,56 +66,6 @@ __all__ = [  # the protocol's names stay importable from here, where they were f
     "parse_push",
     "run_agent",
 ]
-
-
-class ScopedTransport(Transport):
-    """One runtime's view of the agent's transport: its subscriptions stay muted until the
-    runtime takes over (a runtime set up beside the running one must not drive anything) and
-    are all closed when it goes."""
-
-    def __init__(self, transport: Transport) -> None:
-        self.inner = transport
-        self.open = threading.Event()
-        self._subscriptions: list[Subscription] = []
-
-    @property
-    def guid(self) -> int:  # type: ignore[override]
-        return self.inner.guid
-
-    def setup(self) -> None: ...  # the agent owns the real transport's lifecycle
-
-    def start(self) -> None:
-        self.open.set()
-
-    def stop(self) -> None:
-        self.open.clear()
-        for subscription in self._subscriptions:
-            subscription.close()
-        self._subscriptions.clear()
-
-    def publisher(self, qos: TopicQoS) -> Publisher:
-        return self.inner.publisher(qos)
-
-    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
-        gated = None
-        if callback is not None:
-
-            def gated(sample: Sample, callback: Callable[[Sample], None] = callback) -> None:
-                if self.open.is_set():
-                    callback(sample)
-
-        subscription = self.inner.subscribe(qos, gated)
-        self._subscriptions.append(subscription)
-        return subscription
-
-    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
-        self.inner.on_event(callback)
-
-    def peers(self) -> list[int]:
-        return self.inner.peers()
-
-    def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
-        return self.inner.wait_for_subscribers(topic, count, timeout)
 
 
 @dataclass
@@ -231,7 +181,7 @@ class ConfigAgent:
             except Exception as exc:  # a bug must not end the agent: answer and go on
                 LOG.exception("agent %s: a push failed", self.name)
                 ident = message.get("id") if isinstance(message, dict) else None
-                ack = self._answer(ident, False, "", None, [f"agent error: {_describe(exc, self.run_dir)}"])
+                ack = self._answer(ident, False, "", None, [f"agent error: {describe_error(exc, self.run_dir)}"])
             self._acker.publish(ack)
 
     # ------------------------------------------------------------------ applying a push
@@ -282,7 +232,7 @@ class ConfigAgent:
     def _install(self, push: Push) -> dict[str, Any]:
         directory = self._write(push)
         try:
-            runtime, scoped, system = self._build(push, directory)
+            runtime, scoped, system = build_node(push, directory, self.transport, self.registry)
         except Refused:
             shutil.rmtree(directory, ignore_errors=True)  # the errors are in the answer and the log
             raise
@@ -296,7 +246,7 @@ class ConfigAgent:
         except Exception as exc:
             runtime.stop()
             scoped.stop()
-            errors = [f"{push.node} failed to start: {_describe(exc, directory)}"]
+            errors = [f"{push.node} failed to start: {describe_error(exc, directory)}"]
             with self._lock:
                 self.status, self.errors = "failed", errors
             LOG.exception("agent %s: node %s failed to start", self.name, push.node)
@@ -324,33 +274,6 @@ class ConfigAgent:
             raise Refused(f"cannot store the bundle: {exc}") from None
         return directory
 
-    def _build(self, push: Push, directory: Path) -> tuple[NodeRuntime, ScopedTransport, System]:
-        result = load(directory / push.main, strict=False)
-        root = directory.resolve()
-        outside = [f for f in result.files if not Path(f).resolve().is_relative_to(root)]
-        if outside:  # an include reached out of the bundle: say so, show nothing of it
-            raise Refused("an include leads out of the bundle; send every included file in it")
-        if result.errors or result.system is None:
-            raise Refused(*(_describe(e, directory) for e in result.errors))
-        system = result.system
-        node = next((n for n in system.nodes if n.name == push.node), None)
-        if node is None:
-            names = ", ".join(n.name for n in system.nodes) or "none"
-            raise Refused(f"{push.main}: no node {push.node!r} (nodes: {names})")
-        if node.partitions:
-            raise Refused(f"node {push.node!r} has partitions: run it with ckm-run --node, not through an agent")
-        scoped = ScopedTransport(self.transport)
-        runtime: NodeRuntime | None = None
-        try:
-            runtime = NodeRuntime(node, system, scoped, registry=self.registry)
-            runtime.setup()
-        except Exception as exc:  # any error, a plugin's included: the old node keeps running
-            if runtime is not None:
-                _discard(runtime)
-            scoped.stop()
-            raise Refused(_describe(exc, directory)) from None
-        return runtime, scoped, system
-
     def _retire(self, running: _Running) -> None:
         """Stop a running node, actuators safe, and record its run in its directory; never raises."""
         running.scoped.open.clear()
@@ -366,29 +289,6 @@ class ConfigAgent:
         except OSError:
             LOG.exception("agent %s: cannot record the run of %s", self.name, running.push.node)
         LOG.info("agent %s stopped node %s (%s)", self.name, running.push.node, running.push.hash[:12])
-
-
-def _discard(runtime: NodeRuntime) -> None:
-    """Undo a setup that never ran: close what it opened without driving any actuator."""
-    for resource in runtime.resources.values():
-        try:
-            resource.stop()
-        except Exception:
-            LOG.exception("could not stop Smart Resource %s", resource.resource.name)
-    for backend in runtime.backends.values():
-        try:
-            backend.stop()
-        except Exception:
-            LOG.exception("could not close a backend of %s", runtime.node.name)
-
-
-def _describe(error: BaseException, directory: Path) -> str:
-    """One line per problem, file paths relative to the bundle."""
-    if isinstance(error, ConfigError):
-        name = os.path.relpath(error.file, directory) if os.path.isabs(error.file) else error.file
-        return f"{Path(name).as_posix()}:{error.line}:{error.column}: {error.xpath}: {error.message}"
-    text = str(error) or type(error).__name__
-    return text if isinstance(error, (ValueError, OSError)) else f"{type(error).__name__}: {text}"
 
 
 def run_agent(network_file: Path | None, name: str, run_dir: Path, duration: float | None = None) -> int:
