@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import signal
 import socket
 import sys
@@ -42,6 +43,7 @@ from typing import Any
 from ckmconf import ConfigError, load
 from ckmconf.model import Network, Node, Partition, System
 
+from . import simtime
 from .distribution import NAME, run_agent
 from .kernel.node import NodeRuntime
 from .kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor, enter_partition
@@ -78,6 +80,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--record-format", choices=RECORD_FORMATS, default="mcap", help="storage of the --record bag (default: mcap)"
     )
+    parser.add_argument(
+        "--time-scale", metavar="S", help="run every process on a clock S (0 < S <= 1) times the wall clock's "
+        "speed, as on a machine 1/S times faster (runtime.simtime; default: the wall clock)",
+    )
     return parser
 
 
@@ -90,6 +96,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("the following arguments are required: config")
     if args.name is not None:
         parser.error("--name goes with --await-config")
+    if args.time_scale is not None:
+        try:
+            scale = simtime.parse_scale(args.time_scale)
+        except ValueError as error:
+            parser.error(f"--time-scale: {error}")
+        if simtime.scale() != scale:  # every clock of the process (default arguments too) must be the scaled one:
+            os.environ.update(simtime.environment(scale))  # start again on it; partitions and the world inherit it
+            os.execv(sys.executable, [sys.executable, "-m", "runtime.cli", *(sys.argv[1:] if argv is None else argv)])
     try:
         system = load(args.config)
     except ConfigError as error:
