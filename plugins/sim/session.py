@@ -8,7 +8,8 @@ it listens, and puts its address and key in this process's environment, so every
 afterwards — here and in the partition processes, which inherit it — is its client. A thread
 watches the server: if it exits while the run lasts, ``failed`` is called with the reason (ckm-run
 stops the run and exits 5). At the end the server is stopped (SIGTERM, then SIGKILL) and the
-variables removed. Its log is RUN_DIR/sim-server.log, its address and pid RUN_DIR/sim-server.json.
+variables removed. Its log is RUN_DIR/sim-server.log, its address and pid RUN_DIR/sim-server.json
+(sim-server-NODE.log/json for a ``--node NODE`` run, as several may share a run directory).
 """
 
 from __future__ import annotations
@@ -34,8 +35,9 @@ from .plan import WorldPlan
 LOG = logging.getLogger("ckm.sim.session")
 START_TIMEOUT = 120.0  # seconds to build the world (the lab with textures: ~2 s quiet, far more loaded)
 STOP_TIMEOUT = 5.0
-READY = "sim-server.json"
-LOGFILE = "sim-server.log"
+STEM = "sim-server"
+READY = f"{STEM}.json"  # the files of a run of every node; a --node run's carry its nodes' names (D64)
+LOGFILE = f"{STEM}.log"
 
 
 class ServerProcess:
@@ -43,13 +45,14 @@ class ServerProcess:
 
     def __init__(
         self, config: Path, run_dir: Path, nodes: Sequence[str] = (), timeout: float = START_TIMEOUT,
-        options: Sequence[str] = (),
+        options: Sequence[str] = (), stem: str = STEM,
     ) -> None:
-        """``options``: more command-line options of the server (``--no-render-worker``)."""
+        """``options``: more command-line options of the server (``--render-workers N``); ``stem``
+        names its files in ``run_dir`` (STEM.json, STEM.log)."""
         run_dir.mkdir(parents=True, exist_ok=True)
         self.key = secrets.token_bytes(32)
-        self.ready = run_dir / READY
-        self.log = run_dir / LOGFILE
+        self.ready = run_dir / f"{stem}.json"
+        self.log = run_dir / f"{stem}.log"
         self.ready.unlink(missing_ok=True)
         command = [sys.executable, "-m", "plugins.sim.server", str(Path(config).resolve()),
                    "--ready", str(self.ready), "--parent", str(os.getpid())]
@@ -133,7 +136,10 @@ def world_session(
     if os.environ.get(ENV_ADDRESS) or WorldPlan.of(list(nodes)) is None:
         yield  # a server named already (or "off"), or no sim channel here: nothing to start
         return
-    server = ServerProcess(config, run_dir, [n.name for n in nodes])
+    names = [n.name for n in nodes]
+    every = names == [n.name for n in system.nodes]
+    # several `ckm-run --node` processes may share a run directory (D64): each its own files
+    server = ServerProcess(config, run_dir, names, stem=STEM if every else "-".join([STEM, *names]))
     LOG.info("world server %d listening on %s (log %s)", server.pid, server.address, server.log)
     ending = threading.Event()
     watcher = threading.Thread(target=_watch, args=(server, ending, failed), name="ckm-sim-watch", daemon=True)

@@ -303,3 +303,24 @@ def test_a_session_starts_nothing_when_a_server_is_named_or_nothing_is_simulated
     with world_session(system, config, tmp_path / "b", [bare], failures.append):
         assert ENV_ADDRESS not in os.environ
     assert not (tmp_path / "a" / READY).exists() and not (tmp_path / "b" / READY).exists() and not failures
+
+
+def test_a_node_run_session_names_its_files_and_cleans_up(
+    config: Path, tmp_path: Path, no_server: None
+) -> None:
+    system = ckmconf.load(config)
+    other = dataclasses.replace(system.nodes[0], name="other", channels=())
+    wider = dataclasses.replace(system, nodes=(*system.nodes, other))  # as if run with --node rover
+    failures: list[str] = []
+    run_dir = tmp_path / "run"
+    with world_session(wider, config, run_dir, system.nodes, failures.append):
+        ready = json.loads((run_dir / "sim-server-rover.json").read_text())  # a --node run's own files (D64)
+        assert os.environ[ENV_ADDRESS] == ready["address"] and ready["robots"] == ["rover", "turtlebot"]
+        host, _, port = ready["address"].rpartition(":")
+        link = Link((host, int(port), bytes.fromhex(os.environ[ENV_KEY])))
+        assert link.request({"op": "ping"})["time"] >= 0.0
+        link.close()
+    assert ENV_ADDRESS not in os.environ and ENV_KEY not in os.environ
+    assert not psutil.pid_exists(ready["pid"])  # stopped and reaped
+    assert not failures  # a server stopped at the end is no failure
+    assert not (run_dir / READY).exists()
