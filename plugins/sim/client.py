@@ -83,32 +83,50 @@ class Link:
             raise ConnectionError(f"{owner}: cannot reach the world server at {host}:{port}: {exc}") from None
         no_delay(self._conn)
 
-    def request(self, message: dict[str, Any]) -> dict[str, Any]:
-        """Send ``message``, return the reply; raise what an error reply says."""
-        return self.exchange(json.dumps(message).encode())
+    def request(self, message: dict[str, Any], *, answer: bool = True) -> dict[str, Any]:
+        """Send ``message``, return the reply; raise what an error reply says. ``answer=False``: a
+        silent write (``"reply": false``), whose error, if any, is raised by the next exchange."""
+        return self.exchange(json.dumps(message).encode(), answer=answer)
 
-    def exchange(self, data: bytes) -> dict[str, Any]:
+    def exchange(self, data: bytes, *, answer: bool = True) -> dict[str, Any]:
         """Send raw request bytes (tests send malformed ones), return the reply or raise its error."""
         host, port, _ = self.address
         with self._lock:
             if self._conn is None:
                 raise ConnectionError(f"{self.owner}: the link to the world server is closed")
             try:
+                late = self._late(self._conn)  # a silent write's error already here
                 self._conn.send_bytes(data)
-                if not self._conn.poll(self.timeout):
-                    raise TimeoutError(f"{self.owner}: the world server at {host}:{port} did not answer "
-                                       f"within {self.timeout:g} s")
-                reply = self._conn.recv()
+                reply: Any = {}
+                while answer:
+                    if not self._conn.poll(self.timeout):
+                        raise TimeoutError(f"{self.owner}: the world server at {host}:{port} did not answer "
+                                           f"within {self.timeout:g} s")
+                    reply = self._conn.recv()
+                    if not (isinstance(reply, dict) and reply.get("silent")):
+                        break
+                    late = late or reply  # an earlier silent write's error, arrived meanwhile
             except (EOFError, OSError) as exc:
                 if isinstance(exc, TimeoutError):
                     raise
                 raise ConnectionError(f"{self.owner}: the world server at {host}:{port} is gone "
                                       f"({type(exc).__name__}: {exc})") from None
-        if not isinstance(reply, dict):
-            raise ServerError(f"{self.owner}: the world server answered {type(reply).__name__}, not a reply")
-        if "error" in reply:
-            raise _ERRORS.get(str(reply.get("type")), ServerError)(str(reply["error"]))
-        return reply
+        for got in (late, reply):
+            if not isinstance(got, dict):
+                raise ServerError(f"{self.owner}: the world server answered {type(got).__name__}, not a reply")
+            if "error" in got:
+                raise _ERRORS.get(str(got.get("type")), ServerError)(str(got["error"]))
+        return dict(reply)
+
+    @staticmethod
+    def _late(conn: Connection) -> dict[str, Any]:
+        """The first error reply waiting unread (only silent writes' errors can be)."""
+        late: dict[str, Any] = {}
+        while conn.poll(0):
+            got = conn.recv()
+            if isinstance(got, dict) and "error" in got and not late:
+                late = got
+        return late
 
     def close(self) -> None:
         with self._lock:
@@ -133,7 +151,8 @@ class RemoteDevice:
         return value
 
     def write(self, raw: float) -> None:
-        self.link.request({"op": "write", "handle": self.handle, "value": raw})
+        # silent: an actuator's write waits for no round trip (its error comes with the next one)
+        self.link.request({"op": "write", "handle": self.handle, "value": raw, "reply": False}, answer=False)
 
     def close(self) -> None:
         # closing: a server already gone has nothing to release

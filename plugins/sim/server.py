@@ -15,7 +15,8 @@ world (:mod:`plugins.sim.render`, D103) while this thread goes on serving; ``--r
 sets how many (default 2), 0 renders them here. Before each read or write the world advances, in its fixed steps, to the
 server's clock (real time, ``time.monotonic``; started by the first request), as D88 does in
 process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`Spec`) → ``handle``;
-``read``/``write``/``close`` (``handle``; ``value`` to write); ``state`` (time, steps, robots' true
+``read``/``write``/``close`` (``handle``; ``value`` to write, ``"reply": false`` for a silent write,
+answered only if it fails); ``state`` (time, steps, robots' true
 planar poses); ``ping``. A bad request (malformed, unknown op, handle, body, joint, link) is
 answered ``{"error": …, "type": …}`` naming the channel; it never stops the server.
 """
@@ -177,15 +178,16 @@ class WorldServer:
     # ------------------------------------------------------------------ requests
 
     def handle(self, client: Client, data: bytes) -> dict[str, Any] | None:
-        """The reply to one request (None: a camera read handed to the render worker); an error reply
-        for anything wrong, never an exception."""
+        """The reply to one request (None: a camera read handed to a render worker, or a silent write
+        that succeeded); an error reply for anything wrong, never an exception."""
         self.requests += 1
-        name = ""
+        name, silent = "", False
         try:
             message = json.loads(data)
             if not isinstance(message, dict):
                 raise ValueError("a request is a JSON object with 'op'")
             op = message.get("op")
+            silent = op == "write" and message.get("reply") is False  # answered only if it fails
             if op == "open":
                 spec = Spec.from_dict(message.get("spec"))
                 name = spec.name
@@ -215,14 +217,14 @@ class WorldServer:
                 if isinstance(value, bool) or not isinstance(value, int | float):
                     raise ValueError(f"write needs a number 'value', not {value!r}")
                 device.write(float(value))
-                return {"time": self.sim.world.time}
+                return None if silent else {"time": self.sim.world.time}
         except Exception as exc:  # every failure is the client's answer, never the server's end
             self.errors += 1
             text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
             if not text.startswith("sim channel"):
                 text = f"sim channel {name!r}: {text}" if name else f"world server: bad request: {text}"
             LOG.warning("client %d: %s", client.number, text)
-            return {"error": text, "type": type(exc).__name__}
+            return {"error": text, "type": type(exc).__name__, **({"silent": True} if silent else {})}
 
     # ------------------------------------------------------------------ renders (D103)
 

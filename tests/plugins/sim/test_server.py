@@ -220,6 +220,14 @@ def test_bad_requests_get_errors_naming_the_channel(config: Path, tmp_path: Path
             with pytest.raises(ValueError, match="sim channel 'left_encoder' is an input channel"):
                 link.request({"op": "write", "handle": handle, "value": 1.0})
             assert isinstance(link.request({"op": "read", "handle": handle})["value"], float)
+            motor = SimBackend(channel_of(config, "left_motor")).spec().to_dict()
+            out = link.request({"op": "open", "spec": motor})["handle"]
+            # an actuator's write is silent: a bad one is answered, and raised by the next exchange
+            link.request({"op": "write", "handle": out, "value": "fast", "reply": False}, answer=False)
+            with pytest.raises(ValueError, match="sim channel 'left_motor': write needs a number"):
+                link.request({"op": "ping"})
+            link.request({"op": "write", "handle": out, "value": 0.25, "reply": False}, answer=False)
+            assert link.request({"op": "ping"})["time"] >= 0.0  # a silent write that worked answers nothing
             with pytest.raises(ConnectionError):  # a request over 1 MiB: that connection is dropped…
                 Link(server.client_address()).exchange(b" " * (2 << 20))
             with pytest.raises(Exception, match="digest"):  # …a client without the key is refused…
