@@ -9,6 +9,7 @@ taken at stop, so a finished run still reports them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from ckmconf.errors import ConfigError
@@ -22,8 +23,16 @@ from ..resources.resource import SmartResourceRuntime
 class ResourceHost:
     """The Smart Resources one node runs (``resources``: name → runtime), in its main process."""
 
-    def __init__(self, node: Node, system: System, transport: Transport, registry: Registry) -> None:
+    def __init__(
+        self,
+        node: Node,
+        system: System,
+        transport: Transport,
+        registry: Registry,
+        wire_name: Callable[[str], str] | None = None,
+    ) -> None:
         self.node, self.system, self.transport, self.registry = node, system, transport, registry
+        self.wire_name = wire_name  # the name a topic travels under from this node (internal: node-local)
         self.resources: dict[str, SmartResourceRuntime] = {}
         self._final: dict[str, Any] | None = None
 
@@ -46,7 +55,9 @@ class ResourceHost:
                         f"service '{resource.name}.{service.name}' has no Scenario: the runtime runs "
                         "services only through their scenarios' SPT processing",
                     )
-            runtime = SmartResourceRuntime(resource, self.transport, node=self.node.name, registry=self.registry)
+            runtime = SmartResourceRuntime(
+                resource, self.transport, node=self.node.name, registry=self.registry, wire_name=self.wire_name
+            )
             try:
                 runtime.setup()  # a stream its records cannot make is a ConfigError already
             except (OSError, ValueError) as exc:  # a model file, a plugin's own check in its set-up

@@ -95,7 +95,7 @@ class NodeRuntime:
         self.monitor: MonitorService | None = None
         self.delegation: Delegation | None = None
         self.partitions: PartitionSupervisor | None = None  # the partition processes (ckm-run sets it)
-        self.hosting = ResourceHost(node, system, transport, self.registry)
+        self.hosting = ResourceHost(node, system, transport, self.registry, lambda topic: self.topic(topic).name)
         self.resources: dict[str, SmartResourceRuntime] = self.hosting.resources  # hosted here (main process)
         self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}

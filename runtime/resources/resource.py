@@ -74,8 +74,12 @@ class SmartResourceRuntime:
         max_clients: int = 16,
         supply_period: float | None = None,
         selector: SelectorFactory = TaskConfiguringModule,
+        wire_name: Callable[[str], str] | None = None,
     ) -> None:
         self.resource, self.transport = resource, transport
+        # a service Input names its topic as the configuration does; the hosting node gives the
+        # name it travels under (an internal topic's node-local name)
+        self.wire_name = wire_name or (lambda topic: topic)
         self.node = node or resource.node
         self.share, self.primary, self.max_clients = share, primary, max_clients
         self.selector = selector  # builds each instance's scenario selector: the TCM, or a benchmark's baseline
@@ -143,7 +147,7 @@ class SmartResourceRuntime:
                 services[0], f"resource {self.resource.name}: stream {root!r} has no input topic and no source"
             )
         subscriptions = {
-            name: self.transport.subscribe(TopicQoS(topic, "ckm/raw", reliability="best-effort"))
+            name: self.transport.subscribe(TopicQoS(self.wire_name(topic), "ckm/raw", reliability="best-effort"))
             for name, topic in inputs.items()
         }
         self._inputs.update({f"{root}/{name}": sub for name, sub in subscriptions.items()})
