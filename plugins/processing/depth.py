@@ -105,7 +105,19 @@ def to_metres(image: npt.NDArray[Any], scale: float, owner: str) -> Depth:
 
 
 def _decode(message: Mapping[str, Any], owner: str) -> npt.NDArray[Any]:
-    """The image in a sensor_msgs/Image-like dict (``width height encoding data``, optional ``step is_bigendian``)."""
+    """The image in a sensor_msgs/Image-like dict (``width height encoding data``, optional ``step is_bigendian``),
+    or in a ``DepthImage`` (configs/usecase/network.xml: ``width height`` and ``data`` an array of the
+    ``width × height`` raw depths, row-major, as a simulated or real sensor publishes it)."""
+    data = message.get("data")
+    if "encoding" not in message and isinstance(data, np.ndarray):
+        width, height = message.get("width"), message.get("height")
+        if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height)):
+            raise ValueError(f"{owner}: depth message size {width!r} x {height!r} is not two positive integers")
+        assert isinstance(width, int) and isinstance(height, int)
+        if data.size != width * height or data.dtype.kind not in "uif":
+            shape = f"({data.dtype}, {data.size} values)"
+            raise ValueError(f"{owner}: depth message data {shape} is not {width} x {height} depths")
+        return data.reshape(height, width)
     missing = [key for key in ("width", "height", "encoding", "data") if key not in message]
     if missing:
         raise ValueError(f"{owner}: depth message has no {', '.join(map(repr, missing))}")

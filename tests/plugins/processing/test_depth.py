@@ -125,7 +125,7 @@ def test_bad_param_in_the_usecase_is_a_config_error_at_its_plugin(depth_camera: 
         Topology(dataclasses.replace(depth_camera, plugins=plugins))
     assert caught.value.line == depth_camera.plugins[index].loc.line  # type: ignore[union-attr]
     assert str(caught.value).endswith(
-        "plugin 'cluster_qvga' (euclidean-clustering): parameter 'tolerance' = 0.0 must be greater than 0"
+        "plugin 'cluster_qvga' (tabletop-clustering): parameter 'tolerance' = 0.0 must be greater than 0"
     )
 
 
@@ -464,3 +464,14 @@ def test_qqvga_still_finds_every_object_but_trusts_the_boxes_less(topology: Topo
     assert [o["name"] for o in qqvga] == LAB_NAMES
     assert all(small["points"] < big["points"] / 10 for big, small in zip(vga, qqvga, strict=True))
     assert all(o["reliability"] >= 0.7 for o in qqvga)
+
+
+def test_a_use_case_depth_image_message_is_read_as_raw_depths() -> None:
+    """The simulated Xtion's DepthImage (configs/usecase/network.xml): width, height and the raw depths
+    as an array, no encoding (what the sensor publishes, D99)."""
+    raw = np.array([0, 1000, 2500, 65535], dtype=np.uint16)
+    message = {"stamp": 1.0, "width": 2, "height": 2, "scale": 0.001, "data": raw}
+    metres = DepthAcquisition(plugin("depth-acquisition")).process(message, CTX)
+    assert metres.shape == (2, 2) and metres[0, 1] == pytest.approx(1.0) and metres[1, 0] == pytest.approx(2.5)
+    with pytest.raises(ValueError, match=r"data \(uint16, 3 values\) is not 2 x 2 depths"):
+        DepthAcquisition(plugin("depth-acquisition")).process({**message, "data": raw[:3]}, CTX)
