@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
@@ -64,8 +65,8 @@ def _work(plan: WorldPlan, conn: Connection) -> None:
     while True:
         try:
             state, job = conn.recv()
-        except (EOFError, OSError):
-            return
+        except (EOFError, OSError):  # the server closed the pipe: nothing to keep, end at once
+            os._exit(0)  # (an orderly exit tears the mirror world down for seconds)
         try:
             restore(sim.world, state)
             robot, link, fov, width, height = job
@@ -116,8 +117,12 @@ class RenderWorker:
     def alive(self) -> bool:
         return self.process.is_alive()
 
-    def close(self) -> None:
+    def hang_up(self) -> None:
+        """Close the pipe: the worker ends (close() then waits for it)."""
         self.conn.close()
+
+    def close(self) -> None:
+        self.hang_up()
         self.process.join(2.0)
         if self.process.is_alive():
             self.process.kill()

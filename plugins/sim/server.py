@@ -312,6 +312,8 @@ class WorldServer:
     def close(self) -> None:
         self.listener.close()
         for worker in self.renderers:
+            worker.hang_up()  # all end together
+        for worker in self.renderers:
             worker.close()
         for client in list(self.clients):
             self._drop(client, "server stopping")
