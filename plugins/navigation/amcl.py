@@ -147,6 +147,7 @@ class AmclNavigation(ProcessingPlugin):
         self.plan_length = 0.0
         self.unlocalized_since: float | None = None
         self.stopped = True
+        self.settling = False  # at the goal, the path emptied: waiting for the base to stop
 
     # ------------------------------------------------------------------ set-up and goals
 
@@ -208,7 +209,7 @@ class AmclNavigation(ProcessingPlugin):
         self._pending_goal = None
         self.phase, self.reason, self.plan, self.target = "planning", "", None, None
         self.routes.reset()
-        self.unlocalized_since = None
+        self.unlocalized_since, self.settling = None, False
 
     # ------------------------------------------------------------------ planning
 
@@ -250,7 +251,7 @@ class AmclNavigation(ProcessingPlugin):
             "target": None if self.target is None else list(self.target),
             "path_id": self.path_id, "plan_length": self.plan_length,
             "extra": self.routes.areas(),
-            "unlocalized_since": self.unlocalized_since, "stopped": self.stopped,
+            "unlocalized_since": self.unlocalized_since, "stopped": self.stopped, "settling": self.settling,
             "localizer": self.localizer.state(),
         }
 
@@ -275,6 +276,7 @@ class AmclNavigation(ProcessingPlugin):
             self.target = None if target is None else (float(target[0]), float(target[1]))
             self.plan_length = float(state["plan_length"])
             self.unlocalized_since, self.stopped = state["unlocalized_since"], bool(state["stopped"])
+            self.settling = bool(state.get("settling", False))
             self.routes.restore(state["extra"])
             self.localizer.restore(state["localizer"])
         except (KeyError, TypeError, ValueError, IndexError) as exc:
@@ -342,11 +344,15 @@ class AmclNavigation(ProcessingPlugin):
         assert self.goal is not None
         gyaw = self.goal[2]
         target = self.target or (self.goal[0], self.goal[1])
-        if self.stopped and math.dist(pose[:2], target) <= self.params["tolerance"] and (
+        self.settling = math.dist(pose[:2], target) <= self.params["tolerance"] and (
             gyaw is None or abs(wrap(gyaw - pose[2])) <= self.params["yawTolerance"]
-        ):  # the base has stopped at the path's end (odometry): arrived, if localization agrees
-            self.phase, self.plan = "arrived", None
-            return
+        )
+        if self.settling:  # at the goal as the localization sees it: stop the base (an empty path) ...
+            if self.stopped:  # ... and once its odometry says it has stopped, arrived
+                self.phase, self.plan = "arrived", None
+            else:
+                self.phase = "active"
+            return  # (following on, the base would chase the end point each re-anchoring moves: D128)
         if self.plan is not None:
             self.segment, _, off = project(self.plan, (pose[0], pose[1]), self.segment)
             blocking = self._blocked(pose, scan)
@@ -374,7 +380,7 @@ class AmclNavigation(ProcessingPlugin):
         correction = self.localizer.correction
         points: list[list[float]] = []
         yaw = None
-        if self.phase == "active" and self.plan is not None and correction is not None:
+        if self.phase == "active" and not self.settling and self.plan is not None and correction is not None:
             to_odom = inverse(correction)
             odom_pose = self.localizer.odom
             rest = self.plan[self.segment + 1 :]

@@ -230,3 +230,16 @@ def test_a_copy_restored_from_the_state_goes_on_with_the_same_results(file: Path
         assert same(theirs, mine)
     with pytest.raises(ValueError, match="not an amcl-navigation state"):
         copy.restore({"kind": "amcl-navigation", "goal": None})
+
+
+def test_at_the_goal_the_base_is_stopped_then_arrival_waits_for_it_to_be_still(file: Path) -> None:
+    """D128: within tolerance of the goal the path empties (the base stops instead of chasing an end
+    point each re-anchoring moves by the localization's jitter); arrived once the odometry is still."""
+    truth = (3.95, 1.85, 1.55)  # within 0.15 m and 0.2 rad of the goal
+    nav = navigation(file, initialPose="3.95 1.85 1.55", initialSpread="0.05 0.02", goal="4 1.8 1.57")
+    moving = {**odometry((0.0, 0.0, 0.0)), "twist": {"linear": 0.1, "angular": 0.3}}
+    for k in range(3):
+        result = nav.process({"scan": scan(grid(file), truth), "odom": moving}, Context(k, 0.8 * k))
+    assert result["status"]["state"] == "active" and result["path"]["points"] == []
+    result = nav.process({"scan": scan(grid(file), truth), "odom": odometry((0.0, 0.0, 0.0))}, Context(3, 2.4))
+    assert result["status"]["state"] == "arrived" and result["path"]["points"] == []
