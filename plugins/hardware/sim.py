@@ -8,7 +8,7 @@ set up from the ``<Environment>`` of the file its ``world`` Param names (default
 configuration file); a later ``world`` naming another file is an error. ``textures`` names the
 RGB recognition's model file so objects wear the textures it learnt.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
-``altimeter``) or by ``joint``/``joints``, and the channel's kind and direction:
+``altimeter``, ``pose``) or by ``joint``/``joints``, and the channel's kind and direction:
 
 ======================  ===========================================================================
 counter in, joint       wheel encoder speed, ticks/s (``ticksPerRev``), plus ``noise`` (s.d.)
@@ -21,6 +21,8 @@ digital in, contact     1 while ``link`` touches an obstacle (bumper)
 stream in, lidar        ``size`` ranges (m) over ``fov`` from ``link``
 stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
 analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
+bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
+                        for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it
 out, read               the last raw value written (as ``hardware.loopback``)
 ======================  ===========================================================================
 
@@ -53,7 +55,7 @@ from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
 from .simulation import PlantScope, scope_for
 
-SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter")
+SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose")
 _SPEC = Params(
     P("body", "", "Robot the channel belongs to (model plugins/sim/models/<body>.urdf)."),
     P("model", "", "URDF of the robot, relative to the configuration file (default: from body)."),
@@ -122,7 +124,7 @@ class SimBackend(Backend):
         v, size, sensor = self.values, self.channel.size, self.values["sensor"]
         expected = {
             "rgb": v["width"] * v["height"] * 3, "depth": v["width"] * v["height"], "imu": 6,
-            "contact": 1, "altimeter": 1,
+            "contact": 1, "altimeter": 1, "pose": 3,
         }.get(sensor)
         if v["joints"]:
             expected = len(v["joints"].split())

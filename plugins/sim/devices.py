@@ -138,7 +138,7 @@ class ChannelDevice:
             return Imu(robot, v["link"], noise=v["noise"], seed=v["seed"])
         if sensor == "contact":
             return Bumper(robot, v["link"], self.sim.world.floor)
-        if sensor == "altimeter":
+        if sensor in ("altimeter", "pose"):
             return robot.link(v["link"])
         if v.get("joints"):
             return [robot.joint(name) for name in v["joints"].split()]
@@ -173,6 +173,9 @@ class ChannelDevice:
             return 1.0 if self.device.pressed() else 0.0
         if sensor == "altimeter":
             return self._noisy(self.robot.link_pose(self.device)[0][2])
+        if sensor == "pose":  # ground truth: never noisy
+            (x, y, _), (qx, qy, qz, qw) = self.robot.link_pose(self.device)
+            return (x, y, math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)))
         if v.get("joints"):
             return tuple(self._noisy(self._joint_value(j)) for j in self.device)
         return self._noisy(self._joint_value(self.device[0]))
