@@ -20,10 +20,9 @@ serves to score the results (which object is where, and whether it is in view).
 
 Texture skins. pybullet's built-in cylinder and box give texture coordinates that show a few
 magnified texels of the image (a planar projection in metres), so the learnt print would never
-appear. :func:`dress` wraps each textured object of the catalogue in a visual-only skin 1 mm
-outside it whose texture coordinates put the learnt print upright at its own aspect: around a
-cylinder it repeats ``round(circumference / print width)`` times (as a can's label repeats its
-logo), on a box each side face shows it as high as the face, cropped to its width (D116).
+appear. The :class:`~plugins.sim.world.World` built with the model file dresses each textured
+cylinder and box in a skin wearing the learnt print upright at its own aspect
+(:mod:`plugins.sim.skins`, D116, D145); :func:`dress` (from there) lists those bodies.
 """
 
 from __future__ import annotations
@@ -38,7 +37,7 @@ import numpy as np
 import pybullet as p
 
 import ckmconf
-from ckmconf.model import Environment, Param
+from ckmconf.model import Param
 from ckmconf.model.environment import Circle, Geometry25D, Rectangle
 from ckmconf.model.resources import Plugin
 from plugins.processing.depth import DepthAcquisition, EuclideanClustering, KdTreeShapeClassifier
@@ -46,11 +45,11 @@ from plugins.processing.fusion import FeatureFusion
 from plugins.processing.image import Resize
 from plugins.processing.recognition import CameraAcquisition, KeypointMatching, OrbKeypoints
 from plugins.processing.tabletop import TabletopClustering
-from plugins.processing.textures import ModelSpec, TextureSpec, read_model
+from plugins.processing.textures import read_model
 from plugins.sim.arm import ARM_JOINTS, POSES
 from plugins.sim.robots import Robot
 from plugins.sim.sensors import Camera
-from plugins.sim.textures import texture_file, texture_spec
+from plugins.sim.skins import dress
 from plugins.sim.world import World
 from runtime.resources.spt import Context, ProcessingPlugin
 
@@ -99,79 +98,6 @@ class View:
     fused: dict[str, Any]
     camera: tuple[np.ndarray[Any, Any], np.ndarray[Any, Any]]
     """The camera's map rotation and position (to score image-frame results)."""
-
-
-def _tube(radius: float, z0: float, z1: float, repeats: int, segments: int = 48) -> tuple[list[Any], ...]:
-    """A textured open cylinder: vertices, indices, texture coordinates, normals (u around, v down)."""
-    vertices, uvs, normals, indices = [], [], [], []
-    for i in range(segments + 1):
-        angle = 2 * math.pi * i / segments
-        c, s = math.cos(angle), math.sin(angle)
-        for z, v in ((z0, 1.0), (z1, 0.0)):
-            vertices.append([radius * c, radius * s, z])
-            normals.append([c, s, 0.0])
-            uvs.append([-repeats * i / segments, v])  # u decreasing with the angle: the print reads unmirrored
-    for i in range(segments):
-        a, b, c_, d = 2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3
-        indices += [a, c_, b, b, c_, d]
-    return vertices, indices, uvs, normals
-
-
-def _sides(width: float, depth: float, z0: float, z1: float, aspect: float) -> tuple[list[Any], ...]:
-    """A box's four side faces, each with the print upright at its own ``aspect`` (width / height),
-    as high as the face and cropped to its width (viewed from outside)."""
-    vertices: list[list[float]] = []
-    uvs: list[list[float]] = []
-    normals: list[list[float]] = []
-    indices: list[int] = []
-    hx, hy = width / 2, depth / 2
-    corners = [(hx, -hy), (hx, hy), (-hx, hy), (-hx, -hy)]  # counter-clockwise seen from above
-    for k in range(4):
-        (x0, y0), (x1, y1) = corners[k], corners[(k + 1) % 4]
-        normal = [(y1 - y0), -(x1 - x0), 0.0]
-        length = math.hypot(normal[0], normal[1])
-        normal = [normal[0] / length, normal[1] / length, 0.0]
-        base = len(vertices)
-        share = min(1.0, length / ((z1 - z0) * aspect))  # the print's central share the face shows
-        # u falls left to right, as on the tube: pybullet's loaded textures read mirrored otherwise
-        for (x, y), u in (((x0, y0), 0.5 + share / 2), ((x1, y1), 0.5 - share / 2)):
-            for z, v in ((z0, 1.0), (z1, 0.0)):
-                vertices.append([x, y, z])
-                uvs.append([u, v])
-                normals.append(normal)
-        indices += [base, base + 2, base + 1, base + 1, base + 2, base + 3]
-    return vertices, indices, uvs, normals
-
-
-def dress(world: World, environment: Environment, catalog: ModelSpec) -> dict[int, str]:
-    """Wrap every textured 2.5D object in a skin wearing its learnt print; the skins' body ids → object."""
-    skins: dict[int, str] = {}
-    cid = world.client
-    for obj in environment.objects:
-        spec: TextureSpec | None = texture_spec(environment, obj.name, catalog)
-        if spec is None or not isinstance(obj.geometry, Geometry25D):
-            continue
-        prism, base = obj.geometry.prism, obj.geometry.prism.base
-        height = prism.zmax - prism.zmin
-        if isinstance(base, Circle):
-            repeats = max(1, round(2 * math.pi * base.radius / (height * spec.width / spec.height)))
-            mesh = _tube(base.radius + 0.001, prism.zmin, prism.zmax, repeats)
-        elif isinstance(base, Rectangle):
-            mesh = _sides(base.width + 0.002, base.depth + 0.002, prism.zmin, prism.zmax, spec.width / spec.height)
-        else:
-            continue
-        vertices, indices, uvs, normals = mesh
-        shape = p.createVisualShape(
-            p.GEOM_MESH, vertices=vertices, indices=indices, uvs=uvs, normals=normals, physicsClientId=cid
-        )
-        yaw = obj.pose.yaw + (base.yaw if isinstance(base, Rectangle) else 0.0)
-        c, s = math.cos(obj.pose.yaw), math.sin(obj.pose.yaw)
-        at = [obj.pose.x + c * base.x - s * base.y, obj.pose.y + s * base.x + c * base.y, obj.pose.z]
-        body = p.createMultiBody(0, -1, shape, at, p.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=cid)
-        texture = p.loadTexture(str(texture_file(spec)), physicsClientId=cid)
-        p.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
-        skins[int(body)] = obj.name
-    return skins
 
 
 def _record(plugins: dict[str, Plugin], name: str, **override: Any) -> Plugin:

@@ -7,6 +7,9 @@
 - Map bounds → floor and four walls; ``<AvoidedArea>`` → obstacles the map's height tall;
   ``<Object>`` prisms → static bodies, except objects whose semantic tag affords ``pick``, which
   are dynamic (they can be grasped and carried); a 2D-only object stands ``FOOTPRINT_HEIGHT`` tall.
+- A textured 2.5D cylinder or box wears a texture skin (:mod:`plugins.sim.skins`, D145) as its
+  visual shape: its print upright at its own aspect, which the RGB recognition knows; its collision
+  shape is the plain prism's.
 """
 
 from __future__ import annotations
@@ -21,9 +24,19 @@ from typing import Any
 import pybullet as p
 
 from ckmconf.model import Environment
-from ckmconf.model.environment import Circle, EnvObject, Geometry2D, Geometry3D, Polygon, Prism, Rectangle
-from plugins.processing.textures import ModelSpec, rgb
+from ckmconf.model.environment import (
+    Circle,
+    EnvObject,
+    Geometry2D,
+    Geometry3D,
+    Geometry25D,
+    Polygon,
+    Prism,
+    Rectangle,
+)
+from plugins.processing.textures import ModelSpec, TextureSpec, rgb
 
+from .skins import skin_mesh, visual_shape
 from .textures import texture_file, texture_spec
 
 MODELS = Path(__file__).with_name("models")
@@ -117,6 +130,8 @@ class World:
         self.objects: dict[str, int] = {}
         """Body ids of the environment objects by name (a multi-prism static object: its first prism)."""
         self.robots: dict[str, int] = {}
+        self.skins: dict[str, TextureSpec] = {}
+        """The print each object wearing a texture skin wears, by object name (D145)."""
         self.torques: dict[tuple[int, int], float] = {}
         """Joint torques held across steps (effort-mode joints), by (body, joint)."""
         cid = self.client
@@ -140,7 +155,10 @@ class World:
         orn = p.getQuaternionFromEuler([0, 0, yaw])
         return int(p.createMultiBody(0, col, vis, list(centre), orn, physicsClientId=cid))
 
-    def _body(self, shape: Shape, pose: tuple[float, float, float, float], mass: float, rgba: list[float]) -> int:
+    def _body(
+        self, shape: Shape, pose: tuple[float, float, float, float], mass: float, rgba: list[float], visual: int = -1
+    ) -> int:
+        """A body of ``shape`` at the object ``pose``; ``visual`` (a visual shape id) replaces its plain look."""
         cid = self.client
         x, y, z, yaw = pose
         c, s = math.cos(yaw), math.sin(yaw)
@@ -153,7 +171,7 @@ class World:
             args["length"] = args.pop("height")
         if shape.kind == p.GEOM_MESH:  # a visual mesh needs triangles: fan the two caps and the sides
             args["indices"] = _prism_indices(len(args["vertices"]) // 2)
-        vis = p.createVisualShape(shape.kind, rgbaColor=rgba, physicsClientId=cid, **args)
+        vis = visual if visual >= 0 else p.createVisualShape(shape.kind, rgbaColor=rgba, physicsClientId=cid, **args)
         return int(p.createMultiBody(mass, col, vis, position, orn, physicsClientId=cid))
 
     def build(self, environment: Environment, catalog: ModelSpec | None = None) -> None:
@@ -193,9 +211,16 @@ class World:
         first = -1
         for prism in _prisms(obj):
             shape = prism_shape(prism)
-            body = self._body(shape, pose, DENSITY * shape.volume if movable else 0.0, rgba)
+            half = (prism.zmax - prism.zmin) / 2  # the body's origin is the prism's centre
+            skin = None
+            if spec is not None and isinstance(obj.geometry, Geometry25D):
+                skin = skin_mesh(prism, spec, -half, half)
+            visual = visual_shape(cid, skin) if skin is not None else -1
+            body = self._body(shape, pose, DENSITY * shape.volume if movable else 0.0, rgba, visual)
             if texture >= 0:
-                p.changeVisualShape(body, -1, textureUniqueId=texture, physicsClientId=cid)
+                p.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=rgba, physicsClientId=cid)
+            if skin is not None and spec is not None:
+                self.skins[obj.name] = spec
             if movable:
                 p.changeDynamics(body, -1, lateralFriction=1.0, spinningFriction=0.001, physicsClientId=cid)
             first = body if first < 0 else first
