@@ -53,7 +53,10 @@ from .network import Transport, open_transport, read_group_key
 from .network.api import GroupKeyError
 from .network.multipeer import NetworkError
 from .ros.recording import RECORD_FORMATS, RecordingError, RunRecorder
-from .runrecord import EXIT_AGENTS, EXIT_CONFIG, EXIT_FAILED, EXIT_NETWORK
+from .runrecord import EXIT_AGENTS as EXIT_AGENTS  # the exit codes, re-exported for callers
+from .runrecord import EXIT_CONFIG as EXIT_CONFIG
+from .runrecord import EXIT_FAILED as EXIT_FAILED
+from .runrecord import EXIT_NETWORK as EXIT_NETWORK
 from .runrecord import keep_statistics as _keep_statistics  # the name _run calls it by
 from .sessions import HardwareSessions
 from .verification.verify import verify_or_report

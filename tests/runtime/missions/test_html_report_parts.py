@@ -70,7 +70,9 @@ def test_bags_are_found_up_to_two_levels_below_the_run(tmp_path: Path) -> None:
 def test_task_failures_and_misses_count_from_the_statistics(tmp_path: Path) -> None:
     with RunRecorder(tmp_path, "a") as rec:
         rec.write("start", mission="M")
-    stats = {"nodes": {"n": {"tasks": {"n.loop": {"failures": 3, "misses": 7, "first_failure": "ZeroDivisionError"}}}}}
+    stats: dict[str, object] = {
+        "nodes": {"n": {"tasks": {"n.loop": {"failures": 3, "misses": 7, "first_failure": "ZeroDivisionError"}}}}
+    }
     topics = {"/scan": {"written": 5, "dropped": 2, "firstDrop": "ranges: not a float32[]"}, "/x": {"dropped": 0}}
     stats["recording"] = {"bag": "run/bag", "failure": "disk full", "topics": topics}
     (tmp_path / "stats.json").write_text(json.dumps(stats))
