@@ -443,7 +443,7 @@ def topology(depth_camera: SmartResource) -> Iterator[Topology]:
 
 def test_depth_profiles_run_through_the_topology(topology: Topology) -> None:
     topology.reset_stats()
-    scene = render_depth_scene(seed=0)
+    scene = render_depth_scene(seed=0, camera=Camera(fx=577.3, fy=577.3))  # the simulated Xtion resources.xml names
     frame = topology.run({"width": 640, "height": 480, "encoding": "16UC1", "data": scene.depth.tobytes()})
     assert set(frame.outputs) == set(PROFILES)
     for profile in PROFILES:
