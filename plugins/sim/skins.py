@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import pybullet as p
 
@@ -31,8 +31,14 @@ from plugins.processing.textures import ModelSpec, TextureSpec
 
 from .textures import texture_file, texture_spec
 
-if TYPE_CHECKING:
-    from .world import World
+
+class Dressable(Protocol):
+    """What :func:`dress` needs of a world (:class:`plugins.sim.world.World`, which builds skins itself)."""
+
+    client: int
+    skins: dict[str, TextureSpec]
+    objects: dict[str, int]
+
 
 SEGMENTS = 48
 """Facets around a cylinder's skin (its radius is at most 0.2 mm short between vertices at 7 cm)."""
@@ -144,7 +150,7 @@ def wear(client: int, body: int, spec: TextureSpec) -> None:
     p.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=[1, 1, 1, 1], physicsClientId=client)
 
 
-def dress(world: World, environment: Environment, catalog: ModelSpec | None) -> dict[int, str]:
+def dress(world: Dressable, environment: Environment, catalog: ModelSpec | None) -> dict[int, str]:
     """Every textured 2.5D cylinder and box of ``environment`` wearing its print: body ids → object.
 
     An object ``world`` built with the same print (:attr:`World.skins`) keeps its own body; one
