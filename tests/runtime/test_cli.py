@@ -57,7 +57,13 @@ def test_sigterm_stops_cleanly_with_actuators_safe(tmp_path: Path) -> None:
         text=True,
     )
     try:
-        time.sleep(1.5)
+        # signal only once ckm-run is up (its handler installed before it logs "running"), bounded
+        log, deadline = tmp_path / "ckm.log", time.monotonic() + 90.0
+        while not (log.exists() and " running " in log.read_text()):
+            assert process.poll() is None, process.communicate()[1]
+            assert time.monotonic() < deadline, "ckm-run did not log 'running' within 90 s"
+            time.sleep(0.1)
+        time.sleep(1.0)  # some control periods released before the stop
         process.send_signal(signal.SIGTERM)
         _, err = process.communicate(timeout=30)
     finally:
