@@ -3,7 +3,8 @@
 A TinyRenderer frame takes 20–150 ms of a core (QVGA–VGA); served in the physics thread it would
 hold every other request (a wheel encoder read at 100 Hz) for that long. The server therefore keeps
 a render worker: a process (``spawn``) that builds the same world from the same
-:class:`~plugins.sim.server.WorldPlan` (so body ids agree) and never steps it. For each frame the
+:class:`~plugins.sim.server.WorldPlan` (so body ids agree, and its objects wear the same texture
+skins, D145) and never steps it. For each frame the
 server sends a snapshot of every movable body — base pose and joint positions, read in a fraction of
 a millisecond — and the camera; the worker sets its mirror to that state, renders, and returns the
 :class:`Frame` while the server goes on answering. The frame shows the world at the step it was
