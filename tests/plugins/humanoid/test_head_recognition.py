@@ -14,11 +14,11 @@ from typing import Any
 
 import pytest
 
-from benchmarks.fusion_scene import dress
 from ckmconf.loader import load
 from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import read_model
 from plugins.sim.robots import Robot
+from plugins.sim.skins import dress
 from plugins.sim.world import World
 from runtime.resources.spt import Topology
 from tests.conftest import CONFIGS
