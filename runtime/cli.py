@@ -339,6 +339,13 @@ def _verdict(code: int, runtimes: list[NodeRuntime], agents: list[_Agent]) -> in
             print(f"{error}  [node {runtime.node.name}, partition {partition}]", file=sys.stderr)
             LOG.error("node %s: partition %s failed: %s", runtime.node.name, partition, error)
             codes.append(EXIT_FAILED)
+        serious = runtime.log.serious
+        if serious is not None:  # the configuration calls this alarm an error: the run broke (D147)
+            message = (f"alarm {serious['alarm']} ({serious['severity']}) raised {runtime.log.serious_count} "
+                       f"time(s), first: {serious['measure']} = {serious['value']}")
+            print(f"{runtime.node.name}: {message}", file=sys.stderr)
+            LOG.error("node %s: %s", runtime.node.name, message)
+            codes.append(EXIT_FAILED)
         for task, figures in (runtime.statistics().get("tasks") or {}).items():
             if figures.get("failures"):
                 message = f"task {task} failed {figures['failures']} time(s), first: {figures.get('first_failure')}"

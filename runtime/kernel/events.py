@@ -18,6 +18,8 @@ from ..network.api import Publisher
 LOG = logging.getLogger("ckm.node")
 EVENTS_KEPT = 10000  # recent events kept in memory; every event also goes to the event sinks
 EventSink = Callable[[dict[str, Any]], None]
+SERIOUS = ("error", "critical")
+"""Alarm severities that mean the run broke: ckm-run's verdict fails on them (D147)."""
 
 
 class EventLog:
@@ -28,11 +30,16 @@ class EventLog:
         self.events: list[dict[str, Any]] = []  # the recent ones (bounded); all go to the sinks
         self.sinks: list[EventSink] = []  # e.g. the run directory's events file
         self._publisher = publisher
+        self.serious: dict[str, Any] | None = None  # the first error or critical alarm raised (never evicted)
+        self.serious_count = 0
 
     def report(self, kind: str, detail: dict[str, Any]) -> None:
         """Record one event; a failing sink is logged and does not stop the others."""
         event = {"node": self.node, "kind": kind, "time": time.time(), **detail}
         self.events.append(event)
+        if kind == "alarm" and event.get("severity") in SERIOUS:
+            self.serious = self.serious or event
+            self.serious_count += 1
         if len(self.events) > EVENTS_KEPT:
             del self.events[: EVENTS_KEPT // 2]
         for sink in self.sinks:

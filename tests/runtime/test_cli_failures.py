@@ -110,3 +110,16 @@ def test_two_node_processes_share_a_run_directory_and_a_sigkill_keeps_what_happe
     assert by_node["left"][1]["nodes"]["left"]["tasks"]["left.value"]["releases"] > 0  # written while running
     events = {p.name: p.read_text() for p in run_dir.glob("events*.jsonl")}
     assert len(events) == 2 and all("network-linked" in text for text in events.values())
+
+
+def test_an_alarm_the_configuration_calls_an_error_fails_the_run(tmp_path: Path) -> None:
+    """D147: a run whose monitor raised an error (or critical) alarm broke, even if nothing crashed;
+    a warning alone does not fail a run (the same run without the error alarm exits 0)."""
+    config = private("serious_alarm.xml", tmp_path)
+    done = ckm_run(config, "--duration", "2", "--log-dir", tmp_path / "run")
+    assert done.returncode == EXIT_FAILED, done.stderr
+    assert "base: alarm heartbeat_lost (error) raised 1 time(s), first: staleness = inf" in done.stderr
+    warning_only = tmp_path / "warning.xml"
+    warning_only.write_text(config.read_text().replace('severity="error"', 'severity="warning"'))
+    done = ckm_run(warning_only, "--duration", "2", "--log-dir", tmp_path / "run2")
+    assert done.returncode == 0, done.stderr
