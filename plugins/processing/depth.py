@@ -325,12 +325,17 @@ class EuclideanClustering(ProcessingPlugin):
             raise ParamError(f"{self.owner}: parameter 'planeAngle' = {p['planeAngle']} is not in (0, 90] degrees")
         self.camera = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
 
-    def process(self, data: Any, context: Context) -> list[Cluster]:
+    def depth_image(self, data: Any) -> npt.NDArray[Any]:
+        """``data`` as the float depth image in metres (H, W) this plugin clusters, else ValueError."""
         depth = np.asarray(data)
         if depth.ndim != 2 or depth.dtype.kind != "f":
             raise ValueError(
                 f"{self.owner} expects a float depth image in metres (H, W), got {depth.dtype} {depth.shape}"
             )
+        return depth
+
+    def process(self, data: Any, context: Context) -> list[Cluster]:
+        depth = self.depth_image(data)
         p = self.params
         return segment(
             depth,

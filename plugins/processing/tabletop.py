@@ -109,11 +109,7 @@ class TabletopClustering(EuclideanClustering):
             raise ParamError(f"{self.owner}: parameter 'plane' must stay true (use euclidean-clustering without)")
 
     def process(self, data: Any, context: Context) -> list[Cluster]:
-        depth = np.asarray(data)
-        if depth.ndim != 2 or depth.dtype.kind != "f":
-            raise ValueError(
-                f"{self.owner} expects a float depth image in metres (H, W), got {depth.dtype} {depth.shape}"
-            )
+        depth = self.depth_image(data)
         p = self.params
         return tabletop_segment(
             depth,
