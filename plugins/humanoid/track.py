@@ -44,22 +44,12 @@ from ckmconf.model.environment import Geometry2D, Geometry3D
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbers
 
 from .head import HeadModel, map_frame, on_plane
 
 MODELS = Path(__file__).resolve().parents[1] / "sim" / "models"
 FOOTPRINT_HEIGHT = 0.75  # a 2D-only Object's height, as the simulated world extrudes it
-
-
-def _numbers(text: str, count: int, name: str, owner: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split()]
-    except ValueError:
-        values = []
-    if len(values) != count or not all(math.isfinite(v) for v in values):
-        raise ParamError(f"{owner}: parameter {name!r} = {text!r} needs {count} finite numbers")
-    return values
 
 
 class PanTiltTrack(ProcessingPlugin):
@@ -99,7 +89,7 @@ class PanTiltTrack(ProcessingPlugin):
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
         v, owner = self.params, self.owner
-        self.pose = _numbers(v["pose"], 3, "pose", owner)
+        self.pose = fixed_numbers(v["pose"], 3, "pose", owner)
         self.limits = ((v["panMin"], v["panMax"]), (v["tiltMin"], v["tiltMax"]))
         for axis, (low, high) in zip(("pan", "tilt"), self.limits, strict=True):
             if not low < high:
@@ -109,7 +99,7 @@ class PanTiltTrack(ProcessingPlugin):
             name, sep, value = entry.partition(":")
             if not sep or not name.strip():
                 raise ParamError(f"{owner}: parameter 'heights': {entry!r} is not 'name: z'")
-            self.heights[name.strip()] = _numbers(value, 1, f"heights ({name.strip()})", owner)[0]
+            self.heights[name.strip()] = fixed_numbers(value, 1, f"heights ({name.strip()})", owner)[0]
         base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
         model = str(v["model"])
         self.model_path = base / model if Path(model).suffix else MODELS / f"{model}.urdf"

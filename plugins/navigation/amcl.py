@@ -46,7 +46,7 @@ from plugins.localization.raster import GridMap
 from plugins.localization.trajectories import LAB
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbers
 
 from .frames import (
     Point,
@@ -78,16 +78,6 @@ def uncertainty(estimate: Estimate) -> float:
     """√(σx² + σy²) of an estimate's covariance: how far off its position may be (m)."""
     covariance = np.asarray(estimate.covariance, dtype=np.float64)
     return math.sqrt(max(0.0, float(covariance[0, 0] + covariance[1, 1])))
-
-
-def _numbers(text: str, count: int, name: str, owner: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split()]
-    except ValueError:
-        values = []
-    if len(values) != count or not all(math.isfinite(v) for v in values):
-        raise ParamError(f"{owner}: parameter {name!r} = {text!r} is not {count} numbers")
-    return values
 
 
 class AmclNavigation(ProcessingPlugin):
@@ -126,9 +116,9 @@ class AmclNavigation(ProcessingPlugin):
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
         p, owner = self.params, self.owner
-        x, y, yaw = _numbers(p["laserPose"], 3, "laserPose", owner)
+        x, y, yaw = fixed_numbers(p["laserPose"], 3, "laserPose", owner)
         self.laser: Pose = (x, y, yaw)
-        sigma_xy, sigma_yaw = _numbers(p["initialSpread"], 2, "initialSpread", owner)
+        sigma_xy, sigma_yaw = fixed_numbers(p["initialSpread"], 2, "initialSpread", owner)
         if sigma_xy < 0 or sigma_yaw < 0:
             raise ParamError(f"{owner}: parameter 'initialSpread' = {p['initialSpread']!r} must not be negative")
         self.spread = (sigma_xy, sigma_yaw)

@@ -285,3 +285,14 @@ __all__ = [
     "ports_of",
     "read_params",
 ]
+
+
+def fixed_numbers(text: str, count: int, name: str, owner: str) -> list[float]:
+    """Exactly ``count`` finite numbers from a string Param such as a pose ``"x y yaw"``, else ParamError."""
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        values = []
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise ParamError(f"{owner}: parameter {name!r} = {text!r} is not {count} numbers")
+    return values
