@@ -84,6 +84,7 @@ class LiveFactory:
         return lambda value: publisher.publish(codec.encode(value))
 
     def __call__(self, behavior: str, path: str, now: Callable[[], float]) -> Behavior:
+        """Build the behavior of a state (``BehaviorFactory``): registry kind, services by alias, topics and signals."""
         record = self.system.behavior(behavior)
         if record is None:
             raise KeyError(f"state {path}: no behavior {behavior!r}")
@@ -110,6 +111,7 @@ class LiveFactory:
         return self._handle(ref)
 
     def close(self) -> None:
+        """Close every service handle the agent's behaviors shared."""
         for handle in self.handles.values():
             handle.close()
 
@@ -313,4 +315,5 @@ class AgentRunner:
         self.factory.close()
 
     def stop(self) -> None:
+        """Make :meth:`run` return ``stopped`` at its next period, from any thread."""
         self._stop.set()

@@ -70,10 +70,12 @@ class BehaviorContext:
     events: list[dict[str, Any]] = field(default_factory=list)
 
     def log(self, message: str, **detail: Any) -> None:
+        """Keep a note for the mission log (written as a ``log`` record of the state, §7.5)."""
         self.events.append({"message": message, **detail})
 
 
 def requirements_of(requires: tuple[Require, ...]) -> tuple[Bounds, ...]:
+    """The ``<Require>`` elements of a ``<Uses>`` as the quality bounds a service is asked for (§4.2.1.2)."""
     return tuple(Bounds(r.measure, r.lower, r.upper, r.probability) for r in requires)
 
 
@@ -90,6 +92,7 @@ class Behavior(abc.ABC):
 
     @property
     def owner(self) -> str:
+        """How errors name this behavior: its ``<Behavior name>`` and ``kind``."""
         return f"behavior {self.record.name!r} ({self.record.kind})"
 
     def start(self) -> None:
@@ -110,16 +113,19 @@ class Behavior(abc.ABC):
 
     # helpers for implementations
     def service(self, alias: str) -> ServiceHandle:
+        """The handle of the service used as ``alias`` (``<Uses as=…>``); KeyError naming the behavior if none."""
         try:
             return self.context.services[alias]
         except KeyError:
             raise KeyError(f"{self.owner} uses no service {alias!r}") from None
 
     def read(self, name: str) -> Any:
+        """Newest value of ``<Input name>`` (a topic or a plan signal's payload), None before the first."""
         source = self.context.inputs.get(name)
         return None if source is None else source()
 
     def write(self, name: str, value: Any) -> None:
+        """Publish ``value`` on ``<Output name>``; KeyError naming the behavior if it declares no such output."""
         sink = self.context.outputs.get(name)
         if sink is None:
             raise KeyError(f"{self.owner} has no output {name!r}")

@@ -159,6 +159,7 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``ckm-mission``: ``validate`` (§5.4, Fig. 7.21) or ``report`` (Table 7.9); exit status."""
     parser = argparse.ArgumentParser(prog="ckm-mission", description="Validate missions off-line; report runs.")
     commands = parser.add_subparsers(dest="command", required=True)
     validate = commands.add_parser("validate", help="off-line validation (§5.4, Fig. 7.21)")

@@ -50,13 +50,16 @@ class SimulatedService:
         self.parameters: dict[str, Any] = {}
 
     def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
+        """Keep the parameters and the requirements whose intervals :meth:`measures` will meet."""
         self.parameters.update(parameters)
         self._requirements = requirements
 
     def output(self, name: str) -> Any:
+        """No outputs off-line: conditions on service fields are steered by the solver instead."""
         return None
 
     def measures(self) -> dict[str, float]:
+        """One value inside each requested quality interval, so every ``<Require>`` is met."""
         values = {}
         for r in self._requirements:  # a value inside each requested interval (bounds are inclusive)
             if r.lower is not None and r.upper is not None:
@@ -68,10 +71,12 @@ class SimulatedService:
         return values
 
     def samples(self, measure: str) -> list[float]:
+        """Ten copies of the measure's value (a steady service state for eq. 5.1)."""
         value = self.measures().get(measure)
         return [] if value is None else [value] * 10
 
     def running(self) -> bool:
+        """Always running: a simulated service never goes silent."""
         return True
 
 
@@ -83,11 +88,14 @@ class ScriptedBehavior(Behavior):
         self.dwell = dwell
 
     def step(self) -> BehaviorStatus:
+        """Progress ramps linearly to 1 over ``dwell`` simulated seconds; never done or failed by itself."""
         return BehaviorStatus(progress=min(1.0, self.context.now() / self.dwell))
 
 
 @dataclass
 class Episode:
+    """One off-line run from the initial state: the state paths it visited, its outcome, end time and problem."""
+
     states: list[str] = field(default_factory=list)
     outcome: str | None = None
     time: float = 0.0
@@ -96,17 +104,21 @@ class Episode:
 
 @dataclass
 class Coverage:
+    """State and transition counts over all episodes, keyed by (mission, state) and (mission, transition index)."""
+
     states: dict[tuple[str, str], int]
     transitions: dict[TKey, int]
     episodes: list[Episode]
     missions: dict[str, Mission]
 
     def share(self) -> tuple[float, float]:
+        """Shares of states and of transitions visited at least once, each in [0, 1]."""
         s = sum(1 for v in self.states.values() if v) / max(1, len(self.states))
         t = sum(1 for v in self.transitions.values() if v) / max(1, len(self.transitions))
         return s, t
 
     def uncovered(self) -> list[tuple[Mission, Transition]]:
+        """The transitions no episode fired, with their mission (reported with file:line, §5.4)."""
         return [(self.missions[m], self.missions[m].transitions[i]) for (m, i), n in self.transitions.items() if not n]
 
 
@@ -136,6 +148,7 @@ class FakeInteraction(MissionEngine):
     # ------------------------------------------------------------------ steering
 
     def environment(self, run: MissionRun) -> Any:
+        """Condition environment steering ``run`` to the transition planned for it, after the dwell."""
         assert run.state is not None
         nested = run.child is not None
         if nested and run.child is not None and run.child.outcome is None:
@@ -156,6 +169,7 @@ class FakeInteraction(MissionEngine):
         return environment(values)
 
     def record(self, kind: str, **fields: Any) -> None:
+        """Count the entered states and reached finals into :attr:`coverage`, then record as usual."""
         if kind == "enter":
             self.coverage.states[(fields["mission"], fields["state"])] += 1
         elif kind == "outcome":
@@ -253,6 +267,7 @@ class SimulatedClock:
         self.time = 0.0
 
     def __call__(self) -> float:
+        """Current simulated time in seconds (advanced by the explorer, not by the wall clock)."""
         return self.time
 
 

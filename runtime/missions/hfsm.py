@@ -38,7 +38,10 @@ from .payloads import check_payload
 
 
 class Recorder(Protocol):
-    def write(self, kind: str, **fields: Any) -> object: ...
+    """Where the engine writes its mission log (a :class:`runtime.missions.recording.RunRecorder`)."""
+
+    def write(self, kind: str, **fields: Any) -> object:
+        """Append one log record of ``kind`` with ``fields``."""
 
 
 BehaviorFactory = Callable[[str, str, Callable[[], float]], Behavior]
@@ -59,9 +62,11 @@ class Signals:
     """Outgoing: what this agent's behaviors supplied for the signals it will emit."""
 
     def received(self, name: str) -> bool:
+        """True once plan signal ``name`` arrived (the ``signal('name')`` condition, §5.3)."""
         return name in self.values
 
     def set(self, name: str, value: Any) -> None:
+        """Latch the envelope ``value`` of incoming signal ``name``."""
         self.values[name] = value
 
     def supply(self, name: str, value: Any) -> None:
@@ -118,10 +123,12 @@ class MissionRun:
     # ------------------------------------------------------------------ states
 
     def state_path(self) -> str:
+        """Slash path of the active state (``mission/…/state``); only valid while a state is active."""
         assert self.state is not None
         return f"{self.path}/{self.state.name}"
 
     def enter(self, name: str) -> None:
+        """Enter state ``name`` (MissionError if absent): start its behavior or nested mission, record it."""
         state = self.mission.state(name)
         if state is None:
             raise MissionError(f"mission {self.mission.name!r} has no state {name!r}")
@@ -150,6 +157,7 @@ class MissionRun:
         engine.emit(path, "entry")  # after the behavior's start, which may supply the signal's payload
 
     def exit(self, to: str | None, condition: str | None, reason: str) -> None:
+        """Leave the active state: stop its child and behavior, emit its ``done``/``exit`` signals, record it."""
         if self.state is None:
             return
         if self.child is not None and self.child.outcome is None:
@@ -167,6 +175,7 @@ class MissionRun:
     # ------------------------------------------------------------------ stepping
 
     def step(self) -> None:
+        """One top-down HFSM step (§5.2): try transitions, else step the nested mission or the behavior."""
         if self.outcome is not None or self.state is None:
             return
         if self._try_transitions():
@@ -205,11 +214,13 @@ class MissionRun:
     # ------------------------------------------------------------------ measures
 
     def own_progress(self) -> float:
+        """Progress p of the active state: its nested mission's, else its behavior's, in [0, 1]."""
         if self.child is not None:
             return self.child.progress()
         return max(0.0, min(1.0, self.status.progress))
 
     def progress(self) -> float:
+        """Mission progress (D(initial) − D(s) + p) / D(initial) towards the first final, in [0, 1]."""
         if self.outcome is not None:
             return 1.0 if self.mission.finals and self.outcome == self.mission.finals[0].name else 0.0
         start = self.distance.get(self.mission.initial)
@@ -219,12 +230,15 @@ class MissionRun:
         return max(0.0, min(1.0, (start - here + self.own_progress()) / start))
 
     def leaf(self) -> MissionRun:
+        """The innermost run that has an active state (this one if no nested mission runs)."""
         return self.child.leaf() if self.child is not None and self.child.state is not None else self
 
     def elapsed(self) -> float:
+        """Seconds (engine clock) since the active state was entered."""
         return self.engine.now() - self.entered
 
     def timed_out(self) -> bool:
+        """True when the state's ``timeout`` (or its behavior's ``<Behavior timeout>``) has elapsed."""
         if self.state is None:
             return False
         limit = self.state.timeout
@@ -284,9 +298,11 @@ class MissionEngine:
     # ------------------------------------------------------------------ services for MissionRun
 
     def now(self) -> float:
+        """Seconds on the engine's clock since :meth:`start`."""
         return self.clock() - self._start
 
     def record(self, kind: str, **fields: Any) -> None:
+        """Write one mission-log record if a recorder is attached."""
         if self.recorder is not None:
             self.recorder.write(kind, **fields)
 
@@ -302,6 +318,7 @@ class MissionEngine:
         return transition.condition
 
     def emit(self, path: str, when: str) -> None:
+        """Send the plan signal declared on ``path`` for ``when`` (entry/done/exit), payload type-checked (§5.3)."""
         relative = path.split("/", 1)[1] if "/" in path else path
         name = self.emitters.get((relative, when))
         if name is not None:
@@ -351,15 +368,18 @@ class MissionEngine:
     # ------------------------------------------------------------------ driving
 
     def start(self) -> None:
+        """Start the clock, record ``start`` and enter the top mission's initial state."""
         self._start = self.clock()
         self.record("start", mission=self.record_mission.name, plan=self.plan, wall=time.time())
         self.top.enter(self.record_mission.initial)
 
     @property
     def outcome(self) -> str | None:
+        """Name of the final the top mission ended in, None while it runs."""
         return self.top.outcome
 
     def active_path(self) -> str | None:
+        """Slash path of the innermost active state, None when nothing is active."""
         leaf = self.top.leaf()
         return leaf.state_path() if leaf.state is not None else None
 
@@ -382,6 +402,7 @@ class MissionEngine:
         return self.top.outcome
 
     def stop(self, reason: str = "stopped") -> None:
+        """Abort a running mission: exit every active state with ``reason`` and record ``end``."""
         if self.top.outcome is None and self.top.state is not None:
             self._stopping = True
             self.top.exit(None, None, reason)

@@ -193,6 +193,7 @@ class Event:
     source: str  # FILE:LINE
 
     def get(self, key: str, default: Any = None) -> Any:
+        """The event field ``key``, ``default`` if the record has none."""
         return self.fields.get(key, default)
 
 
@@ -221,6 +222,7 @@ class AgentRun:
 
     @property
     def duration(self) -> float:
+        """Seconds of mission time, :attr:`finish` − :attr:`begin` (never negative)."""
         return max(0.0, self.finish - self.begin)
 
 

@@ -59,9 +59,11 @@ class StateRow:
 
     @property
     def time(self) -> float:
+        """Total seconds the state was active, over all its visits."""
         return sum(self.visits)
 
     def to_json(self) -> dict[str, Any]:
+        """The row as JSON-ready values, rounded to the recording's microsecond resolution."""
         return {  # rounded to the recording's microsecond resolution
             "path": self.path,
             "state": self.state,
@@ -86,6 +88,7 @@ class AgentReport:
     qualities: dict[str, dict[str, float]] = field(default_factory=dict)  # service → measure → mean
 
     def to_json(self) -> dict[str, Any]:
+        """The agent's report (mission, plan, total time, outcome, state rows, qualities) as JSON."""
         return {
             "agent": self.agent,
             "mission": self.mission,
@@ -99,15 +102,19 @@ class AgentReport:
 
 @dataclass
 class Report:
+    """Evaluation of a whole run (Table 7.9) at ``depth`` leaf or top: one :class:`AgentReport` per agent, and notes."""
+
     depth: str
     agents: list[AgentReport] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
     @property
     def rows(self) -> list[StateRow]:
+        """Every agent's state rows, in agent order."""
         return [row for agent in self.agents for row in agent.rows]
 
     def to_json(self) -> dict[str, Any]:
+        """The report as JSON-ready values (what ``ckm-mission report --json`` prints)."""
         return {"depth": self.depth, "agents": [a.to_json() for a in self.agents], "notes": self.notes}
 
 

@@ -47,6 +47,7 @@ class ReportTopics:
     zoom: tuple[str, ...] = ("/nav/zoom", "/env/zoom", "/zoom_map/area")
 
     def wanted(self) -> set[str]:
+        """Every topic the report reads, to load only those from the bags."""
         return {self.estimate, self.fused, *self.truth, *self.recognition, *self.cameras, *self.zoom}
 
 

@@ -54,6 +54,7 @@ class Problems:
 
     @property
     def total(self) -> int:
+        """Number of problems, counting each repeated one as often as it occurred."""
         return sum(p.count for p in self.problems)
 
 

@@ -32,10 +32,12 @@ POSE_GAP = 1.0
 
 
 def png_tag(data: bytes, alt: str) -> str:
+    """An ``<img>`` embedding PNG ``data`` inline (the report is one self-contained file)."""
     return f'<img alt="{escape(alt)}" src="data:image/png;base64,{base64.b64encode(data).decode("ascii")}">'
 
 
 def note(text: str, kind: str = "note") -> str:
+    """A ``<p class=kind>`` paragraph (``note`` or ``error``) saying what a section lacks."""
     return f'<p class="{kind}">{escape(text)}</p>'
 
 

@@ -91,6 +91,7 @@ class NetworkServiceHandle:
     # ------------------------------------------------------------------ ServiceHandle
 
     def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
+        """Send Configure/Require to the service's own instance (§4.3), resent until acknowledged."""
         typed: dict[str, Any] = {}
         known = {p.name: p for p in self.service.parameters}
         for name, raw in parameters.items():
@@ -138,22 +139,27 @@ class NetworkServiceHandle:
             self._config.publish(message)
 
     def output(self, name: str) -> Any:
+        """Newest value the service published on output ``name`` (None before the first)."""
         with self._lock:
             return self._outputs.get(name)
 
     def measures(self) -> dict[str, float]:
+        """Newest value of each quality measure the service reported (§4.2.1.1)."""
         with self._lock:
             return dict(self._measures)
 
     def samples(self, measure: str) -> list[float]:
+        """Recent values of ``measure`` (the service state of eq. 5.1)."""
         with self._lock:
             return list(self._samples.get(measure, ()))
 
     def running(self) -> bool:
+        """True if the service was heard from within ``stale`` seconds."""
         with self._lock:
             return time.monotonic() - self._heard < self.stale
 
     def close(self) -> None:
+        """Stop resending and close every subscription."""
         self._closed.set()
         self._wake.set()
         for subscription in self._subscriptions:

@@ -36,11 +36,13 @@ class Interval:
     high_closed: bool = False
 
     def within(self, other: Interval) -> bool:
+        """True if every value this interval admits is admitted by ``other`` (so ``x > 30`` ⊆ ``x > 10``)."""
         low_ok = self.low > other.low or (self.low == other.low and (other.low_closed or not self.low_closed))
         high_ok = self.high < other.high or (self.high == other.high and (other.high_closed or not self.high_closed))
         return low_ok and high_ok
 
     def empty_with(self, other: Interval) -> bool:
+        """True if no value satisfies both intervals (e.g. ``x < 3 and x > 5``)."""
         # The tighter bound wins: for equal values an open bound is tighter than a closed one.
         low, low_open = max((self.low, not self.low_closed), (other.low, not other.low_closed))
         high, high_closed = min((self.high, self.high_closed), (other.high, other.high_closed))
@@ -53,6 +55,8 @@ Atom = tuple[object, ...]
 
 @dataclass(frozen=True)
 class Literal:
+    """An atom (``Atom``), possibly negated: one factor of a conjunction in the DNF of a condition."""
+
     positive: bool
     atom: Atom
 

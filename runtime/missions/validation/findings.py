@@ -35,9 +35,11 @@ class Finding:
         return f"{self.file}:{self.line}:{self.column}: {self.xpath}: [{self.kind}] {self.message}"
 
     def to_json(self) -> dict[str, object]:
+        """All fields as a JSON-ready dict (the ``--json`` output of ``ckm-mission validate``)."""
         return asdict(self)
 
     def sort_key(self) -> tuple[str, int, int, str, str]:
+        """Order of reporting: by file, line, column, then kind and message."""
         return (self.file, self.line, self.column, self.kind, self.message)
 
 

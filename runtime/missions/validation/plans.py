@@ -60,6 +60,7 @@ class AgentGraph:
     """State node → the behavior it runs."""
 
     def reachable(self, node: str, removed: Sequence[tuple[str, str]] = ()) -> bool:
+        """True if ``node`` can be reached from the start with the ``removed`` edges taken out."""
         graph = self.graph
         if removed:
             graph = self.graph.copy()
@@ -67,6 +68,7 @@ class AgentGraph:
         return node in graph and (node == self.start or nx.has_path(graph, self.start, node))
 
     def can_emit(self, signal: Signal, removed: Sequence[tuple[str, str]] = ()) -> bool:
+        """True if ``signal``'s state is still entered (``entry``) or left (``done``/``exit``) without ``removed``."""
         node = signal.state
         if not self.reachable(node, removed):
             return False

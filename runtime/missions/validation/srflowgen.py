@@ -69,6 +69,7 @@ class VariableFlow:
     record: Record | None = field(default=None, compare=False, repr=False)
 
     def to_json(self) -> dict[str, object]:
+        """The variable's k, P, chains and per-service factors as JSON (``--json`` output)."""
         return {
             "variable": self.name,
             "k": self.k,
@@ -91,13 +92,16 @@ class StateFlow:
 
     @property
     def probability(self) -> float:
+        """The state's P: its weakest variable's (1.0 with no variables), compared to P_min (eq. 5.7)."""
         return min((v.probability for v in self.variables), default=1.0)
 
     @property
     def k(self) -> int:
+        """The state's k: its longest variable chain, compared to K_max (eq. 5.7)."""
         return max((v.k for v in self.variables), default=0)
 
     def to_json(self) -> dict[str, object]:
+        """The state's k, P and variables as JSON."""
         return {
             "mission": self.mission,
             "state": self.state,
@@ -118,9 +122,11 @@ class FlowReport:
     states: tuple[StateFlow, ...]
 
     def state(self, mission: str, state: str) -> StateFlow | None:
+        """The flow of ``state`` in ``mission``, None if it runs no behavior."""
         return next((s for s in self.states if s.mission == mission and s.state == state), None)
 
     def to_json(self) -> dict[str, object]:
+        """The report with its ``<Validation>`` thresholds pMin/kMax, as JSON."""
         return {
             "mission": self.mission,
             "pMin": self.p_min,
