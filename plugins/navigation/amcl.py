@@ -8,7 +8,9 @@ MobileBase.Displacement). Each frame (0.8 s in the use case, Table 7.8):
 2. plan on the Environment's map with the A* planner of plugins/environment (§6.1.2), the robot's
    footprint inflated by ``inflation``: when the goal is set, when the robot strays more than
    ``strayDistance`` from the path, or when scan points fall on the path ahead (they become
-   obstacles of a new plan; the map's own obstacles are at least the inflated radius away);
+   obstacles of a new plan; the map's own obstacles are at least the inflated radius away); those
+   obstacles go when a later beam sees through them or after ``obstacleTimeout`` s unseen (D152),
+   and the robot takes a new plan when that makes the way ``replanGain`` metres shorter;
 3. publish ``pose`` (PoseEstimate: pose, covariance, dispersion), ``status`` (NavStatus) and
    ``path`` (Path2D: the rest of the plan in the odom frame through the current map→odom
    correction, which MobileBase.Displacement follows on odometry until the next frame).
@@ -51,6 +53,7 @@ from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbe
 from .frames import (
     Point,
     Pose,
+    compose,
     inverse,
     mapping,
     parse_pose,
@@ -63,6 +66,7 @@ from .frames import (
     wrap,
 )
 from .localizer import FILTERS, Localizer
+from .obstacles import ScanObstacles
 from .routes import Routes, blocking
 
 INPUTS = ("scan", "odom")
@@ -108,6 +112,11 @@ class AmclNavigation(ProcessingPlugin):
         P("strayDistance", 0.5, "Replan when the robot is this far from the path.", unit="m", above=0.0),
         P("blockLookahead", 1.5, "Scan points on this much of the path ahead block it.", unit="m", above=0.0),
         P("blockPoints", 3, "Scan points on the path ahead that make it blocked.", min=1),
+        P("obstacleTimeout", 30.0, "Forget a scan obstacle not seen again for this long (0: only when seen "
+          "through).", unit="s", min=0.0),
+        P("clearMargin", 0.1, "A beam reaching this far beyond a scan obstacle's point clears it.", unit="m", min=0.0),
+        P("replanGain", 0.2, "After scan obstacles cleared, take a new plan if it is this much shorter.", unit="m",
+          min=0.0),
         P("escape", 0.6, "How far a start inside an inflated obstacle looks for free space.", unit="m", min=0.0),
         P("goalEscape", 0.3, "How far a goal inside an inflated obstacle may move to free space.", unit="m", min=0.0),
         P("seed", 0, "Random seed of the filter.", min=0),
@@ -156,7 +165,8 @@ class AmclNavigation(ProcessingPlugin):
         self.env = env = document.environment
         p = self.params
         footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
-        self.routes = Routes(env, footprint, p["planResolution"], p["escape"], p["goalEscape"])
+        self.routes = Routes(env, footprint, p["planResolution"], p["escape"], p["goalEscape"],
+                             ScanObstacles(margin=p["clearMargin"], timeout=p["obstacleTimeout"]))
         self.model = self.routes.model
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
         self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
@@ -217,14 +227,26 @@ class AmclNavigation(ProcessingPlugin):
         self.plan_length = polyline_length(points)
         self.phase = "active"
 
-    def _blocked(self, pose: Pose, scan: Mapping[str, Any] | None) -> list[Point]:
-        """Scan points within the robot's radius of the next ``blockLookahead`` m of the path."""
-        if scan is None or self.plan is None or self.localizer is None:
+    def _blocked(self, pose: Pose, hits: np.ndarray | None) -> list[Point]:
+        """Scan points (``hits``) within the robot's radius of the next ``blockLookahead`` m of the path."""
+        if hits is None or self.plan is None:
             return []
         self.segment, near, _ = project(self.plan, (pose[0], pose[1]), self.segment)
         p = self.params
-        return blocking(self.plan, self.segment, near, self.localizer.endpoints(scan, pose), p["robotRadius"],
-                        p["blockLookahead"], p["blockPoints"])
+        return blocking(self.plan, self.segment, near, hits, p["robotRadius"], p["blockLookahead"], p["blockPoints"])
+
+    def _shorter(self, pose: Pose) -> None:
+        """Scan obstacles went: take a new plan if it is ``replanGain`` shorter than the rest of this one."""
+        assert self.goal is not None and self.plan is not None
+        self.segment, near, _ = project(self.plan, (pose[0], pose[1]), self.segment)
+        left = remaining_length(self.plan, self.segment, near)
+        try:
+            points = self.routes.plan((pose[0], pose[1]), (self.goal[0], self.goal[1]))
+        except Unreachable:
+            return  # the current plan stays (the next frame checks it as usual)
+        if polyline_length(points) < left - self.params["replanGain"]:
+            self.plan, self.segment, self.path_id = points, 0, self.path_id + 1
+            self.target, self.plan_length = points[-1], polyline_length(points)
 
     # ------------------------------------------------------------------ delegation
 
@@ -240,7 +262,7 @@ class AmclNavigation(ProcessingPlugin):
             "plan": None if self.plan is None else [list(p) for p in self.plan], "segment": self.segment,
             "target": None if self.target is None else list(self.target),
             "path_id": self.path_id, "plan_length": self.plan_length,
-            "extra": self.routes.areas(),
+            "obstacles": self.routes.areas(),
             "unlocalized_since": self.unlocalized_since, "stopped": self.stopped, "settling": self.settling,
             "localizer": self.localizer.state(),
         }
@@ -267,7 +289,7 @@ class AmclNavigation(ProcessingPlugin):
             self.plan_length = float(state["plan_length"])
             self.unlocalized_since, self.stopped = state["unlocalized_since"], bool(state["stopped"])
             self.settling = bool(state.get("settling", False))
-            self.routes.restore(state["extra"])
+            self.routes.restore(state["obstacles"])
             self.localizer.restore(state["localizer"])
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise ValueError(f"{self.owner}: not an amcl-navigation state ({exc})") from None
@@ -312,7 +334,7 @@ class AmclNavigation(ProcessingPlugin):
                 self._unlocalized(now, self._why(estimate, odom_message is not None))
             else:
                 self.unlocalized_since = None
-                self._navigate(pose, scan)
+                self._navigate(pose, scan, now)
         result["status"] = self._status(pose if localized else None)
         result["path"] = self._path()
         return result
@@ -330,7 +352,7 @@ class AmclNavigation(ProcessingPlugin):
         if now - self.unlocalized_since > self.params["localizeTimeout"]:
             self.phase, self.reason = "failed", f"no localization for {self.params['localizeTimeout']:g} s ({why})"
 
-    def _navigate(self, pose: Pose, scan: Mapping[str, Any] | None) -> None:
+    def _navigate(self, pose: Pose, scan: Mapping[str, Any] | None, now: float) -> None:
         assert self.goal is not None
         gyaw = self.goal[2]
         target = self.target or (self.goal[0], self.goal[1])
@@ -343,14 +365,21 @@ class AmclNavigation(ProcessingPlugin):
             else:
                 self.phase = "active"
             return  # (following on, the base would chase the end point each re-anchoring moves: D128)
+        assert self.localizer is not None
+        hits = None if scan is None else self.localizer.endpoints(scan, pose)
+        cleared = 0
+        if scan is not None and hits is not None:
+            cleared = self.routes.forget(scan, compose(pose, self.laser), hits, now)
         if self.plan is not None:
             self.segment, _, off = project(self.plan, (pose[0], pose[1]), self.segment)
-            blocking = self._blocked(pose, scan)
+            blocking = self._blocked(pose, hits)
             if blocking:
-                self.routes.avoid(blocking)
+                self.routes.avoid(blocking, now)
                 self.plan = None
             elif off > self.params["strayDistance"]:
                 self.plan = None
+            elif cleared:
+                self._shorter(pose)
         if self.plan is None:
             self._replan(pose)
 

@@ -7,7 +7,9 @@
   goal inside them (a pose short of an object on a table) is replaced by the nearest free cell
   within ``goal_escape`` metres, so only a goal deeper in (or walled off) is unreachable;
 - scan hits on the path (an obstacle the map does not hold) join the map as avoided areas
-  ("scan obstacle N") until the goal changes: :meth:`Routes.avoid` rebuilds the planner with them.
+  ("scan obstacle N"): :meth:`Routes.avoid` rebuilds the planner with them; :meth:`Routes.forget`
+  drops those later scans see through or do not see again (plugins/navigation/obstacles.py, D152)
+  and rebuilds it without them; a new goal forgets them all.
 
 :func:`blocking` finds those hits: scan endpoints within ``radius`` of the next ``lookahead``
 metres of the path. The map's own obstacles are at least the inflated radius from any planned
@@ -18,19 +20,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import shapely
-from shapely.geometry import MultiPoint, Polygon
 
 from ckmconf.model.environment import AvoidedArea, Environment, Vertex
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import MapModel
 from plugins.environment.planner import Planner, Unreachable
 
-from .frames import Point
+from .frames import Point, Pose
+from .obstacles import ScanObstacles
 
 ESCAPE_TRIES = 20
 """Free cells (nearest first) tried as the way out of an inflated obstacle."""
@@ -40,16 +43,20 @@ class Routes:
     """A* routes for ``footprint`` on ``env``, with the obstacles scans added since the last reset."""
 
     def __init__(
-        self, env: Environment, footprint: Footprint, resolution: float, escape: float, goal_escape: float = 0.0
+        self, env: Environment, footprint: Footprint, resolution: float, escape: float, goal_escape: float = 0.0,
+        obstacles: ScanObstacles | None = None,
     ) -> None:
         self.env, self.footprint, self.resolution, self.escape = env, footprint, resolution, escape
         self.goal_escape = goal_escape
         self.model = MapModel.from_environment(env)
         self.static = self.planner = Planner(self.model, footprint, resolution=resolution)
+        self.obstacles = ScanObstacles() if obstacles is None else obstacles
         self.extra: list[AvoidedArea] = []
+        """The scan obstacles as the planner's avoided areas (rebuilt when they change)."""
 
     def reset(self) -> None:
         """Forget the obstacles scans added (a new goal)."""
+        self.obstacles.clear()
         self.extra, self.planner = [], self.static
 
     def plan(self, here: Point, goal: Point) -> list[Point]:
@@ -90,28 +97,35 @@ class Routes:
         order = [k for k in np.argsort(near)[:ESCAPE_TRIES] if near[k] <= reach]
         return [(float(xy[k, 0]), float(xy[k, 1])) for k in order]
 
-    def avoid(self, points: Sequence[Point]) -> None:
-        """Plan around ``points`` from now on: they join the map as avoided areas (5 cm around each)."""
-        blob = MultiPoint(list(points)).buffer(0.05, quad_segs=4)
-        parts = [blob] if isinstance(blob, Polygon) else list(getattr(blob, "geoms", []))
-        for part in parts:
-            vertices = tuple(Vertex(x=float(x), y=float(y)) for x, y in list(part.exterior.coords)[:-1])
-            self.extra.append(AvoidedArea(name=f"scan obstacle {len(self.extra) + 1}", vertices=vertices))
+    def avoid(self, points: Sequence[Point], now: float = 0.0) -> None:
+        """Plan around ``points`` (seen at ``now``) from now on: they join the map as avoided areas
+        (``merge``, 5 cm, around each)."""
+        self.obstacles.add(points, now)
         self._rebuild()
 
-    def areas(self) -> list[list[list[float]]]:
-        """The added areas' vertices (for a plugin's state)."""
-        return [[[v.x, v.y] for v in area.vertices] for area in self.extra]
+    def forget(self, scan: Mapping[str, Any], laser: Pose, hits: npt.NDArray[np.float64], now: float) -> int:
+        """Drop the scan obstacles ``scan`` (from the laser's map pose ``laser``, endpoints ``hits``)
+        sees through or that went unseen too long (D152); how many points went (the planner rebuilt)."""
+        gone = self.obstacles.update(scan, laser, hits, now)
+        if gone:
+            self._rebuild()
+        return gone
 
-    def restore(self, areas: Sequence[Sequence[Sequence[float]]]) -> None:
-        """The added areas of :meth:`areas`, planned around again."""
-        self.extra = [
-            AvoidedArea(name=f"scan obstacle {i + 1}", vertices=tuple(Vertex(x=float(x), y=float(y)) for x, y in area))
-            for i, area in enumerate(areas)
-        ]
+    def areas(self) -> dict[str, Any]:
+        """The scan obstacles (for a plugin's state)."""
+        return self.obstacles.state()
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """The scan obstacles of :meth:`areas`, planned around again."""
+        self.obstacles.restore(state)
         self._rebuild()
 
     def _rebuild(self) -> None:
+        self.extra = [
+            AvoidedArea(name=f"scan obstacle {i + 1}",
+                        vertices=tuple(Vertex(x=float(x), y=float(y)) for x, y in list(part.exterior.coords)[:-1]))
+            for i, part in enumerate(self.obstacles.shapes())
+        ]
         if not self.extra:
             self.planner = self.static
             return
