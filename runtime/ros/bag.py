@@ -216,6 +216,18 @@ class BagSource:
 
     def messages(self) -> Iterator[BagMessage]:
         """Every message in time order, decoded to CKM payloads, as fast as they can be read."""
+        for topic, msgtype, timestamp, data in self.records():
+            try:
+                payload = from_message(self.types, msgtype, self.types.decode(msgtype, data))
+            except RosTypeError as error:
+                raise BagError(f"{self.path}: {topic} at {timestamp} ns: {error}") from error
+            yield BagMessage(topic, msgtype, timestamp * 1e-9, payload)
+
+    def records(self) -> Iterator[tuple[str, str, int, bytes]]:
+        """Every message in time order as it is stored: (topic, ROS type, time in ns, CDR bytes).
+
+        The types of the selected topics are in :attr:`types` once the first record is yielded
+        (``hardware.bag`` keeps the bytes and decodes a message only when it is played)."""
         with self._reader() as reader:
             connections = [c for c in reader.connections if self.topics is None or c.topic in self.topics]
             missing = sorted((self.topics or frozenset()) - {c.topic for c in reader.connections})
@@ -224,11 +236,7 @@ class BagSource:
             for connection in connections:
                 self._learn(connection)
             for connection, timestamp, data in reader.messages(connections=connections):
-                try:
-                    payload = from_message(self.types, connection.msgtype, self.types.decode(connection.msgtype, data))
-                except RosTypeError as error:
-                    raise BagError(f"{self.path}: {connection.topic} at {timestamp} ns: {error}") from error
-                yield BagMessage(connection.topic, connection.msgtype, timestamp * 1e-9, payload)
+                yield connection.topic, connection.msgtype, timestamp, bytes(data)
 
     def play(
         self,
