@@ -16,7 +16,8 @@ pwm out, joint          duty × ``maxVelocity`` (``mode`` velocity) or × max ef
 analog/bus in, joint    joint position (``mode`` velocity/effort: those), raw = value / scale + offset
 bus in, joints          a tuple of the named joints' positions, each as above
 analog/bus out, joint   joint target (``mode``), value = (raw − offset) × scale; ``mirror``: a second
-                        joint driven alike (the gripper's other finger)
+                        joint driven alike (the gripper's other finger); ``initial``: the raw value the
+                        joint stands at when the robot is spawned (a servo's power-on position)
 digital in, contact     1 while ``link`` touches an obstacle (bumper)
 stream in, lidar        ``size`` ranges (m) over ``fov`` from ``link``
 stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
@@ -73,6 +74,7 @@ _SPEC = Params(
     P("ticksPerRev", 2578.33, "Encoder ticks per wheel turn.", above=0.0),
     P("scale", 1.0, "Joint units per raw unit.", unit="rad"),
     P("offset", 0.0, "Raw value at joint zero."),
+    P("initial", "", "Raw value an out channel's joint(s) stand at when the robot is spawned (position mode)."),
     P("noise", 0.0, "Standard deviation of the noise added to each read.", min=0.0),
     P("fov", 1.0123, "Horizontal field of view (camera, lidar).", unit="rad", above=0.0),
     P("rangeMin", 0.02, "Lidar minimum range.", unit="m", min=0.0),
@@ -108,6 +110,14 @@ class SimBackend(Backend):
             raise ParamError(f"{self.owner}: give Param 'sensor' or 'joint'/'joints' to choose the device")
         if channel.direction == "out" and not v["joint"]:
             raise ParamError(f"{self.owner}: an out channel drives a joint: give Param 'joint'")
+        if v["initial"]:
+            if channel.direction != "out" or v["mode"] != "position":
+                raise ParamError(f"{self.owner}: Param 'initial' places a joint: only for an out channel in mode "
+                                 "'position'")
+            try:
+                v["initial"] = float(v["initial"])
+            except ValueError:
+                raise ParamError(f"{self.owner}: Param 'initial' is {v['initial']!r}, not a number") from None
         here = Path(channel.loc.file) if channel.loc and channel.loc.file != "<memory>" else None
         self.base_dir = here.parent if here else Path.cwd()
         own = str(here.resolve()) if here else ""

@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+import pybullet as p
 
 from ckmconf.model import Environment
 from plugins.hardware.simulation import Clock, SimulationHook
@@ -126,6 +127,17 @@ class ChannelDevice:
         self.robot = sim.robot(v["body"], v.get("model", ""), v.get("pose", ""))
         self.device: Any = self._make()
         self._rng = np.random.default_rng(v.get("seed", 0))
+        if spec.direction == "out" and isinstance(v.get("initial"), int | float):
+            self.place(float(v["initial"]))
+
+    def place(self, raw: float) -> None:
+        """Stand the channel's joint(s) at ``raw`` at once and hold them there (a servo's power-on
+        position): no physics in between, so the robot starts in that posture."""
+        v = self.spec.values
+        angle = (raw - v["offset"]) * v["scale"]
+        for joint in self.device:
+            p.resetJointState(self.robot.body, joint, angle, physicsClientId=self.sim.world.client)
+            self.robot.command(joint, "position", angle)
 
     def _make(self) -> Any:
         v, sensor, robot = self.spec.values, self.spec.values.get("sensor", ""), self.robot
