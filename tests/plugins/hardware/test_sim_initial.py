@@ -42,5 +42,5 @@ def test_a_bad_initial_is_refused_naming_the_channel(direction: str, params: dic
     initial = "folded" if "not a number" in message else "899"
     with pytest.raises(ParamError, match=message) as caught:
         open_all(PlantScope(ManualClock(), name="initial-bad"),
-                 channel("elbow", direction, "bus", body="turtlebot", initial=initial, **params))
+                 channel("elbow", direction, "bus", 1, body="turtlebot", initial=initial, **params))
     assert "sim channel 'elbow'" in str(caught.value)
