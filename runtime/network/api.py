@@ -36,6 +36,7 @@ class TopicQoS:
 
     @classmethod
     def of(cls, topic: Topic) -> TopicQoS:
+        """The QoS of a configuration ``<Topic>`` (TopicType): reliability, history, deadline, lifespan."""
         return cls(topic.name, topic.type, topic.reliability, topic.history, topic.deadline, topic.lifespan)
 
 
@@ -83,6 +84,7 @@ class Subscription:
         self._arrived = threading.Condition(self._lock)
 
     def deliver(self, sample: Sample) -> None:
+        """Store an arrived sample in the history, wake waiters, then call the callback (transport side)."""
         with self._lock:
             self._samples.append(sample)
             self.received += 1
@@ -104,6 +106,7 @@ class Subscription:
         return sample
 
     def history(self) -> list[Sample]:
+        """The last ``history`` samples received, oldest first (lifespan not applied)."""
         with self._lock:
             return list(self._samples)
 
@@ -113,6 +116,7 @@ class Subscription:
             return self._arrived.wait_for(lambda: self.received >= count, timeout)
 
     def close(self) -> None:
+        """Unsubscribe: the transport stops delivering and may withdraw its TOPICLINK."""
         self._on_close(self)
 
 
@@ -134,25 +138,32 @@ class Transport(abc.ABC):
     guid: int = 0
 
     @abc.abstractmethod
-    def setup(self) -> None: ...
+    def setup(self) -> None:
+        """Bind sockets or open the session (no threads yet); raises NetworkError if impossible."""
 
     @abc.abstractmethod
-    def start(self) -> None: ...
+    def start(self) -> None:
+        """Start discovery and the I/O threads; samples flow from here on."""
 
     @abc.abstractmethod
-    def stop(self) -> None: ...
+    def stop(self) -> None:
+        """Say goodbye to the peers, stop the threads and close every socket; idempotent."""
 
     @abc.abstractmethod
-    def publisher(self, qos: TopicQoS) -> Publisher: ...
+    def publisher(self, qos: TopicQoS) -> Publisher:
+        """A publisher for the topic described by ``qos``."""
 
     @abc.abstractmethod
-    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription: ...
+    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        """Subscribe to ``qos.name``; ``callback`` (if any) runs on a transport thread per sample."""
 
     @abc.abstractmethod
-    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None: ...
+    def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        """Call ``callback`` for every network event (peer found/lost, deadline missed, stale dropped)."""
 
     @abc.abstractmethod
-    def peers(self) -> list[int]: ...
+    def peers(self) -> list[int]:
+        """GUIDs of the peers this one can currently reach."""
 
     @abc.abstractmethod
     def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:

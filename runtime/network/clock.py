@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Offset:
+    """One SYNCTIME result: the remote clock minus ours, and the round-trip delay, in seconds."""
+
     offset: float
     delay: float
 
@@ -31,12 +33,14 @@ class ClockSync:
         self._lock = threading.Lock()
 
     def add(self, guid: int, t1: float, t2: float, t3: float, t4: float) -> Offset:
+        """Record one exchange with peer ``guid`` from its four timestamps; returns its offset and delay."""
         sample = Offset(((t2 - t1) + (t3 - t4)) / 2, (t4 - t1) - (t3 - t2))
         with self._lock:
             self._samples.setdefault(guid, deque(maxlen=self._window)).append(sample)
         return sample
 
     def best(self, guid: int) -> Offset | None:
+        """The lowest-delay offset of the recent window (the most trustworthy, NTP's rule), None if none."""
         with self._lock:
             samples = self._samples.get(guid)
             return min(samples, key=lambda s: s.delay) if samples else None
@@ -51,5 +55,6 @@ class ClockSync:
         return remote_time - self.offset(guid)
 
     def forget(self, guid: int) -> None:
+        """Drop a lost peer's samples."""
         with self._lock:
             self._samples.pop(guid, None)

@@ -86,6 +86,7 @@ class Discovery:
         self._last_answer = 0.0
 
     def setup(self) -> None:
+        """Open the multicast socket bound to the group (§3.1.4.2); no threads yet."""
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         if hasattr(socket, "SO_REUSEPORT"):
@@ -103,6 +104,7 @@ class Discovery:
         self._sock = sock
 
     def start(self) -> None:
+        """Start the receive and heartbeat threads and announce this peer (HELLO)."""
         for target, label in ((self._receive_loop, "rx"), (self._beat_loop, "beat")):
             thread = threading.Thread(target=target, name=f"ckm-discovery-{label}", daemon=True)
             thread.start()
@@ -110,6 +112,7 @@ class Discovery:
         self.announce(HELLO)
 
     def stop(self) -> None:
+        """Announce BYE, stop the threads and close the socket."""
         if self._sock is not None and not self._stop.is_set():
             self.announce(BYE)
         self._stop.set()
@@ -119,6 +122,7 @@ class Discovery:
             self._sock.close()
 
     def announce(self, kind: str) -> None:
+        """Send one announcement of ``kind`` (hello, beat, bye) to the group, HMAC-signed with a group key."""
         if self._sock is None:
             return
         with self._lock:

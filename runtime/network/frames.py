@@ -72,11 +72,13 @@ class Authenticator:
         self._seen = 0
 
     def seal(self, direction: bytes, head: bytes, body: bytes) -> bytes:
+        """Trailer for an outgoing frame: next sequence number and HMAC over direction, head and body."""
         self._sent += 1
         sequence = AUTH.pack(self._sent)
         return sequence + self._mac(direction, sequence, head, body)
 
     def check(self, direction: bytes, head: bytes, body: bytes, trailer: bytes) -> int:
+        """Verify a frame's trailer; returns its sequence number, FrameError on bad MAC or replay."""
         sequence, mac = trailer[: AUTH.size], trailer[AUTH.size :]
         if not hmac.compare_digest(mac, self._mac(direction, sequence, head, body)):
             self.rejected += 1
@@ -117,6 +119,7 @@ class Decoder:
         self._buffer = bytearray()
 
     def feed(self, data: bytes) -> Iterator[Frame]:
+        """Append received bytes and yield every frame now complete; FrameError on a violation."""
         self._buffer += data
         while True:
             frame = self._next()
@@ -125,6 +128,7 @@ class Decoder:
             yield frame
 
     def pending(self) -> int:
+        """Bytes buffered towards the next, incomplete frame."""
         return len(self._buffer)
 
     def _next(self) -> Frame | None:

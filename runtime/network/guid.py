@@ -20,5 +20,6 @@ def guid_address(guid: int) -> tuple[str, int]:
 
 
 def guid_text(guid: int) -> str:
+    """``address:port`` of a GUID, for logs and error messages."""
     address, port = guid_address(guid)
     return f"{address}:{port}"

@@ -74,6 +74,7 @@ class Link:
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
+        """Send our HELLO (GUID, name, nonce, protocol) and start the reader thread (§3.1.4.1)."""
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sock.settimeout(SEND_TIMEOUT)  # bounds sendall; reads wait in select
         hello = [self.local_guid, self.local_name, self._nonce, PROTOCOL]
@@ -81,6 +82,7 @@ class Link:
         self._reader.start()
 
     def close(self, reason: str) -> None:
+        """Close the connection once, recording ``reason``, and tell the owner."""
         with self._send_lock:
             if self.state == "closed":
                 return
@@ -92,6 +94,7 @@ class Link:
         self._on_close(self, reason)
 
     def join(self, timeout: float = 2.0) -> None:
+        """Wait up to ``timeout`` s for the reader thread (not from the reader itself)."""
         if self._reader.is_alive() and threading.current_thread() is not self._reader:
             self._reader.join(timeout)
 

@@ -87,6 +87,7 @@ class MultiPeer:
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
+        """Bind the listening port (next ones if busy), derive the GUID and open discovery."""
         net = self.network
         self._server = self._bind(net.interface, net.base_port, net.port_tries)
         self.guid = make_guid(net.interface, self._server.getsockname()[1])
@@ -110,6 +111,7 @@ class MultiPeer:
             raise NetworkError(f"cannot join multicast group {net.group}:{net.discovery_port}: {exc}") from exc
 
     def start(self) -> None:
+        """Start the accept and timer threads, then discovery; links follow the announcements."""
         assert self._server is not None and self._discovery is not None, "call setup() first"
         for target, label in ((self._accept_loop, "accept"), (self._timer_loop, "timer")):
             thread = threading.Thread(target=target, name=f"ckm-{label}", daemon=True)
@@ -118,6 +120,7 @@ class MultiPeer:
         self._discovery.start()
 
     def stop(self) -> None:
+        """Stop discovery, close the server and every link, join the threads; idempotent."""
         if self._stop.is_set():
             return
         self._stop.set()
@@ -173,9 +176,11 @@ class MultiPeer:
         self._listeners.setdefault(kind, []).append(callback)
 
     def on_event(self, callback: Callable[[PeerEvent], None]) -> None:
+        """Call ``callback`` on every peer event (found, linked, unlinked, lost)."""
         self._event_callbacks.append(callback)
 
     def linked(self) -> list[int]:
+        """GUIDs of the peers with a direct link, sorted."""
         with self._lock:
             return sorted(self.links)
 

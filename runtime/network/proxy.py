@@ -70,6 +70,7 @@ class Router:
     # ------------------------------------------------------------------ sending
 
     def send(self, guid: int, kind: FrameType, body: list[Any]) -> bool:
+        """Wrap a frame for ``guid`` in PROXYWRAPPER to its relay; False if no route is known."""
         via = self.routes.get(guid)
         if via is None:
             return False
@@ -78,6 +79,7 @@ class Router:
     # ------------------------------------------------------------------ receiving
 
     def handle(self, sender: int, frame: Frame) -> None:
+        """Take a PROXYWRAPPER frame from ``sender``: a route list, or a frame to forward or deliver."""
         body = frame.body
         if len(body) == 2 and body[0] == "route" and isinstance(body[1], list):
             entries = {

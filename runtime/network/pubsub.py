@@ -43,27 +43,33 @@ class MultiPeerTransport(SubscriptionTable, Transport):
 
     @property
     def guid(self) -> int:  # type: ignore[override]
+        """This peer's GUID (§3.1.4.1), known after :meth:`setup`."""
         return self.peer.guid
 
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
+        """Bind the peer's sockets (:meth:`MultiPeer.setup`)."""
         self.peer.setup()
 
     def start(self) -> None:
+        """Start the peer and the deadline watchdog."""
         self.peer.start()
         self._deadlines.start()
 
     def stop(self) -> None:
+        """Stop the deadline watchdog and the peer."""
         self._deadlines.stop()
         self.peer.stop()
 
     # ------------------------------------------------------------------ API
 
     def publisher(self, qos: TopicQoS) -> Publisher:
+        """A publisher sending locally and as TOPICDATA to the subscribed peers only."""
         return Publisher(qos, self._publish)
 
     def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        """Subscribe locally; the first subscription of a topic announces it in TOPICLINKS."""
         subscription = Subscription(qos, callback, self._unsubscribe)
         with self._lock:
             first = not self._subs.get(qos.name)
@@ -73,12 +79,15 @@ class MultiPeerTransport(SubscriptionTable, Transport):
         return subscription
 
     def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        """Call ``callback`` for every network event."""
         self._callbacks.append(callback)
 
     def peers(self) -> list[int]:
+        """Peers reachable directly or through a relay (PROXYWRAPPER)."""
         return self.peer.reachable()
 
     def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        """Wait up to ``timeout`` s until ``count`` remote peers subscribe ``topic``."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if len(self._remote_subs.get(topic, ())) >= count:

@@ -62,6 +62,7 @@ def deliver(subscribers: list[Subscription], sample: Sample, emit: Callable[[Net
 
 
 def stale_event(sample: Sample) -> NetworkEvent:
+    """The ``stale-dropped`` event for a sample older than its topic's lifespan."""
     return NetworkEvent("stale-dropped", sample.source, sample.topic, f"sample {sample.seq} is {sample.age:.3f} s old")
 
 
@@ -77,9 +78,11 @@ class DeadlineWatchdog:
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
     def start(self) -> None:
+        """Start the watchdog thread."""
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop the watchdog thread and wait for it (not from itself)."""
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=2)

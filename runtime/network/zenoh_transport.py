@@ -153,6 +153,7 @@ class ZenohTransport(SubscriptionTable, Transport):
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
+        """Open the Zenoh session (NetworkError if impossible) and derive the GUID from its id."""
         try:
             session = zenoh.open(zenoh_config(self.network))
         except zenoh.ZError as exc:  # no router to connect to, port taken…
@@ -167,6 +168,7 @@ class ZenohTransport(SubscriptionTable, Transport):
             self._sync_topic(topic)
 
     def start(self) -> None:
+        """Watch peer and subscriber liveliness tokens, declare ours, start the deadline watchdog."""
         session = self._session
         assert session is not None, "call setup() first"
         liveliness = session.liveliness()
@@ -178,6 +180,7 @@ class ZenohTransport(SubscriptionTable, Transport):
         self._deadlines.start()
 
     def stop(self) -> None:
+        """Undeclare every entity and close the session; idempotent."""
         with self._lock:
             if self._stopped:
                 return
@@ -204,11 +207,13 @@ class ZenohTransport(SubscriptionTable, Transport):
     # ------------------------------------------------------------------ API
 
     def publisher(self, qos: TopicQoS) -> Publisher:
+        """A publisher on the topic's key expression (a bad name is refused here)."""
         if qos.name != EVENTS_TOPIC:
             key_expr(qos.name)  # refuse a bad name now, not at the first publish
         return Publisher(qos, self._publish)
 
     def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        """Subscribe to ``qos.name``; the Zenoh subscriber and token follow the local subscriptions."""
         if qos.name != EVENTS_TOPIC:
             key_expr(qos.name)
         subscription = Subscription(qos, callback, self._unsubscribe)
@@ -218,13 +223,16 @@ class ZenohTransport(SubscriptionTable, Transport):
         return subscription
 
     def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        """Call ``callback`` for every network event."""
         self._callbacks.append(callback)
 
     def peers(self) -> list[int]:
+        """GUIDs of the transports whose liveliness token is present."""
         with self._lock:
             return sorted(self._peers)
 
     def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        """Wait up to ``timeout`` s until ``count`` remote subscribers of ``topic`` appear."""
         key = key_expr(topic)
         with self._changed:
             return self._changed.wait_for(lambda: len(self._remote_subs.get(key, ())) >= count, timeout)
