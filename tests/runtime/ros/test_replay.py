@@ -13,6 +13,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from rosbags.rosbag2 import Reader
@@ -81,7 +82,8 @@ def _values(bag: Path, topic: str) -> list[float]:
     with Reader(bag) as reader:
         connections = [c for c in reader.connections if c.topic == topic]
         assert connections, f"{bag} has no topic {topic}"
-        return [store.deserialize_cdr(data, c.msgtype).data for c, _, data in reader.messages(connections)]
+        messages: list[Any] = [store.deserialize_cdr(data, c.msgtype) for c, _, data in reader.messages(connections)]
+    return [float(m.data) for m in messages]
 
 
 @pytest.mark.timeout(120)
