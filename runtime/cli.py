@@ -30,35 +30,30 @@ import argparse
 import contextlib
 import logging
 import os
-import signal
 import socket
 import sys
 import threading
 import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from ckmconf import ConfigError, load
-from ckmconf.model import Network, Node, Partition, System
+from ckmconf.model import Node, Partition, System
 
 from . import simtime
 from .distribution import NAME, run_agent
-from .kernel.node import NodeRuntime
-from .kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervisor, enter_partition
+from .host import Host, stop_on_signals
+from .host_network import JoinError
+from .kernel.partitions import MEMORY_EXIT, MemoryWatch, enter_partition
 from .kernel.runlog import RunLog
 from .missions.agent import AgentRunner
-from .network import Transport, open_transport, read_group_key
-from .network.api import GroupKeyError
-from .network.multipeer import NetworkError
+from .network import Transport
 from .ros.recording import RECORD_FORMATS, RecordingError, RunRecorder
 from .runrecord import EXIT_AGENTS as EXIT_AGENTS  # the exit codes, re-exported for callers
 from .runrecord import EXIT_CONFIG as EXIT_CONFIG
 from .runrecord import EXIT_FAILED as EXIT_FAILED
 from .runrecord import EXIT_NETWORK as EXIT_NETWORK
-from .runrecord import keep_statistics as _keep_statistics  # the name _run calls it by
-from .sessions import HardwareSessions
 from .verification.verify import verify_or_report
 
 LOG = logging.getLogger("ckm.run")
@@ -183,18 +178,6 @@ def _await_config(parser: argparse.ArgumentParser, args: argparse.Namespace) -> 
         return run_agent(Path(args.config) if args.config else None, name, run_dir, args.duration)
 
 
-def _runtime(
-    node: Node, system: System, transport: Transport, config: Path, run_dir: Path, several: bool
-) -> NodeRuntime:
-    """The node's runtime here: all of it, or, for a node with partitions, its unpartitioned part
-    and the monitor, with a supervisor for the partition processes."""
-    if not node.partitions:
-        return NodeRuntime(node, system, transport)
-    runtime = NodeRuntime(node, system, transport, partition="")
-    runtime.partitions = PartitionSupervisor(node, config, run_dir / node.name if several else run_dir, runtime.report)
-    return runtime
-
-
 def _run(
     system: System,
     config: Path,
@@ -206,29 +189,14 @@ def _run(
     plan: str | None = None,
     recorder: RunRecorder | None = None,
 ) -> int:
-    run_dir = run_log.run_dir
-    network = system.network or Network()
+    host = Host(system, config, run_log.run_dir)
     try:
-        key = read_group_key(network, config.parent)
-        transport = open_transport(network, name=name, key=key)
-        transport.on_event(lambda event: _network_event(run_log, event))
-        transport.setup()
-    except (GroupKeyError, NetworkError, OSError, ValueError) as exc:
-        print(f"{config}: cannot join the network: {exc}", file=sys.stderr)
+        transport = host.join(name, lambda event: _network_event(run_log, event))
+    except JoinError as exc:
+        print(f"{config}: {exc}", file=sys.stderr)
         return EXIT_NETWORK
-    stop = threading.Event()
-    code = 0
-
-    def on_signal(signum: int, _frame: FrameType | None) -> None:
-        LOG.info("signal %s: stopping", signal.Signals(signum).name)
-        stop.set()
-
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
-    runtimes: list[NodeRuntime] = []
-    supervisors: list[PartitionSupervisor] = []
     agents: list[_Agent] = []
     memory: MemoryWatch | None = None
-    started = time.time()
 
     def extra() -> dict[str, Any]:
         record = {"recording": recorder.statistics()} if recorder is not None else {}
@@ -236,87 +204,49 @@ def _run(
             return record
         return {"partition": partition.name, "memory": memory.statistics() if memory else None, **record}
 
-    def session_failed(message: str) -> None:  # a backend's run-wide session (the sim world server) broke
-        nonlocal code
-        print(f"{config}: {message}", file=sys.stderr)
-        LOG.error("%s", message)
-        code = EXIT_FAILED
-        stop.set()
+    if recorder is not None:  # after the nodes' last samples, before the transport goes
+        host.on_stop("finish the recording", recorder.stop)
+    with stop_on_signals(host.stopping):
+        try:
+            host.start_sessions(nodes)  # before any node is built or partition started (runtime.sessions)
+            transport.start()
+            if recorder is not None:  # subscribed before any node publishes
+                recorder.start(transport)
+            for node in nodes:
+                host.build(node, transport, partition=partition, several=len(nodes) > 1, sinks=[run_log.event])
+            host.start()
+            if partition is not None:  # its memory budget counts from the runtime it started with
 
-    sessions = HardwareSessions(system, config, run_dir, nodes, session_failed)
-    try:
-        sessions.start()  # before any node or partition is built (runtime.sessions)
-        transport.start()
-        if recorder is not None:  # subscribed before any node publishes
-            recorder.start(transport)
-        for node in nodes:
-            if partition is not None:
-                runtime = NodeRuntime(node, system, transport, partition=partition.name)
-            else:
-                runtime = _runtime(node, system, transport, config, run_dir, len(nodes) > 1)
-            runtime.event_sinks.append(run_log.event)
-            runtime.setup()
-            runtimes.append(runtime)
-        for runtime in runtimes:
-            runtime.start()
-        supervisors = [r.partitions for r in runtimes if r.partitions is not None]
-        for supervisor in supervisors:
-            supervisor.start()
-        if partition is not None:  # its memory budget counts from the runtime it started with
+                def over_budget(used: int, limit: int) -> None:
+                    LOG.error("partition %s: %d MiB over its memory budget: stopping", partition.name,
+                              (used - limit) >> 20)
+                    host.fail(MEMORY_EXIT)
 
-            def over_budget(used: int, limit: int) -> None:
-                nonlocal code
-                LOG.error("partition %s: %d MiB over its memory budget: stopping", partition.name, (used - limit) >> 20)
-                code = MEMORY_EXIT
-                stop.set()
-
-            memory = MemoryWatch(partition, over_budget)
-        LOG.info("running %s (%d node(s)) for %s", system.name, len(runtimes), duration or "ever")
-        agents = _start_agents(system, plan, nodes, transport, run_dir) if plan and partition is None else []
-        deadline = None if duration is None else time.monotonic() + duration
-        next_stats = time.monotonic() + STATS_EVERY
-        while not stop.is_set() and not (agents and all(not a.thread.is_alive() for a in agents)):
-            remaining = None if deadline is None else deadline - time.monotonic()
-            if remaining is not None and remaining <= 0:
-                break
-            stop.wait(0.1 if remaining is None else min(0.1, remaining))
-            if time.monotonic() >= next_stats:  # kept current: a SIGKILL loses at most STATS_EVERY
-                next_stats = time.monotonic() + STATS_EVERY
-                _keep_statistics(run_log, config, system, runtimes, started, extra())
-        for agent in agents:
-            agent.runner.stop()
-            agent.thread.join(5.0)
-    except ConfigError as error:
-        print(error, file=sys.stderr)
-        return EXIT_CONFIG
-    except Exception as exc:  # a backend's own failure at set-up: reported, never a traceback
-        LOG.exception("%s: the run failed", name)
-        print(f"{config}: {name}: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return EXIT_FAILED
-    finally:
-        for supervisor in supervisors:  # the partitions stop first, their actuators safe
-            _isolated(f"stop the partitions of {supervisor.node.name}", supervisor.stop)
-        for runtime in reversed(runtimes):
-            _isolated(f"stop node {runtime.node.name}", runtime.stop)
-        if recorder is not None:  # after the nodes' last samples, before the transport goes
-            _isolated("finish the recording", recorder.stop)
-        _isolated("stop the transport", transport.stop)
-        _isolated("end the hardware sessions", sessions.stop)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        _keep_statistics(run_log, config, system, runtimes, started, extra())
+                memory = MemoryWatch(partition, over_budget)
+            LOG.info("running %s (%d node(s)) for %s", system.name, len(host.runtimes), duration or "ever")
+            if plan and partition is None:
+                agents = _start_agents(system, plan, nodes, transport, run_log.run_dir)
+            # kept current: a SIGKILL loses at most STATS_EVERY
+            keep = (STATS_EVERY, lambda: host.keep_statistics(run_log, extra()))
+            host.wait(duration, done=lambda: bool(agents) and all(not a.thread.is_alive() for a in agents), every=keep)
+            for agent in agents:
+                agent.runner.stop()
+                agent.thread.join(5.0)
+        except ConfigError as error:
+            print(error, file=sys.stderr)
+            return EXIT_CONFIG
+        except Exception as exc:  # a backend's own failure at set-up: reported, never a traceback
+            LOG.exception("%s: the run failed", name)
+            print(f"{config}: {name}: {type(exc).__name__}: {exc}", file=sys.stderr)
+            return EXIT_FAILED
+        finally:
+            host.stop()  # the partitions, the nodes (actuators safe), the recording, the transport, the sessions
+            host.keep_statistics(run_log, extra())
+    recorded = []
     if recorder is not None and recorder.failure is not None:  # watched like a task: stderr and the exit code
         print(f"{config}: {recorder.failure}", file=sys.stderr)
-        code = min(code, EXIT_FAILED) if code else EXIT_FAILED
-    return _verdict(code, runtimes, agents)
-
-
-def _isolated(what: str, action: Any) -> None:
-    """One stop step: a failure is logged, and the next step still runs."""
-    try:
-        action()
-    except Exception:
-        LOG.exception("could not %s", what)
+        recorded.append(EXIT_FAILED)
+    return _verdict(host.failures() + recorded, agents)
 
 
 def _network_event(run_log: RunLog, event: Any) -> None:
@@ -331,26 +261,9 @@ def _network_event(run_log: RunLog, event: Any) -> None:
         LOG.info("network: %s %s %s", event.kind, event.peer, event.detail)
 
 
-def _verdict(code: int, runtimes: list[NodeRuntime], agents: list[_Agent]) -> int:
-    """The exit code, with the first error of everything that failed printed on stderr (issue G)."""
-    codes = [code] if code else []
-    for runtime in runtimes:
-        for partition, error in runtime.partitions.failures() if runtime.partitions is not None else []:
-            print(f"{error}  [node {runtime.node.name}, partition {partition}]", file=sys.stderr)
-            LOG.error("node %s: partition %s failed: %s", runtime.node.name, partition, error)
-            codes.append(EXIT_FAILED)
-        serious = runtime.log.serious
-        if serious is not None:  # the configuration calls this alarm an error: the run broke (D147)
-            message = (f"alarm {serious['alarm']} ({serious['severity']}) raised {runtime.log.serious_count} "
-                       f"time(s), first: {serious['measure']} = {serious['value']}")
-            print(f"{runtime.node.name}: {message}", file=sys.stderr)
-            LOG.error("node %s: %s", runtime.node.name, message)
-            codes.append(EXIT_FAILED)
-        for task, figures in (runtime.statistics().get("tasks") or {}).items():
-            if figures.get("failures"):
-                message = f"task {task} failed {figures['failures']} time(s), first: {figures.get('first_failure')}"
-                print(f"{runtime.node.name}: {message}", file=sys.stderr)
-                codes.append(EXIT_FAILED)
+def _verdict(codes: list[int], agents: list[_Agent]) -> int:
+    """The exit code: the lowest of the host's failures (``codes``, already on stderr) and of the
+    plan's agents, whose first error is printed here (issue G)."""
     for agent in agents:
         outcome = agent.outcome or "stopped"
         succeeded = agent.error is None and agent.runner.succeeded

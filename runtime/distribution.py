@@ -16,7 +16,6 @@ import logging
 import os
 import queue
 import shutil
-import signal
 import socket
 import sys
 import threading
@@ -24,7 +23,6 @@ import time
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from ckmconf import ConfigError, load
@@ -43,12 +41,12 @@ from .distribution_protocol import (
     parse_push,
 )
 from .distribution_staging import ScopedTransport, build_node, describe_error
+from .host import Host, stop_on_signals, wait_for_stop
+from .host_network import JoinError, join
 from .kernel.node import NodeRuntime
-from .network import open_transport, read_group_key
-from .network.api import GroupKeyError, Sample, Subscription, TopicQoS, Transport
-from .network.multipeer import NetworkError
+from .network.api import Sample, Subscription, TopicQoS, Transport
 from .registry import Registry
-from .runrecord import EXIT_NETWORK, write_run
+from .runrecord import EXIT_NETWORK
 
 LOG = logging.getLogger("ckm.distribution")
 
@@ -70,12 +68,15 @@ __all__ = [  # the protocol's names stay importable from here, where they were f
 
 @dataclass
 class _Running:
+    host: Host  # the node's objects, its scoped transport, its run record in ``directory``
     runtime: NodeRuntime
     scoped: ScopedTransport
-    system: System
     push: Push
     directory: Path
-    started: float
+
+    @property
+    def system(self) -> System:
+        return self.host.system
 
 
 class ConfigAgent:
@@ -232,7 +233,7 @@ class ConfigAgent:
     def _install(self, push: Push) -> dict[str, Any]:
         directory = self._write(push)
         try:
-            runtime, scoped, system = build_node(push, directory, self.transport, self.registry)
+            host, runtime, scoped = build_node(push, directory, self.transport, self.registry)
         except Refused:
             shutil.rmtree(directory, ignore_errors=True)  # the errors are in the answer and the log
             raise
@@ -242,19 +243,19 @@ class ConfigAgent:
             self._retire(old)  # the old node stops, its actuators safe, before the new one acts
         scoped.start()
         try:
-            runtime.start()
+            host.start()
         except Exception as exc:
-            runtime.stop()
-            scoped.stop()
+            host.stop()  # the node, then its scoped transport
             errors = [f"{push.node} failed to start: {describe_error(exc, directory)}"]
             with self._lock:
                 self.status, self.errors = "failed", errors
             LOG.exception("agent %s: node %s failed to start", self.name, push.node)
             return self._answer(push.id, False, push.hash, push.node, errors)
+        host.started = time.time()  # its run record counts from here
         with self._lock:
-            self.current = _Running(runtime, scoped, system, push, directory, time.time())
+            self.current = _Running(host, runtime, scoped, push, directory)
             self.status, self.errors = "running", []
-        LOG.info("agent %s runs node %s of %s (%s)", self.name, push.node, system.name, push.hash[:12])
+        LOG.info("agent %s runs node %s of %s (%s)", self.name, push.node, host.system.name, push.hash[:12])
         return self._answer(push.id, True, push.hash, push.node, [])
 
     def _write(self, push: Push) -> Path:
@@ -276,16 +277,11 @@ class ConfigAgent:
 
     def _retire(self, running: _Running) -> None:
         """Stop a running node, actuators safe, and record its run in its directory; never raises."""
-        running.scoped.open.clear()
-        try:
-            running.runtime.stop()
-        except Exception:
-            LOG.exception("agent %s: node %s did not stop cleanly", self.name, running.push.node)
-        running.scoped.stop()
-        main = running.directory / running.push.main
+        running.scoped.open.clear()  # no command reaches it while it stops
+        running.host.stop()  # the node (bounded), then its scoped transport
         extra = {"agent": self.name, "hash": running.push.hash}
         try:
-            write_run(running.directory, main, running.system, [running.runtime], running.started, extra)
+            running.host.write_run(extra)
         except OSError:
             LOG.exception("agent %s: cannot record the run of %s", self.name, running.push.node)
         LOG.info("agent %s stopped node %s (%s)", self.name, running.push.node, running.push.hash[:12])
@@ -293,38 +289,28 @@ class ConfigAgent:
 
 def run_agent(network_file: Path | None, name: str, run_dir: Path, duration: float | None = None) -> int:
     """``ckm-run --await-config [NETWORK.xml] --name NAME``: join, announce, apply pushes until a
-    signal (or ``duration``); exit 0 on a clean stop, 1 for a bad network file, 2 if the network
-    cannot be joined."""
-    network, key = Network(), None
+    signal (or ``duration``); exit 0 on a clean stop, 1 for a bad network file, 4 (EXIT_NETWORK)
+    if the network cannot be joined."""
+    network = Network()
     try:
         if network_file is not None:
             network = load(network_file).network or Network()
-            key = read_group_key(network, network_file.parent)
-        transport = open_transport(network, name=name, key=key)
-        transport.setup()
+        key_dir = network_file.parent if network_file is not None else None
+        transport = join(network, name, key_dir=key_dir)  # no key without a bootstrap file
     except ConfigError as error:
         print(error, file=sys.stderr)
         return 1
-    except (GroupKeyError, NetworkError, OSError, ValueError) as exc:
-        print(f"{network_file or 'default network'}: cannot join the network: {exc}", file=sys.stderr)
+    except JoinError as exc:
+        print(f"{network_file or 'default network'}: {exc}", file=sys.stderr)
         return EXIT_NETWORK
     stop = threading.Event()
-
-    def on_signal(signum: int, _frame: FrameType | None) -> None:
-        LOG.info("signal %s: stopping", signal.Signals(signum).name)
-        stop.set()
-
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
-    agent = ConfigAgent(name, transport, run_dir)
-    try:
-        transport.start()
-        agent.start()
-        deadline = None if duration is None else time.monotonic() + duration
-        while not stop.is_set() and (deadline is None or time.monotonic() < deadline):
-            stop.wait(0.1)
-    finally:
-        agent.stop()
-        transport.stop()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    with stop_on_signals(stop):
+        agent = ConfigAgent(name, transport, run_dir)
+        try:
+            transport.start()
+            agent.start()
+            wait_for_stop(stop, duration)
+        finally:
+            agent.stop()
+            transport.stop()
     return 0

@@ -1,29 +1,27 @@
 """Staging a pushed configuration (§3.1.5.2): its node built beside the one the agent runs.
 
 The configuration agent (:mod:`runtime.distribution`) stores each accepted bundle in a fresh
-directory; :func:`build_node` loads it (every problem collected) and builds and sets up its node on a
-:class:`ScopedTransport`, a view of the agent's transport whose subscriptions stay muted until
-the new node takes over and are all closed when it goes. Until then the running node is
-untouched, so a bundle that fails anywhere here is refused and the old node keeps running.
+directory; :func:`build_node` loads it (every problem collected) and has a
+:class:`~runtime.host.Host` build and set up its node on a :class:`ScopedTransport`, a view of
+the agent's transport whose subscriptions stay muted until the new node takes over and are all
+closed when it goes. Until then the running node is untouched, so a bundle that fails anywhere
+here is refused and the old node keeps running.
 """
 
 from __future__ import annotations
 
-import logging
 import os
 import threading
 from collections.abc import Callable
 from pathlib import Path
 
 from ckmconf import ConfigError, load
-from ckmconf.model import System
 
 from .distribution_protocol import Push, Refused
+from .host import Host
 from .kernel.node import NodeRuntime
 from .network.api import NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .registry import Registry
-
-LOG = logging.getLogger("ckm.distribution")
 
 
 class ScopedTransport(Transport):
@@ -78,12 +76,13 @@ class ScopedTransport(Transport):
 
 def build_node(
     push: Push, directory: Path, transport: Transport, registry: Registry | None
-) -> tuple[NodeRuntime, ScopedTransport, System]:
+) -> tuple[Host, NodeRuntime, ScopedTransport]:
     """Load the stored bundle and build and set up its node beside the running one.
 
     Refused (with every problem, paths relative to the bundle) when the bundle does not load,
     an include leads out of it, the node is missing or partitioned, or the node's set-up fails;
-    what a failed set-up opened is closed again without driving any actuator.
+    what a failed set-up opened is closed again without driving any actuator (:meth:`Host.build`).
+    The node's :class:`~runtime.host.Host` stops it, then its scoped transport.
     """
     result = load(directory / push.main, strict=False)
     root = directory.resolve()
@@ -100,30 +99,14 @@ def build_node(
     if node.partitions:
         raise Refused(f"node {push.node!r} has partitions: run it with ckm-run --node, not through an agent")
     scoped = ScopedTransport(transport)
-    runtime: NodeRuntime | None = None
+    host = Host(system, directory / push.main, directory, registry=registry)
+    host.transport = scoped  # the agent owns the real transport; the host closes this view of it
     try:
-        runtime = NodeRuntime(node, system, scoped, registry=registry)
-        runtime.setup()
+        runtime = host.build(node, scoped)
     except Exception as exc:  # any error, a plugin's included: the old node keeps running
-        if runtime is not None:
-            discard(runtime)
         scoped.stop()
         raise Refused(describe_error(exc, directory)) from None
-    return runtime, scoped, system
-
-
-def discard(runtime: NodeRuntime) -> None:
-    """Undo a setup that never ran: close what it opened without driving any actuator."""
-    for resource in runtime.resources.values():
-        try:
-            resource.stop()
-        except Exception:
-            LOG.exception("could not stop Smart Resource %s", resource.resource.name)
-    for backend in runtime.backends.values():
-        try:
-            backend.stop()
-        except Exception:
-            LOG.exception("could not close a backend of %s", runtime.node.name)
+    return host, runtime, scoped
 
 
 def describe_error(error: BaseException, directory: Path) -> str:
