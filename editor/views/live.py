@@ -11,7 +11,8 @@ confirmed, or the errors the agent refused it with.
 
 Monitor: every topic of the system with its rate, every service announced on ``/ckm/services``
 with its active scenario, measures and last alarm, and each plan agent's active state — which the
-mission canvas highlights when it shows that mission.
+mission canvas highlights when it shows that mission; beside them, for a simulation, the live map
+and camera images of editor/views/sim_map.py.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from PySide6.QtWidgets import (
     QHBoxLayout,
     QLabel,
     QPushButton,
+    QSplitter,
     QTableWidget,
     QTableWidgetItem,
     QVBoxLayout,
@@ -41,6 +43,7 @@ from runtime.network import Sample, TopicQoS, Transport, open_transport, read_gr
 from runtime.resources.api import DIRECTORY_TOPIC
 
 from ..distribution import Ack, AgentDirectory, distribute
+from .sim_map import SimLivePanel
 
 
 def open_network(system: System | None, base: Path, network: Network | None = None) -> Transport:
@@ -172,11 +175,18 @@ class MonitorPanel(QWidget):
         self.topics_table = _table(["topic", "messages/s", "total"])
         self.services_table = _table(["service", "scenario", "measures", "alarm"])
         self.agents_table = _table(["agent", "active state", "mission progress"])
-        layout = QVBoxLayout(self)
+        tables = QWidget()
+        layout = QVBoxLayout(tables)
         for title, table in (("Topics", self.topics_table), ("Services", self.services_table),
                              ("Mission states", self.agents_table)):  # fmt: skip
             layout.addWidget(QLabel(title))
             layout.addWidget(table)
+        self.live = SimLivePanel()  # the map, the robots, the recognised objects and the cameras
+        split = QSplitter()
+        split.addWidget(tables)
+        split.addWidget(self.live)
+        split.setSizes([450, 750])
+        QVBoxLayout(self).addWidget(split)
         self._lock = threading.Lock()
         self.arrivals: dict[str, collections.deque[float]] = {}
         self.totals: dict[str, int] = collections.Counter()
@@ -197,6 +207,7 @@ class MonitorPanel(QWidget):
         for plan in system.plans if system is not None else ():
             qos = TopicQoS(f"/plan/{plan.name}/agents", "ckm/agent-heartbeat", history=8)
             self._subscribe(transport, qos, self._on_beat)
+        self.live.start(system, transport)
         self.timer.start(500)
 
     def _subscribe(self, transport: Transport, qos: TopicQoS, callback: Callable[[Sample], None]) -> None:
@@ -263,6 +274,7 @@ class MonitorPanel(QWidget):
         _fill(self.topics_table, topics)
         _fill(self.services_table, services)
         _fill(self.agents_table, [[a, s or "—", f"{progress.get(a, 0.0):.0%}"] for a, s in sorted(states.items())])
+        self.live.refresh()
         if self.on_state is not None:
             for agent, state in states.items():
                 self.on_state(agent, state)

@@ -1,0 +1,174 @@
+"""The newest values of the live views' topics (issue K.5), filled on the transport's threads.
+
+Network callbacks only store what arrived, under a lock; the Monitor tab's Qt timer takes a
+:class:`Snapshot` and redraws from it (the same split as editor/views/live.py). Images are kept as
+they arrived and turned into pixels at most once each, on the GUI thread.
+
+The zoom-map area (§6.1.3) is the newest one a zoom topic carried; when the system publishes none
+(the use case), it is replayed from the pose estimate with the ``<ZoomMap>`` triggers of
+plugins/environment/zoom.py — centred on the robot at the first estimate, again when the robot comes
+within ``border`` × the size of the area's edge, and after ``timeout`` s — at its fixed size (D160).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ckmconf.model.environment import ZoomMap
+from runtime.network import Sample
+
+from .sim_feeds import FeedError, Feeds, Seen, covariance_of, objects_of, particles_of, plain, pose_of, zoom_of
+
+Pose = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Zoom:
+    """A zoom-map area: centre, size, and whether it was replayed rather than published."""
+
+    x: float
+    y: float
+    width: float
+    depth: float
+    replayed: bool
+
+
+@dataclass
+class Snapshot:
+    """What the views draw, as of one refresh."""
+
+    truth: dict[str, Pose] = field(default_factory=dict)
+    estimate: dict[str, Pose] = field(default_factory=dict)
+    covariance: dict[str, np.ndarray] = field(default_factory=dict)
+    particles: np.ndarray | None = None
+    zoom: Zoom | None = None
+    objects: list[Seen] = field(default_factory=list)
+    images: dict[str, tuple[int, Any]] = field(default_factory=dict)  # topic → (frames so far, newest)
+    errors: dict[str, str] = field(default_factory=dict)  # topic → the last unreadable message
+
+
+class LiveState:
+    """The newest sample of every topic of ``feeds``, turned into what the map draws."""
+
+    def __init__(self, feeds: Feeds, zoom: ZoomMap | None = None) -> None:
+        self.feeds = feeds
+        self.settings = zoom
+        self._lock = threading.Lock()
+        self._now = Snapshot()
+        self._zoom_stamp = 0.0
+        self._by_topic: dict[str, list[Seen]] = {}
+        self._frames: dict[str, int] = {}
+
+    def handlers(self) -> dict[str, Callable[[Sample], None]]:
+        """One callback per topic to subscribe (a topic feeding several roles gets one that does all)."""
+        roles: dict[str, list[Callable[[str, Any, float], None]]] = {}
+        for robot in self.feeds.robots:
+            if robot.truth is not None:
+                roles.setdefault(robot.truth, []).append(self._truth(robot.name))
+            for topic in robot.estimates:
+                roles.setdefault(topic, []).append(self._estimate(robot.name))
+        for topic in self.feeds.objects:
+            roles.setdefault(topic, []).append(self._objects)
+        for topic in self.feeds.cameras:
+            roles.setdefault(topic, []).append(self._image)
+        for topic in self.feeds.zoom:
+            roles.setdefault(topic, []).append(self._zoom)
+        for topic in self.feeds.particles:
+            roles.setdefault(topic, []).append(self._particles)
+        return {topic: self._handler(topic, jobs) for topic, jobs in roles.items()}
+
+    def _handler(self, topic: str, jobs: list[Callable[[str, Any, float], None]]) -> Callable[[Sample], None]:
+        def arrived(sample: Sample) -> None:
+            try:
+                value = plain(sample.value)
+            except FeedError as exc:
+                with self._lock:
+                    self._now.errors[topic] = str(exc)
+                return
+            for job in jobs:
+                job(topic, value, sample.stamp)
+
+        return arrived
+
+    def feed(self, topic: str, value: Any, stamp: float) -> None:
+        """Hand a value straight in, as if it had arrived on ``topic`` (tests, recordings)."""
+        handler = self.handlers().get(topic)
+        if handler is None:
+            raise KeyError(f"{topic}: not a topic of the live views ({', '.join(sorted(self.handlers()))})")
+        handler(Sample(topic, value, stamp, 0, 0, stamp))
+
+    # ------------------------------------------------------------------ roles
+
+    def _truth(self, robot: str) -> Callable[[str, Any, float], None]:
+        def take(_: str, value: Any, __: float) -> None:
+            pose = pose_of(value)
+            if pose is not None:
+                with self._lock:
+                    self._now.truth[robot] = pose
+
+        return take
+
+    def _estimate(self, robot: str) -> Callable[[str, Any, float], None]:
+        def take(_: str, value: Any, stamp: float) -> None:
+            pose = pose_of(value)
+            if pose is None:
+                return
+            covariance, cloud = covariance_of(value), particles_of(value)
+            with self._lock:
+                self._now.estimate[robot] = pose
+                if covariance is not None:
+                    self._now.covariance[robot] = covariance
+                if cloud is not None:
+                    self._now.particles = cloud
+                if not self.feeds.zoom:
+                    self._replay_zoom(pose, stamp)
+
+        return take
+
+    def _replay_zoom(self, pose: Pose, stamp: float) -> None:
+        settings, area = self.settings, self._now.zoom
+        if settings is None:
+            return
+        if area is not None:
+            margin_x, margin_y = area.width / 2 - abs(pose[0] - area.x), area.depth / 2 - abs(pose[1] - area.y)
+            border = margin_x < settings.border * area.width or margin_y < settings.border * area.depth
+            if not border and stamp - self._zoom_stamp < settings.timeout:
+                return
+        self._zoom_stamp = stamp
+        self._now.zoom = Zoom(pose[0], pose[1], settings.width, settings.depth, True)
+
+    def _objects(self, topic: str, value: Any, _: float) -> None:
+        seen = objects_of(value, topic)
+        with self._lock:
+            self._by_topic[topic] = seen  # each topic's newest result replaces its last one
+            self._now.objects = [s for t in sorted(self._by_topic) for s in self._by_topic[t]]
+
+    def _image(self, topic: str, value: Any, _: float) -> None:
+        if isinstance(value, Mapping):
+            with self._lock:
+                count = self._frames[topic] = self._frames.get(topic, 0) + 1
+                self._now.images[topic] = (count, value)
+
+    def _zoom(self, _: str, value: Any, __: float) -> None:
+        area = zoom_of(value)
+        if area is not None:
+            with self._lock:
+                self._now.zoom = Zoom(*area, replayed=False)
+
+    def _particles(self, _: str, value: Any, __: float) -> None:
+        cloud = particles_of(value)
+        if cloud is not None:
+            with self._lock:
+                self._now.particles = cloud
+
+    def snapshot(self) -> Snapshot:
+        """A copy of the newest values (the arrays and payloads are shared: they are never changed)."""
+        with self._lock:
+            now = self._now
+            return Snapshot(dict(now.truth), dict(now.estimate), dict(now.covariance), now.particles, now.zoom,
+                            list(now.objects), dict(now.images), dict(now.errors))  # fmt: skip
