@@ -47,6 +47,7 @@ class Bounds:
     probability: float = 0.95
 
     def to_message(self) -> dict[str, Any]:
+        """The bounds as the ``requirements`` entry of a configure request (§4.3)."""
         return {"measure": self.measure, "lower": self.lower, "upper": self.upper, "probability": self.probability}
 
 

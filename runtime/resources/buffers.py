@@ -57,6 +57,8 @@ _LOG = logging.getLogger(__name__)
 
 
 class SlotState(enum.Enum):
+    """What a slot of the triple buffer holds (§3.2.3): nothing, a fresh frame, a result, a supplied result."""
+
     EMPTY = "empty"  # nothing useful (its buffers may be reused)
     FRESH = "fresh"  # an acquired frame not processed yet
     DONE = "done"  # a complete result not supplied yet
@@ -148,6 +150,7 @@ class TripleBuffer(Generic[T, R]):
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
+        """Start the acquire, process and supply threads and the two switch threads (Fig. 3.12)."""
         if self._threads:
             raise RuntimeError(f"{self.name} is already started")
         self._stopping.clear()
@@ -179,6 +182,7 @@ class TripleBuffer(Generic[T, R]):
 
     @property
     def running(self) -> bool:
+        """True while any of the buffer's threads is alive."""
         return any(t.is_alive() for t in self._threads)
 
     def __enter__(self) -> TripleBuffer[T, R]:

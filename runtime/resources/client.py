@@ -50,10 +50,12 @@ class ServiceDirectory:
             self._changed.notify_all()
 
     def services(self) -> dict[tuple[str, str], dict[str, Any]]:
+        """Every service announced so far, by (resource, service), with its announcement."""
         with self._changed:
             return dict(self._entries)
 
     def wait_for(self, resource: str, service: str, timeout: float) -> dict[str, Any]:
+        """The announcement of ``resource.service``; ServiceError naming those seen if none in time."""
         with self._changed:
             if not self._changed.wait_for(lambda: (resource, service) in self._entries, timeout):
                 known = ", ".join(f"{r}.{s}" for r, s in sorted(self._entries)) or "none"
@@ -61,6 +63,7 @@ class ServiceDirectory:
             return self._entries[(resource, service)]
 
     def close(self) -> None:
+        """Stop listening to the announcements."""
         self._subscription.close()
 
 
@@ -142,13 +145,16 @@ class ServiceClient:
         return ack
 
     def connect(self, **kwargs: Any) -> dict[str, Any]:
+        """Send ``connect`` (§4.3) with :meth:`request`'s arguments; returns the acknowledgement."""
         ack = self.request("connect", **kwargs)
         return ack
 
     def configure(self, **kwargs: Any) -> dict[str, Any]:
+        """Send ``configure`` (new parameters and/or requirements); returns the acknowledgement."""
         return self.request("configure", **kwargs)
 
     def disconnect(self, timeout: float = 5.0) -> dict[str, Any]:
+        """Send ``disconnect``: the service drops this client's instance; returns the acknowledgement."""
         return self.request("disconnect", timeout=timeout)
 
     # ------------------------------------------------------------------ data and quality
@@ -169,6 +175,7 @@ class ServiceClient:
             return self._cond.wait_for(lambda: predicate(self), timeout)
 
     def close(self) -> None:
+        """Close the client's subscriptions (config acks, data, quality); does not disconnect."""
         for subscription in (*self._subs, *self._data.values()):
             subscription.close()
 

@@ -160,9 +160,11 @@ class DelegatedPlugin(ProcessingPlugin):
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
+        """Set up the wrapped local plugin."""
         self.inner.setup()
 
     def stop(self) -> None:
+        """Recall a delegated plugin, stop listening to its taker and stop the local plugin."""
         self.recall()
         if self._subscription is not None:
             self._subscription.close()
@@ -170,6 +172,7 @@ class DelegatedPlugin(ProcessingPlugin):
         self.inner.stop()
 
     def state(self) -> dict[str, Any]:
+        """The plugin's state: the local one, or the mirror of the state the taker last returned."""
         with self._call:
             if not self._started:
                 return self.inner.state()
@@ -177,6 +180,7 @@ class DelegatedPlugin(ProcessingPlugin):
             return state
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Restore the local plugin and, while delegated, ship ``state`` with the next call."""
         with self._call:
             self.inner.restore(state)
             if self._started:  # the next call ships it: GO restores before processing
@@ -245,6 +249,7 @@ class DelegatedPlugin(ProcessingPlugin):
     # ------------------------------------------------------------------ calls
 
     def process(self, data: Any, context: Context) -> Any:
+        """One SPT call (§3.2.2), locally or on the taker (local fallback past ``frame_timeout``)."""
         with self._call:
             if self._taker is None:
                 self.local_calls += 1

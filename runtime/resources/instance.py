@@ -41,6 +41,7 @@ class MeasureLog:
     count: dict[str, int] = field(default_factory=dict)
 
     def add(self, name: str, value: float) -> None:
+        """Record one value of measure ``name``."""
         self.last[name] = value
         self.count[name] = self.count.get(name, 0) + 1
 
@@ -110,11 +111,13 @@ class Instance:
 
     @property
     def profile(self) -> str:
+        """The SPT profile of the instance's active scenario."""
         with self._lock:
             return self.tcm.profile
 
     @property
     def scenario(self) -> str:
+        """The instance's active scenario (chosen by its TCM, §4.2.1.5)."""
         with self._lock:
             return self.tcm.active
 

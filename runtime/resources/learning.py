@@ -60,6 +60,7 @@ class ScenarioLearner:
 
     @property
     def trained(self) -> bool:
+        """True once an SVM was fitted (enough records of both labels), so ``fy`` is known."""
         return self._model is not None
 
     def record(self, features: Sequence[float], label: bool) -> None:

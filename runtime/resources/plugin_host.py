@@ -68,6 +68,7 @@ class PluginHost:
         self._worker: threading.Thread | None = None
 
     def start(self) -> None:
+        """Start the worker thread and listen on this node's delegation channel."""
         self._worker = threading.Thread(target=self._serve, name=f"ckm-plugin-host-{self.node}", daemon=True)
         self._worker.start()
         self._subscription = self.transport.subscribe(channel(self.node), self._on_message)

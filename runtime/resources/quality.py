@@ -45,13 +45,20 @@ class QualityBounds(Protocol):
     """What a Policy and a client's Require have in common: bounds and a least probability."""
 
     @property
-    def measure(self) -> str: ...
+    def measure(self) -> str:
+        """Name of the quality measure bounded."""
+
     @property
-    def lower(self) -> float | None: ...
+    def lower(self) -> float | None:
+        """Lower bound (eq. 4.2), None for none."""
+
     @property
-    def upper(self) -> float | None: ...
+    def upper(self) -> float | None:
+        """Upper bound (eq. 4.2), None for none."""
+
     @property
-    def probability(self) -> float: ...
+    def probability(self) -> float:
+        """Least probability with which the measure must lie within the bounds."""
 
 
 def _array(samples: Iterable[float]) -> FloatArray:
@@ -88,6 +95,7 @@ class MeasureWindow:
 
     @property
     def window(self) -> int:
+        """How many samples the window keeps."""
         return self._samples.maxlen or 0
 
     def push(self, value: float) -> None:
@@ -97,10 +105,12 @@ class MeasureWindow:
             self._samples.append(value)
 
     def extend(self, values: Iterable[float]) -> None:
+        """Push several samples, oldest first."""
         for value in values:
             self.push(value)
 
     def clear(self) -> None:
+        """Forget every sample (after a scenario change the old ones say nothing)."""
         self._samples.clear()
 
     def last(self, count: int | None = None) -> FloatArray:
@@ -156,9 +166,11 @@ class Distribution:
         return float(self.values[min(index, self.values.size - 1)])
 
     def mean(self) -> float:
+        """Expected value of the distribution."""
         return float(np.dot(self.values, self.probabilities))
 
     def pmf(self) -> dict[float, float]:
+        """The distribution as {value: probability}."""
         return {float(v): float(p) for v, p in zip(self.values, self.probabilities, strict=True)}
 
     def __add__(self, other: Distribution) -> Distribution:
@@ -238,9 +250,11 @@ class PolicyEvaluator:
 
     @property
     def measure(self) -> str:
+        """Name of the measure the policy bounds."""
         return self.policy.measure
 
     def bounds(self, band: float = 0.0) -> tuple[float | None, float | None]:
+        """The policy's bounds narrowed by ``band`` · scale from each side (met in the middle if crossed)."""
         lower, upper = self.policy.lower, self.policy.upper
         delta = band * self.scale
         if lower is not None:

@@ -167,6 +167,7 @@ class SmartResourceRuntime:
         self._directory = self.transport.publisher(TopicQoS(DIRECTORY_TOPIC, "ckm/service", history=64))
 
     def start(self) -> None:
+        """Check parameter defaults, create the services' own instances, start buffers and loops."""
         self._start_time = time.monotonic()
         for service in self.services.values():
             # A default only the plugin can judge (no min/max on the Parameter): refused here, at start.
@@ -190,6 +191,7 @@ class SmartResourceRuntime:
             self._threads.append(thread)
 
     def stop(self) -> None:
+        """Stop the loops, triple buffers and topologies, and close the subscriptions."""
         self._stop.set()
         for thread in self._threads:
             thread.join(2.0)
@@ -210,6 +212,7 @@ class SmartResourceRuntime:
     # ------------------------------------------------------------------ instances
 
     def now(self) -> float:
+        """Seconds since :meth:`start` (the time base of the TCM)."""
         return time.monotonic() - self._start_time
 
     def _sender(self, service: str) -> Callable[[str, dict[str, Any]], None]:
@@ -236,9 +239,11 @@ class SmartResourceRuntime:
         }
 
     def instances(self) -> list[Instance]:
+        """Every live service instance, the services' own and the clients' replicas."""
         return [i for stream in self.streams.values() for i in list(stream.instances.values())]
 
     def instance(self, service: str, client: str = "") -> Instance | None:
+        """The instance of ``service`` for ``client`` (``""``: the service's own), None if absent."""
         stream = self._service_stream.get(service)
         key = service if not client else f"{service}/{client}"
         return None if stream is None else stream.instances.get(key)

@@ -35,6 +35,7 @@ class ConditionResult:
     compatible: bool = True
 
     def describe(self) -> str:
+        """One line for logs and alarms: the condition, its probability and whether it is met."""
         if not self.compatible:
             return f"{self.measure}: the scenario's policy exceeds the requested bounds"
         shown = "?" if self.probability is None else f"{self.probability:.2f}"
@@ -64,6 +65,7 @@ class ScenarioEvaluation:
 
     @property
     def failing(self) -> tuple[ConditionResult, ...]:
+        """The conditions known to fail (unknown ones excluded)."""
         return tuple(c for c in self.conditions if c.met is False)
 
     @property
@@ -109,6 +111,7 @@ class Decision:
 
     @property
     def changed(self) -> bool:
+        """True if the evaluation switched scenario."""
         return bool(self.events)
 
 
@@ -175,4 +178,5 @@ class SelectorFactory(Protocol):
         on_event: Callable[[ScenarioEvent], None] | None = None,
         on_alarm: Callable[[Alarm], None] | None = None,
         alarm_after: int = 1,
-    ) -> ScenarioSelector: ...
+    ) -> ScenarioSelector:
+        """Build the selector of one instance from its ``<Scenario>`` and ``<TCM>`` records."""

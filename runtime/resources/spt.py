@@ -115,6 +115,7 @@ class PluginStats:
 
     @property
     def mean(self) -> float:
+        """Mean execution time per call in seconds (0 before the first call)."""
         return self.total / self.calls if self.calls else 0.0
 
 
@@ -136,6 +137,7 @@ class Composite:
 
     @property
     def is_leaf(self) -> bool:
+        """True if no plugin consumes this node's output."""
         return not self.children
 
     def walk(self, prefix: Path = ()) -> Iterator[tuple[Path, Composite]]:
@@ -270,6 +272,7 @@ class Topology:
         return {name: s for name, plugin in self.plugins.items() if (s := plugin.state())}
 
     def restore(self, states: Mapping[str, Mapping[str, Any]]) -> None:
+        """Give each named plugin back its state (after delegation)."""
         for name, state in states.items():
             self.plugins[name].restore(state)
 
@@ -341,6 +344,7 @@ class Topology:
 
     @property
     def frames(self) -> int:
+        """Frames run through the topology so far."""
         with self._lock:
             return self._frames
 
@@ -359,5 +363,6 @@ class Topology:
             return {name: dataclasses.replace(s) for name, s in self._stats.items()}
 
     def reset_stats(self) -> None:
+        """Zero every plugin's call and time counters."""
         with self._lock:
             self._stats = {name: PluginStats() for name in self.plugins}

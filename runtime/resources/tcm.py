@@ -178,25 +178,31 @@ class TaskConfiguringModule:
 
     @property
     def active(self) -> str:
+        """Name of the active scenario."""
         return self._active
 
     @property
     def profile(self) -> str:
+        """SPT profile of the active scenario."""
         return self._scenarios[self._active].record.profile
 
     @property
     def penalties(self) -> dict[str, float]:
+        """Each scenario's penalty ξ (eq. 4.7)."""
         return {name: s.penalty for name, s in self._scenarios.items()}
 
     @property
     def requirements(self) -> tuple[QualityBounds, ...]:
+        """The clients' quality requirements QR in force."""
         return tuple(e.policy for e in self._requirements)
 
     @property
     def alarm_active(self) -> bool:
+        """True while no scenario meets the requirements (alarm raised, not cleared)."""
         return self._alarm
 
     def learner(self, scenario: str) -> ScenarioLearner | None:
+        """The soft-margin classifier of ``scenario`` (eq. 4.10), None without learning."""
         return self._scenarios[scenario].learner
 
     # -- measures ----------------------------------------------------------------------------
@@ -217,6 +223,7 @@ class TaskConfiguringModule:
         self._windows[measure].push(value)
 
     def observe_many(self, samples: Mapping[str, float]) -> None:
+        """Feed one sample of each measure (:meth:`observe`)."""
         for measure, value in samples.items():
             self.observe(measure, value)
 

@@ -36,6 +36,7 @@ class ThresholdSwitcher:
         self.switches = 0
 
     def observe(self, measure: str, value: float) -> None:
+        """Keep ``value`` as the latest sample of ``measure``."""
         self._latest[measure] = value
 
     def latest(self, measure: str) -> float | None:
@@ -47,6 +48,8 @@ class ThresholdSwitcher:
         return None if any(v is None for v in values) else sum(v for v in values if v is not None)
 
     def evaluate(self) -> str:
+        """Switch to the highest-weight scenario whose bounds contain the latest samples; its name."""
+
         def contains(scenario: Scenario) -> bool:
             for p in scenario.policies:
                 value = self.latest(p.measure)
@@ -87,37 +90,46 @@ class ThresholdSelector:
 
     @property
     def active(self) -> str:
+        """Name of the active scenario."""
         return self._switcher.active
 
     @property
     def profile(self) -> str:
+        """SPT profile of the active scenario."""
         return self._records[self.active].profile
 
     @property
     def switches(self) -> int:
+        """Scenario changes so far."""
         return self._switcher.switches
 
     @property
     def penalties(self) -> dict[str, float]:
+        """All 0: the baseline has no penalty ξ."""
         return dict.fromkeys(self._records, 0.0)
 
     def observe(self, measure: str, value: float) -> None:
+        """Keep one sample of a measure (only the latest counts)."""
         self._switcher.observe(measure, value)
 
     def set_requirements(self, requirements: Iterable[QualityBounds], now: float | None = None) -> Decision:
+        """Keep the requirements for the record only (no QR here); decide on the active scenario."""
         self.requirements = tuple(requirements)  # kept for the record: thresholds know no QR
         return self._decide(now or 0.0, self.active)
 
     def set_ceiling(self, scenario: str) -> None:
+        """Check the scenario name only: the baseline has no ceiling."""
         if scenario not in self._records:
             raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._records)})")
 
     def prefer(self, scenario: str, now: float | None = None) -> Decision:
+        """Switch to ``scenario`` (ValueError if unknown)."""
         if scenario not in self._records:
             raise ValueError(f"no scenario {scenario!r} (scenarios: {', '.join(self._records)})")
         return self._decide(now or 0.0, scenario)
 
     def evaluate(self, now: float | None = None) -> Decision:
+        """The highest-weight scenario containing the latest samples (the lowest-weight one if none)."""
         ranked = sorted(self._records.values(), key=lambda s: -s.weight)  # the switcher's own rule
         chosen = next((s.name for s in ranked if self._contains(s)), ranked[-1].name)
         return self._decide(now or 0.0, chosen)
