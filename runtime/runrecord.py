@@ -1,9 +1,10 @@
 """What a run leaves behind: its exit code and its record in the run directory (§3.1.5, issue G).
 
-Both hosts of a node use it: ``ckm-run`` (:mod:`runtime.cli`) rewrites the statistics every few
-seconds and at the stop through its :class:`~runtime.kernel.runlog.RunLog`; the configuration
-agent (:mod:`runtime.distribution`) writes a pushed node's ``stats.json`` and ``events.jsonl``
-in one go when it retires it. The exit codes are those of ``docs/exit-codes.md``.
+The host (:class:`runtime.host.Host`) writes it for every way of running a node: ``ckm-run``
+(:mod:`runtime.cli`) rewrites the statistics every few seconds and at the stop through its
+:class:`~runtime.kernel.runlog.RunLog`; the configuration agent (:mod:`runtime.distribution`)
+writes a pushed node's ``stats.json`` and ``events.jsonl`` in one go when it retires it. The
+exit codes are those of ``docs/exit-codes.md``.
 """
 
 from __future__ import annotations
