@@ -5,8 +5,9 @@ A backend class registered as ``hardware.KIND`` may define a classmethod
     run_session(system, config, run_dir, nodes, failed) -> context manager
 
 that ``ckm-run``'s host (:meth:`runtime.host.Host.start_sessions`) enters before it builds any
-node or starts any partition and leaves after every node and partition has stopped: a simulator serving the channels of every process of the run (the
-``hardware.sim`` world server), a bus daemon… ``nodes`` are the nodes this process runs;
+node or starts any partition and leaves after every node and partition has stopped: a simulator
+serving the channels of every process of the run (the ``hardware.sim`` world server), a bus
+daemon… ``nodes`` are the nodes this process runs;
 ``failed(message)`` tells the run that the session broke while it lasted (ckm-run then prints the
 message, stops and exits 5). The runtime finds the backends through the registry, so it imports no
 plugin itself. Each backend kind used by the nodes' channels is entered once, in name order.
