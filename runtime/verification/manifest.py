@@ -91,10 +91,12 @@ class P:
 
     @property
     def required(self) -> bool:
+        """True if the ``<Param>`` must be given (no default)."""
         return self.default is REQUIRED
 
     @property
     def type_name(self) -> str:
+        """The parameter's type as the manifest reference shows it (``float``, ``int``, ``bool``, ``string``)."""
         assert self.type is not None
         return _TYPE_NAMES[self.type]
 
@@ -112,6 +114,7 @@ class P:
         return f"{low or '(-inf'}, {high or 'inf)'}"
 
     def default_text(self) -> str:
+        """The default as documentation shows it: ``required``, ``computed`` or the value."""
         if self.required:
             return "required"
         if self.default is None:
@@ -211,9 +214,11 @@ class Ports:
     sizes: tuple[int, ...] = ()
 
     def input(self, name: str) -> str:
+        """Value type read on input ``name`` (or role), falling back to ``"*"``, then :data:`ANY`."""
         return self.inputs.get(name, self.inputs.get("*", ANY))
 
     def output(self, name: str) -> str:
+        """Value type written on output ``name`` (or role), falling back to ``"*"``, then :data:`ANY`."""
         return self.outputs.get(name, self.outputs.get("*", ANY))
 
 
