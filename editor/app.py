@@ -202,12 +202,24 @@ class MainWindow(QMainWindow):
             QMessageBox.warning(self, "Network", f"cannot join the system's network: {exc}")
 
     def _live_state(self, agent: str, path: str | None) -> None:
-        """Highlight an agent's active state when the canvas shows its mission."""
-        if not path:
-            return
-        parts = path.split("/")
-        if parts[-1] in self.canvas.nodes and self.canvas.active != parts[-1]:
-            self.canvas.highlight(parts[-1])
+        """Highlight an agent's active state when the canvas shows its mission or one nested in it.
+
+        ``path`` is ``TOP/STATE/…/STATE`` (runtime/missions/hfsm.py): each state but the last runs the
+        mission its ``<State mission=…>`` names, so the canvas's mission is found along it and its
+        state on the path is the one highlighted (the whole nested mission's box, at the top level).
+        """
+        shown = self.canvas.mission.get("name") if self.canvas.mission is not None else None
+        parts = (path or "").split("/")
+        mission: str | None = parts[0]
+        for state in parts[1:]:
+            if mission == shown:
+                if state in self.canvas.nodes and self.canvas.active != state:
+                    self.canvas.highlight(state)
+                return
+            element = self.document.mission(mission) if mission else None
+            children = list(element) if element is not None else []
+            states = [e for e in children if isinstance(e.tag, str) and local(e) == "State"]
+            mission = next((e.get("mission") for e in states if e.get("name") == state), None)
 
     # ------------------------------------------------------------------ files
 
