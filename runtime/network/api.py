@@ -20,6 +20,8 @@ from typing import Any, Literal
 
 from ckmconf.model import Network, Topic
 
+from .wire import WireCodec
+
 EVENTS_TOPIC = "/ckm/events"
 
 
@@ -136,6 +138,7 @@ class Transport(abc.ABC):
     """What the runtime uses to talk: the same for CKMultiPeer and Zenoh."""
 
     guid: int = 0
+    codec: WireCodec | None = None  # serialises the topic types it knows (runtime.network.wire)
 
     @abc.abstractmethod
     def setup(self) -> None:

@@ -1,8 +1,9 @@
 """Publish/subscribe over CKMultiPeer: TOPICLINKS tell who subscribes what; TOPICDATA goes only there.
 
 Local subscribers get the very object published, with no serialization. Remote peers get one
-TOPICDATA frame per sample — ``[topic, seq, stamp, value]`` — encoded once for all links when
-there is no group key. Best-effort topics drop a sample rather than wait for a busy link.
+TOPICDATA frame per sample — ``[topic, seq, stamp, value]``, or ``[topic, seq, stamp, cdr,
+"cdr", type]`` for a topic type the transport's codec serialises (:mod:`.wire`) — encoded once for
+all links when there is no group key. Best-effort topics drop a sample rather than wait for a busy link.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, To
 from .frames import Frame, FrameType, encode
 from .multipeer import MultiPeer, PeerEvent
 from .qos import DeadlineWatchdog, SubscriptionTable, deliver
+from .wire import WireError, incoming, outgoing, undecodable
 
 LOG = logging.getLogger("ckm.pubsub")
 BEST_EFFORT_WAIT = 0.002  # a best-effort sample waits this long for a busy link, then is dropped
@@ -106,7 +108,7 @@ class MultiPeerTransport(SubscriptionTable, Transport):
             deliver(local, Sample(qos.name, value, stamp, self.guid, seq, time.time()), self._emit)
         if not remote:
             return 0
-        body = [qos.name, seq, stamp, value]
+        body = [qos.name, seq, stamp, *outgoing(self.codec, qos.name, qos.type, value)]  # value or cdr, 'cdr', type
         links = [self.peer.links.get(g) for g in remote]
         routed = sum(
             self.peer.send(g, FrameType.TOPICDATA, body) for g, link in zip(remote, links, strict=True) if link is None
@@ -131,17 +133,22 @@ class MultiPeerTransport(SubscriptionTable, Transport):
     def _on_data(self, guid: int, frame: Frame) -> None:
         body = frame.body
         if (
-            len(body) != 4
+            len(body) not in (4, 6)
             or not isinstance(body[0], str)
             or not isinstance(body[1], int)
             or not isinstance(body[2], (float, int))
         ):
             LOG.warning("ignoring a malformed TOPICDATA frame from %s", guid)
             return
-        topic, seq, stamp, value = body
+        topic, seq, stamp = body[:3]
         with self._lock:
             local = list(self._subs.get(topic, ()))
         if not local:
+            return
+        try:
+            value = incoming(self.codec, body[3:])
+        except WireError as error:
+            undecodable(topic, error)
             return
         offset = self.peer.clock.offset(guid)
         sample = Sample(topic, value, float(stamp), guid, seq, time.time(), offset)

@@ -10,6 +10,7 @@ Because the leading slash is dropped, "/a/b" and "a/b" are one topic here (two i
 ``@`` chunks are verbatim in Zenoh, so the token spaces never match a data key expression.
 
 Wire format: the payload is msgpack ``[seq, stamp, value]`` as in CKMultiPeer's TOPICDATA
+(``[seq, stamp, cdr, "cdr", type]`` for a type the transport's codec serialises: :mod:`.wire`)
 (the topic is the key expression); the attachment is the publisher's GUID (8 bytes,
 big-endian). The GUID is the low 48 bits of the session's random 128-bit ZenohId, so it has
 the width of a CKMultiPeer GUID. There is no SYNCTIME: ``Sample.offset`` is 0, clocks are
@@ -43,6 +44,7 @@ from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, To
 from .frames import FrameError, unpack_body
 from .multipeer import NetworkError
 from .qos import DeadlineWatchdog, SubscriptionTable, deliver
+from .wire import WireError, incoming, outgoing, undecodable
 
 LOG = logging.getLogger("ckm.zenoh")
 
@@ -297,7 +299,8 @@ class ZenohTransport(SubscriptionTable, Transport):
             deliver(local, Sample(qos.name, value, stamp, self.guid, seq, time.time()), self._emit)
         if session is None or qos.name == EVENTS_TOPIC:
             return 0
-        payload = msgpack.packb([seq, float(stamp), value], use_bin_type=True)
+        tail = outgoing(self.codec, qos.name, qos.type, value)  # [value] or [cdr, 'cdr', type]
+        payload = msgpack.packb([seq, float(stamp), *tail], use_bin_type=True)
         try:
             self._zenoh_publisher(session, qos).put(payload, attachment=self._attachment)
         except zenoh.ZError:
@@ -316,16 +319,21 @@ class ZenohTransport(SubscriptionTable, Transport):
             body = unpack_body(zsample.payload.to_bytes(), self.network.max_frame)
         except (struct.error, FrameError):
             body = []
-        if len(body) != 3 or type(body[0]) is not int or type(body[1]) not in (int, float):
+        if len(body) not in (3, 5) or type(body[0]) is not int or type(body[1]) not in (int, float):
             self.dropped_malformed += 1
             LOG.warning("ignoring a malformed sample on %s", zsample.key_expr)
             return
         if source == self.guid:
             return  # our own sample: local subscribers already had it
-        seq, stamp, value = body
+        seq, stamp = body[:2]
         with self._lock:
             local = list(self._subs.get(topic, ()))
         if not local:
+            return
+        try:
+            value = incoming(self.codec, body[2:])
+        except WireError as error:
+            undecodable(topic, error)
             return
         sample = Sample(topic, value, float(stamp), source, seq, time.time())
         if deliver(local, sample, self._emit):

@@ -1,0 +1,69 @@
+"""Topics of a ROS 2 type travel as CDR on both transports (issue L point 1, decision D157).
+
+:class:`CdrWire` is the :class:`runtime.network.wire.WireCodec` of a configuration: a topic whose
+``<Topic type>`` names a ROS 2 type (``sensor_msgs/msg/LaserScan``, a custom ``pkg/msg/Name``)
+leaves the process as the CDR bytes of that message (little endian, behind the ``00 01 00 00``
+header, as ROS 2 and rosbag2 write it), on CKMultiPeer and on Zenoh alike; topics of CKM types stay
+msgpack. Install it with :func:`install` once the transport is opened.
+
+What is sent is what the recorder writes (:meth:`ConfigRosTypes.payload`: a value that is not a dict
+stands for the message's ``data`` field, D131). What a remote subscriber gets back is the
+:mod:`runtime.ros.convert` payload (a dict of the ROS fields, an Image as an array), except that a
+type whose only field is ``data`` (``std_msgs/msg/Float64``, ``String``, ``Bool`` …) gives back the
+bare value: a PID reading a number from a ``std_msgs/msg/Float64`` topic gets a number, remote or
+local.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ckmconf.model import System
+from ckmconf.rostypes import is_ros_type
+
+from ..network.api import Transport
+from .config import ConfigRosTypes, all_topics
+from .convert import decode_payload, to_message
+from .types import RosTypeError
+
+CDR = "cdr"
+
+
+class CdrWire:
+    """Serialises every ROS 2 type of a configuration's type store as CDR (see the module docstring).
+
+    Args:
+        types: the configuration's ROS types (custom ``.msg`` files and generated ``ckm_msgs``).
+    """
+
+    name = CDR
+
+    def __init__(self, types: ConfigRosTypes) -> None:
+        self.types = types
+        self._bare: dict[str, bool] = {}
+
+    def encodes(self, type_name: str) -> bool:
+        return is_ros_type(type_name) and type_name in self.types.ros
+
+    def encode(self, type_name: str, value: Any) -> bytes:
+        ros = self.types.ros
+        try:
+            return ros.encode(type_name, to_message(ros, type_name, self.types.payload(type_name, value)))
+        except RosTypeError as error:
+            raise ValueError(f"not a {type_name}: {error}") from error
+
+    def decode(self, type_name: str, data: bytes) -> Any:
+        payload = decode_payload(self.types.ros, type_name, data)  # RosTypeError is a ValueError
+        bare = self._bare.get(type_name)
+        if bare is None:
+            bare = self._bare[type_name] = [name for name, _ in self.types.ros.fields(type_name)] == ["data"]
+        return payload["data"] if bare and isinstance(payload, dict) else payload
+
+
+def install(transport: Transport, system: System) -> CdrWire | None:
+    """Give ``transport`` the CDR codec when ``system`` has a topic of a ROS 2 type; returns it."""
+    if not any(is_ros_type(topic.type) for topic, _ in all_topics(system)):
+        return None
+    codec = CdrWire(ConfigRosTypes(system))
+    transport.codec = codec
+    return codec
