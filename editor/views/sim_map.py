@@ -119,7 +119,7 @@ class SimMapView(QGraphicsView):
         self.setDragMode(QGraphicsView.DragMode.ScrollHandDrag)
         self.bounds = QRectF()
         self.robots: dict[str, dict[str, QGraphicsItem]] = {}
-        self.labels: list[QGraphicsSimpleTextItem] = []  # the recognised objects' labels of the last refresh
+        self.labels: list[QGraphicsSimpleTextItem] = []  # the recognised objects' labels (on white plates)
         self._marks: list[QGraphicsItem] = []
         self.particles = QGraphicsPathItem()
         self.zoom = QGraphicsRectItem()
@@ -183,7 +183,6 @@ class SimMapView(QGraphicsView):
                 _place(markers["truth"], robot.placed)
                 self._label(markers["label"], robot.placed)
             self.robots[robot.name] = markers
-        scene.setSceneRect(self.bounds.adjusted(-60, -60, 60, 60) if not self.bounds.isNull() else QRectF())
         self.fit()
 
     def _text(self, text: str, x: float, y: float, colour: QColor) -> QGraphicsSimpleTextItem:
@@ -236,9 +235,14 @@ class SimMapView(QGraphicsView):
             mark.setPos(to_scene(seen.x, seen.y))
             mark.setZValue(26)
             mark.setToolTip(f"{seen.label} from {seen.topic}, {seen.sources} source(s)")
-            label = self._text(f"{seen.label} {seen.reliability:.2f}", seen.x, seen.y, OBJECT)
-            label.setPos(label.pos() + QPointF(8, -16))
-            self._marks += [mark, label]
+            label = QGraphicsSimpleTextItem(f"{seen.label} {seen.reliability:.2f}")
+            label.setBrush(QBrush(OBJECT.darker(130)))
+            plate = scene.addRect(label.boundingRect().adjusted(-2, 0, 2, 0), QPen(Qt.PenStyle.NoPen),
+                                  QBrush(QColor(255, 255, 255, 200)))  # fmt: skip
+            label.setParentItem(plate)  # readable over the objects' footprints
+            plate.setPos(to_scene(seen.x, seen.y) + QPointF(8, -16))
+            plate.setZValue(30)
+            self._marks += [mark, plate]
             self.labels.append(label)
 
     @staticmethod
@@ -311,7 +315,8 @@ class SimLivePanel(QWidget):
         feeds, out = self.state.feeds, []
         if not feeds.particles:
             where = ", ".join(t for r in feeds.robots for t in r.estimates) or "a pose estimate"
-            out.append(f"Particles: no topic of this system carries them (drawn from a 'particles' field of {where}).")
+            out.append(f"Particles: not published by this system (drawn from a 'particles' field of {where} "
+                       "or a topic named for particles).")  # fmt: skip
         if not feeds.zoom:
             zoom = system.environment.zoom if system.environment is not None else None
             out.append("Zoom map: no topic carries it; " + (

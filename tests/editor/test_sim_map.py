@@ -95,7 +95,7 @@ def test_robots_objects_and_the_zoom_area_are_drawn_where_the_messages_put_them(
     labels = sorted(item.text() for item in view.labels)
     assert labels == ["can cylinder 0.40", "mug cylinder 0.87"]
     mug = next(item for item in view.labels if item.text().startswith("mug"))
-    assert (mug.pos() - to_scene(8.0, 6.1)).manhattanLength() < 30  # beside its mark
+    assert (mug.scenePos() - to_scene(8.0, 6.1)).manhattanLength() < 30  # beside its mark
     assert view.zoom.isVisible() and view.zoom_label.text() == "zoom map (replayed)"
     assert close(view.zoom.rect().center(), to_scene(2.1, 2.9))
     assert view.zoom.rect().width() == pytest.approx(400.0)  # 4 × 4 m
@@ -192,7 +192,7 @@ def test_the_monitor_tab_draws_what_arrives_on_the_network(qtbot: QtBot, lab: Sy
         image = panel.live.cameras.images["/nao/camera/image"]
         assert (image.width(), image.height()) == (2, 1)
         assert image.pixel(0, 0) & 0xFFFFFF == 0xFF0000 and image.pixel(1, 0) & 0xFFFFFF == 0x0000FF  # red, blue
-        assert "Particles: no topic of this system carries them" in panel.live.notes.text()
+        assert "Particles: not published by this system" in panel.live.notes.text()
         assert "replayed from the estimate with <ZoomMap> (4×4 m)" in panel.live.notes.text()
     finally:
         panel.timer.stop()
