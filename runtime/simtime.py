@@ -12,13 +12,17 @@ the scale (the real-time factor is ``s`` at best).
 Every process installs the same scale from the environment (``CKM_TIME_SCALE``) around the same
 origin (``CKM_TIME_ORIGIN``: a monotonic and a wall reading taken once by the run), so stamps and
 deadlines agree across processes. The origin is the same CLOCK_MONOTONIC instant in every process
-of the machine. Waits inside the standard library (``threading.Event.wait``, ``queue.get``) keep the
-wall clock: they only poll sooner in scaled time, never later.
+of the machine. Timed waits of ``threading`` (``Condition.wait``, hence ``Event.wait``, ``Timer``,
+``queue.Queue.get``, ``Semaphore.acquire``) wait the scaled duration too: a loop pacing itself with
+``event.wait(period)`` keeps its period on the run's clock (unscaled it ran ``1/s`` times too often,
+and a scheduler spun the rest of each period, busy, before every release). Lock and socket
+timeouts keep the wall clock.
 """
 
 from __future__ import annotations
 
 import os
+import threading
 import time
 from collections.abc import Callable, MutableMapping
 
@@ -88,6 +92,12 @@ def install(env: MutableMapping[str, str] | None = None) -> float | None:
     }
     for name, function in scaled.items():
         setattr(time, name, function)
+    wall_wait = threading.Condition.wait
+
+    def wait(self: threading.Condition, timeout: float | None = None) -> bool:
+        return wall_wait(self, None if timeout is None else max(0.0, timeout) / scale)
+
+    threading.Condition.wait = wait  # type: ignore[method-assign]
     _installed = scale
     return scale
 

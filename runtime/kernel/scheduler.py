@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from runtime import simtime
+
 LOG = logging.getLogger("ckm.scheduler")
 SPIN = 0.0003  # seconds spun before a release instead of sleeping
 IDLE_WINDOW = 1.0  # seconds over which the idle share is measured
@@ -253,9 +255,10 @@ class Scheduler:
 
     def _wait_until(self, release: float) -> bool:
         remaining = release - self.clock()
-        if remaining > SPIN:
+        spin = SPIN * simtime.scale()  # SPIN wall seconds, on a scaled clock too (runtime.simtime)
+        if remaining > spin:
             self._wake.clear()
-            if self._wake.wait(remaining - SPIN):
+            if self._wake.wait(remaining - spin):
                 return False
         while self.clock() < release:
             pass

@@ -45,6 +45,31 @@ def test_a_process_on_a_scale_sleeps_and_reads_scaled_time() -> None:
         assert figures[clock] == pytest.approx(0.25 * figures["wall"], rel=0.05, abs=0.01), clock
 
 
+WAITS = """
+import json, queue, threading
+import runtime
+from runtime import simtime
+real = simtime._REAL["monotonic"]
+r0 = real()
+threading.Event().wait(0.1)
+r1 = real()
+try:
+    queue.Queue().get(timeout=0.1)
+except queue.Empty:
+    pass
+print(json.dumps({"event": r1 - r0, "queue": real() - r1}))
+"""
+
+
+def test_a_process_on_a_scale_waits_on_events_and_queues_the_scaled_time() -> None:
+    done = subprocess.run([sys.executable, "-c", WAITS], cwd=REPO, env={**os.environ, **simtime.environment(0.25)},
+                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    figures = json.loads(done.stdout)
+    # 0.1 s of the run's clock is 0.4 wall seconds: a loop paced by Event.wait keeps its period
+    assert figures["event"] >= 0.4 - 0.01 and figures["queue"] >= 0.4 - 0.01
+
+
 def test_without_a_scale_the_clocks_are_the_wall_clocks() -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("CKM_TIME_")}
     done = subprocess.run([sys.executable, "-c", "from runtime import simtime; print(simtime.scale())"], cwd=REPO,
