@@ -7,7 +7,10 @@ symmetric rooms and a kidnapping there. Every run starts from a uniform prior (g
 Per filter and particle count: position and heading RMSE over the steps after convergence,
 time to converge, mean time to recover after the kidnapping — recovered when the estimate stays
 within 0.45 m for more than 10 s (Fox et al.) —, failure rate (runs that never converge or never
-recover) and milliseconds per update. A PNG plots the error over time of both filters.
+recover) and milliseconds per update; the same per world (``worlds``: the lab, the floor plan),
+with the global-localization convergence rate (runs that converge from the uniform prior). A PNG
+plots the error over time of both filters. ``--rooms`` sets the floor plan's identical rooms per
+side (3), ``--worlds`` runs only some worlds.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy.typing as npt
 from plugins.localization.mcl import AmclFilter, MclSettings
 from plugins.localization.odometry import wrap
 from plugins.localization.reliability_filter import ReliabilityFilter, ReliabilitySettings
-from plugins.localization.trajectories import Run, standard_runs
+from plugins.localization.trajectories import WORLDS, Run, standard_runs
 
 Array = npt.NDArray[np.float64]
 PARTICLES = (500, 2500, 10000)
@@ -91,6 +94,33 @@ def play(name: str, run: Run, particles: int, seed: int) -> dict[str, Any]:
     }
 
 
+def world_of(run_name: str) -> str:
+    """The world a run's name starts with (``lab-tour`` → ``lab``)."""
+    return next(w for w in WORLDS if run_name.startswith(w + "-"))
+
+
+def by_world(plays: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per world: runs, global-localization convergence rate, failure rate, mean convergence and recovery times."""
+    found: dict[str, dict[str, Any]] = {}
+    for world in WORLDS:
+        mine = [p for p in plays if world_of(p["run"]) == world]
+        if not mine:
+            continue
+        converged = [p["converged"] for p in mine if p["converged"] is not None]
+        kidnapped = [p for p in mine if p["kidnapped"]]
+        recovered = [p["recovered"] for p in kidnapped if p["recovered"] is not None]
+        failures = sum(p["converged"] is None or (p["kidnapped"] and p["recovered"] is None) for p in mine)
+        found[world] = {
+            "runs": len(mine),
+            "converged_rate": len(converged) / len(mine),
+            "failure_rate": failures / len(mine),
+            "converge_s": float(np.mean(converged)) if converged else None,
+            "recovered_rate": len(recovered) / len(kidnapped) if kidnapped else None,
+            "recover_s": float(np.mean(recovered)) if recovered else None,
+        }
+    return found
+
+
 def summarise(name: str, particles: int, beams: int, plays: list[dict[str, Any]]) -> dict[str, Any]:
     """The JSON object of one filter and particle count over all its runs."""
     tracked_err = np.concatenate([p["errors"][p["tracked"]] for p in plays])
@@ -109,6 +139,7 @@ def summarise(name: str, particles: int, beams: int, plays: list[dict[str, Any]]
         "failure_rate": failures / len(plays),
         "ms_per_update": float(np.mean([p["ms"] for p in plays])),
         "runs": len(plays),
+        "worlds": by_world(plays),
         "per_run": [
             {
                 "run": p["run"],
@@ -154,10 +185,14 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--seeds", type=int, default=2, help="simulated data sets (each: four runs)")
     parser.add_argument("--particles", type=int, nargs="+", default=None, help="particle counts")
     parser.add_argument("--out", type=Path, default=Path("runs/bench-localization"), help="where the plot goes")
+    parser.add_argument("--rooms", type=int, default=3, help="identical rooms per side of the floor plan's corridor")
+    parser.add_argument("--worlds", nargs="+", choices=WORLDS, default=list(WORLDS), help="worlds to run")
     args = parser.parse_args(list(argv or []))
+    if args.rooms < 2:
+        parser.error(f"--rooms must be at least 2, not {args.rooms}")
     seeds = 1 if args.quick else args.seeds
     counts = tuple(args.particles or ((500, 2500) if args.quick else PARTICLES))
-    datasets = [standard_runs(100 * s + 1) for s in range(seeds)]
+    datasets = [standard_runs(100 * s + 1, rooms=args.rooms, worlds=args.worlds) for s in range(seeds)]
     beams = datasets[0][0].laser.beams
     plot_count = 2500 if 2500 in counts else counts[-1]
     series: dict[str, dict[str, Array]] = {name: {} for name in FILTERS}
@@ -178,6 +213,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         "filters": rows,
         "runs": [r.name for r in datasets[0]],
         "seeds": seeds,
+        "rooms": args.rooms,
         "plot": str(png),
         "criterion": f"within {RECOVERED_M} m for more than {RECOVERED_S:g} s",
     }
@@ -201,5 +237,14 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
                 f"fail {f['failure_rate']:.2f}, {f['ms_per_update']:.1f} ms",
             )
         )
+        for world, w in f.get("worlds", {}).items():
+            rows.append(
+                (
+                    f"  {world} ({w['runs']} runs)",
+                    f"converged {w['converged_rate']:.2f} (in {_fmt(w['converge_s'], 1, ' s')}), "
+                    f"recovered {'-' if w['recovered_rate'] is None else format(w['recovered_rate'], '.2f')} "
+                    f"(in {_fmt(w['recover_s'], 1, ' s')}), fail {w['failure_rate']:.2f}",
+                )
+            )
     rows.append(("plot", result["plot"]))
     return rows

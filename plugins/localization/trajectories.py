@@ -93,6 +93,33 @@ def floor_plan_grid(rooms: int = 3, resolution: float = 0.05) -> GridMap:
     return GridMap.from_shapes(bounds, shapes, resolution)
 
 
+Waypoints = tuple[tuple[float, float], ...]
+
+
+def floor_plan_routes(
+    rooms: int = 3, room: float = 4.0, corridor: float = 2.0
+) -> tuple[Waypoints, Waypoints, Waypoints]:
+    """Waypoints through the floor plan of :func:`floor_plan_shapes`: a tour, and the two legs of a kidnapping.
+
+    The tour runs east along the corridor, into the last south room through its door and back,
+    into the middle north room and back, then west to the start. The kidnapping's first leg ends in
+    the last north room; the robot is carried to the last south room, walks out and west along
+    the corridor, visits the first south room and goes east again. Every leg keeps clear of the
+    walls and the tables (doors are ``room / 2`` along each room).
+    """
+    if rooms < 2:
+        raise ValueError(f"a floor plan needs at least 2 rooms per side, not {rooms}")
+    mid_y, width = room + corridor / 2, room * rooms
+    last, middle = (rooms - 0.5) * room, (rooms // 2 + 0.5) * room  # door abscissas
+    south, north = room * 0.6, room + corridor + room * 0.4  # inside a room, past its table's side
+    tour = ((1.5, mid_y), (last, mid_y), (last, south), (last, mid_y), (middle, mid_y), (middle, north),
+            (middle, mid_y), (1.5, mid_y))
+    before = ((3.0, mid_y + 0.2), (last, mid_y + 0.2), (last, north))
+    after = ((last, south), (last, mid_y - 0.1), (middle - 0.5, mid_y), (room / 2, mid_y), (room / 2, room * 0.55),
+             (room / 2, mid_y), (width - 3.0, mid_y))
+    return tour, before, after
+
+
 def drive(
     waypoints: Sequence[tuple[float, float]],
     dt: float = 0.2,
@@ -154,18 +181,34 @@ def simulate(
     return Run(name, grid, laser, dt, truth, np.stack(odometry), scans, kidnap)
 
 
-def standard_runs(seed: int, laser: LaserSpec | None = None, noise: OdometryNoise | None = None) -> list[Run]:
-    """The benchmark's runs: a tour and a kidnapping in the lab and in the floor plan of symmetric rooms."""
+WORLDS = ("lab", "floor-plan")
+"""The benchmark's worlds: the use-case lab, the generated floor plan of symmetric rooms."""
+
+
+def standard_runs(
+    seed: int, laser: LaserSpec | None = None, noise: OdometryNoise | None = None, *, rooms: int = 3,
+    worlds: Sequence[str] = WORLDS,
+) -> list[Run]:
+    """The benchmark's runs: a tour and a kidnapping in the lab and in the floor plan of ``rooms`` symmetric
+    rooms per side (``worlds``: which of the two)."""
+    unknown = sorted(set(worlds) - set(WORLDS))
+    if unknown:
+        raise ValueError(f"unknown worlds {unknown}: choose among {', '.join(WORLDS)}")
     laser = laser or LaserSpec()
     noise = noise or OdometryNoise()
-    lab, plan = lab_grid(), floor_plan_grid()
-    plan_tour = ((1.5, 5.0), (10.0, 5.0), (10.0, 2.4), (10.0, 5.0), (6.0, 5.0), (6.0, 7.6), (6.0, 5.0), (1.5, 5.0))
-    plan_before = ((3.0, 5.2), (10.0, 5.2), (10.0, 7.6))
-    plan_after = ((10.0, 2.4), (10.0, 4.9), (5.5, 5.0), (2.0, 5.0), (2.0, 2.2), (2.0, 5.0), (9.0, 5.0))
-    lab_after = ((2.8, 5.5), (2.0, 3.2), (1.8, 0.8), (3.0, 2.8), (6.2, 2.8), (7.0, 4.6))
-    return [
-        simulate("lab-tour", lab, [drive(LAB_WAYPOINTS)], laser, noise, seed),
-        simulate("lab-kidnap", lab, [drive(LAB_WAYPOINTS[:6]), drive(lab_after)], laser, noise, seed + 1),
-        simulate("floor-plan-tour", plan, [drive(plan_tour)], laser, noise, seed + 2),
-        simulate("floor-plan-kidnap", plan, [drive(plan_before), drive(plan_after)], laser, noise, seed + 3),
-    ]
+    runs = []
+    if "lab" in worlds:
+        lab = lab_grid()
+        lab_after = ((2.8, 5.5), (2.0, 3.2), (1.8, 0.8), (3.0, 2.8), (6.2, 2.8), (7.0, 4.6))
+        runs += [
+            simulate("lab-tour", lab, [drive(LAB_WAYPOINTS)], laser, noise, seed),
+            simulate("lab-kidnap", lab, [drive(LAB_WAYPOINTS[:6]), drive(lab_after)], laser, noise, seed + 1),
+        ]
+    if "floor-plan" in worlds:
+        plan = floor_plan_grid(rooms)
+        tour, before, after = floor_plan_routes(rooms)
+        runs += [
+            simulate("floor-plan-tour", plan, [drive(tour)], laser, noise, seed + 2),
+            simulate("floor-plan-kidnap", plan, [drive(before), drive(after)], laser, noise, seed + 3),
+        ]
+    return runs

@@ -35,6 +35,23 @@ def test_bench_reports_both_filters_per_particle_count(tmp_path: Path, capsys: p
         assert 0.0 <= row["failure_rate"] <= 1.0
         assert row["ms_per_update"] > 0
         assert row["recover_s"] is None or row["recover_s"] >= 0
+        assert set(row["worlds"]) == {"lab", "floor-plan"}
+        for world in row["worlds"].values():  # global localization per world: 2 runs each (tour, kidnapping)
+            assert world["runs"] == 2 and 0.0 <= world["converged_rate"] <= 1.0
+            assert 0.0 <= world["failure_rate"] <= 1.0 and world["failure_rate"] >= 1.0 - world["converged_rate"]
     assert result["runs"] == ["lab-tour", "lab-kidnap", "floor-plan-tour", "floor-plan-kidnap"]
     assert (out / "localization-error.png").stat().st_size > 10_000
     assert json.loads((out / "results.json").read_text())["filters"] == rows
+
+
+def test_bench_runs_a_larger_floor_plan_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bench"
+    argv = ["localization", "--json", "--seeds", "1", "--particles", "100", "--worlds", "floor-plan", "--rooms", "4",
+            "--out", str(out)]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["runs"] == ["floor-plan-tour", "floor-plan-kidnap"] and result["rooms"] == 4
+    assert all(set(row["worlds"]) == {"floor-plan"} for row in result["filters"])
+    with pytest.raises(SystemExit) as refused:
+        main(["localization", "--rooms", "1", "--out", str(out)])
+    assert refused.value.code == 2 and "--rooms must be at least 2" in capsys.readouterr().err

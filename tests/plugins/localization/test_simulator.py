@@ -11,7 +11,7 @@ import shapely
 from plugins.localization.odometry import OdometryNoise, OdometrySimulator, sample_motion
 from plugins.localization.raster import GridMap
 from plugins.localization.raycast import LaserSpec, cast, simulate_scan
-from plugins.localization.trajectories import floor_plan_grid, lab_grid, standard_runs
+from plugins.localization.trajectories import floor_plan_grid, floor_plan_routes, lab_grid, standard_runs
 
 
 def test_ray_caster_measures_known_wall_distances() -> None:
@@ -83,3 +83,21 @@ def test_floor_plan_rooms_are_copies_of_one_another() -> None:
     inside = (a < 3.5) & (b < 3.5)  # beams staying in the room (not out through the door)
     assert inside.sum() > 45
     assert a[inside] == pytest.approx(b[inside], abs=0.03)
+
+
+def test_a_larger_floor_plan_has_n_identical_rooms_and_its_runs_stay_clear() -> None:
+    runs = standard_runs(seed=7, rooms=5, worlds=["floor-plan"])
+    assert [r.name for r in runs] == ["floor-plan-tour", "floor-plan-kidnap"]
+    grid = runs[0].grid
+    assert grid.bounds == (0.0, 0.0, 20.0, 10.0)  # 5 rooms of 4 m along the corridor, on each side
+    angles = LaserSpec().angles()
+    scans = cast(grid, np.array([[2.0 + 4.0 * k, 2.4, 0.3] for k in range(5)]), angles, 8.0)
+    inside = (scans < 3.5).all(axis=0)
+    assert inside.sum() > 45 and np.ptp(scans[:, inside], axis=0).max() < 0.03  # five rooms, one scan
+    for run in runs:
+        assert run.grid.distance_at(run.truth[:, 0], run.truth[:, 1]).min() >= 0.3, run.name
+        assert run.truth[:, 0].max() > 17.0  # the last rooms are visited
+    with pytest.raises(ValueError, match="at least 2 rooms"):
+        floor_plan_routes(1)
+    with pytest.raises(ValueError, match="unknown worlds"):
+        standard_runs(seed=1, worlds=["moon"])
