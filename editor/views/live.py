@@ -9,10 +9,10 @@ configuration hash; each node of the system is mapped to an agent (by default th
 same name), and **Distribute** pushes every node its bundle (D58) and shows each answer — the hash
 confirmed, or the errors the agent refused it with.
 
-Monitor: every topic of the system with its rate, every service announced on ``/ckm/services``
-with its active scenario, measures and last alarm, and each plan agent's active state — which the
-mission canvas highlights when it shows that mission; beside them, for a simulation, the live map
-and camera images of editor/views/sim_map.py.
+Monitor: every topic of the system on the network (its own and its nodes' external ones) with its
+rate, every service announced on ``/ckm/services`` with its active scenario, measures and last
+alarm, and each plan agent's active state — which the mission canvas highlights when it shows that
+mission; beside them, for a simulation, the live map and camera images of editor/views/sim_map.py.
 """
 
 from __future__ import annotations
@@ -202,7 +202,9 @@ class MonitorPanel(QWidget):
         self.system = system
         transport = self._transport()
         self._subscribe(transport, TopicQoS(DIRECTORY_TOPIC, "ckm/service", history=64), self._on_service)
-        for topic in system.topics if system is not None else ():
+        nodes = system.nodes if system is not None else ()
+        external = [t for n in nodes for t in n.topics if t.scope == "external"]  # the nodes' topics on the network
+        for topic in [*system.topics, *external] if system is not None else ():
             self._subscribe(transport, TopicQoS(topic.name, topic.type), self._count(topic.name))
         for plan in system.plans if system is not None else ():
             qos = TopicQoS(f"/plan/{plan.name}/agents", "ckm/agent-heartbeat", history=8)

@@ -23,6 +23,7 @@ from editor.views.sim_map import SCALE, SimMapView, to_scene
 from editor.views.sim_state import LiveState
 from runtime.network import TopicQoS, open_transport
 from runtime.resources import codec
+from tests.editor.test_live import cell
 from tests.runtime.network.conftest import private_network
 
 LAB = Path(__file__).resolve().parents[2] / "configs" / "usecase" / "lab.xml"
@@ -192,6 +193,9 @@ def test_the_monitor_tab_draws_what_arrives_on_the_network(qtbot: QtBot, lab: Sy
         image = panel.live.cameras.images["/nao/camera/image"]
         assert (image.width(), image.height()) == (2, 1)
         assert image.pixel(0, 0) & 0xFFFFFF == 0xFF0000 and image.pixel(1, 0) & 0xFFFFFF == 0x0000FF  # red, blue
+        table = panel.topics_table  # the nodes' topics are counted too, not only the system's own
+        counted = {cell(table, r, 0) for r in range(table.rowCount())}
+        assert {"/sim/turtlebot/pose", "/nav/pose", "/recog/objects"} <= counted
         assert "Particles: not published by this system" in panel.live.notes.text()
         assert "replayed from the estimate with <ZoomMap> (4×4 m)" in panel.live.notes.text()
     finally:
