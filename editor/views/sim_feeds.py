@@ -149,7 +149,9 @@ def zoom_of(payload: Any) -> tuple[float, float, float, float] | None:
 
 @dataclass(frozen=True)
 class Seen:
-    """A recognised object with a place on the map."""
+    """A recognised object with a place on the map: a point, or a lone camera ray (Algorithm 4 keeps a 2D
+    observation as a ray until another source places it): from ``(x, y)`` along ``ray``, a unit vector
+    of the map plane."""
 
     label: str
     x: float
@@ -157,6 +159,7 @@ class Seen:
     reliability: float
     sources: int
     topic: str
+    ray: tuple[float, float] | None = None
 
 
 def objects_of(payload: Any, topic: str) -> list[Seen]:
@@ -169,14 +172,31 @@ def objects_of(payload: Any, topic: str) -> list[Seen]:
         if not isinstance(item, Mapping) or item.get("frame", payload.get("frame")) != "map":
             continue
         x, y, r = number(item.get("x")), number(item.get("y")), number(item.get("reliability"))
+        ray = None
         if x is None or y is None:
-            continue  # a lone ray (no position yet)
+            x, y, ray = _ray(item.get("origin"), item.get("direction"))
+        if x is None or y is None:
+            continue
         words = [str(item.get(k) or "") for k in ("name", "label", "shape", "texture")]
         label = " ".join(dict.fromkeys(w for w in words if w)) or "object"
         sources = item.get("sources")
-        found.append(Seen(label, x, y, r if r is not None else 0.0, len(sources) if isinstance(sources, list) else 1,
-                          topic))  # fmt: skip
+        count = len(sources) if isinstance(sources, list) else 1
+        found.append(Seen(label, x, y, r if r is not None else 0.0, count, topic, ray))
     return found
+
+
+def _ray(origin: Any, direction: Any) -> tuple[float | None, float | None, tuple[float, float] | None]:
+    """The map-plane start and unit direction of a ray ``origin``, ``direction`` (3 numbers each)."""
+    try:
+        start, along = np.asarray(origin, dtype=np.float64), np.asarray(direction, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None, None, None
+    if start.shape != (3,) or along.shape != (3,) or not np.all(np.isfinite(start)) or not np.all(np.isfinite(along)):
+        return None, None, None
+    norm = math.hypot(along[0], along[1])
+    if norm < 1e-9:  # straight up or down, or no direction at all: nothing to draw on a map
+        return None, None, None
+    return float(start[0]), float(start[1]), (float(along[0] / norm), float(along[1] / norm))
 
 
 @dataclass(frozen=True)

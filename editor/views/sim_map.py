@@ -10,7 +10,8 @@ a :class:`~editor.views.sim_state.Snapshot`:
   drawn where the configuration placed it (the Nao stands still);
 - the **particle cloud**, when the system publishes one;
 - the **zoom-map area** (dashed, purple), published or replayed (:mod:`.sim_state`);
-- the **recognised objects** in the map frame, each labelled with its name and reliability.
+- the **recognised objects** in the map frame, each labelled with its name and reliability (an
+  observation the fusion could not place yet as its camera's ray, dashed).
 
 Scene coordinates are the map's metres × :data:`SCALE`, y pointing up the screen (``to_scene``).
 :class:`SimLivePanel` puts the map, the camera images (:mod:`.camera`) and a line saying what the
@@ -22,7 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtCore import QLineF, QPointF, QRectF, Qt
 from PySide6.QtGui import QBrush, QColor, QPainter, QPainterPath, QPen, QPolygonF, QResizeEvent
 from PySide6.QtWidgets import (
     QGraphicsEllipseItem,
@@ -49,6 +50,7 @@ from .sim_feeds import Robot, feeds_of
 from .sim_state import LiveState, Snapshot
 
 SCALE = 100.0  # scene units per metre
+RAY = 2.0  # m of an unplaced sighting's ray drawn from its camera
 TRUE, ESTIMATE, ZOOM, OBJECT = QColor("#2e7d32"), QColor("#1565c0"), QColor("#8e24aa"), QColor("#e65100")
 
 
@@ -231,16 +233,25 @@ class SimMapView(QGraphicsView):
             scene.removeItem(item)
         self._marks, self.labels = [], []
         for seen in now.objects:
-            mark = scene.addEllipse(QRectF(-6, -6, 12, 12), QPen(OBJECT, 2), QBrush(QColor(230, 81, 0, 90)))
-            mark.setPos(to_scene(seen.x, seen.y))
+            at = to_scene(seen.x, seen.y)
+            mark: QGraphicsItem
+            if seen.ray is None:
+                mark = scene.addEllipse(QRectF(-6, -6, 12, 12), QPen(OBJECT, 2), QBrush(QColor(230, 81, 0, 90)))
+                mark.setPos(at)
+            else:  # a sighting not placed yet: the camera's ray
+                pen = QPen(OBJECT, 2, Qt.PenStyle.DashLine)
+                pen.setCosmetic(True)
+                at = to_scene(seen.x + RAY * seen.ray[0], seen.y + RAY * seen.ray[1])
+                mark = scene.addLine(QLineF(to_scene(seen.x, seen.y), at), pen)
             mark.setZValue(26)
             mark.setToolTip(f"{seen.label} from {seen.topic}, {seen.sources} source(s)")
-            label = QGraphicsSimpleTextItem(f"{seen.label} {seen.reliability:.2f}")
+            ray = " (ray)" if seen.ray is not None else ""
+            label = QGraphicsSimpleTextItem(f"{seen.label} {seen.reliability:.2f}{ray}")
             label.setBrush(QBrush(OBJECT.darker(130)))
             plate = scene.addRect(label.boundingRect().adjusted(-2, 0, 2, 0), QPen(Qt.PenStyle.NoPen),
                                   QBrush(QColor(255, 255, 255, 200)))  # fmt: skip
             label.setParentItem(plate)  # readable over the objects' footprints
-            plate.setPos(to_scene(seen.x, seen.y) + QPointF(8, -16))
+            plate.setPos(at + QPointF(8, -16))
             plate.setZValue(30)
             self._marks += [mark, plate]
             self.labels.append(label)

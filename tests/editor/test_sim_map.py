@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from PySide6.QtCore import QPointF
-from PySide6.QtWidgets import QGraphicsEllipseItem
+from PySide6.QtWidgets import QGraphicsEllipseItem, QGraphicsLineItem
 from pytestqt.qtbot import QtBot
 
 import ckmconf
@@ -101,12 +101,17 @@ def test_robots_objects_and_the_zoom_area_are_drawn_where_the_messages_put_them(
     assert close(view.zoom.rect().center(), to_scene(2.1, 2.9))
     assert view.zoom.rect().width() == pytest.approx(400.0)  # 4 × 4 m
 
-    # A newer result replaces the topic's objects; an object still placed only as a ray is left out.
-    ray = codec.encode({"objects": [{"name": "box", "x": None, "y": None, "frame": "map", "reliability": 0.3,
-                                     "origin": [1, 1, 1], "direction": [1, 0, 0]}]})  # fmt: skip
-    state.feed("/recog/objects", ray, 101.0)
+    # A newer result replaces the topic's objects. A sighting the fusion could not place yet is its camera's
+    # ray (Algorithm 4), drawn 2 m along its map-plane direction; a vertical one has no place on the map.
+    rays = [{"name": "box", "x": None, "y": None, "frame": "map", "reliability": 0.3, "origin": [7.6, 6.78, 0.5],
+             "direction": [0.0, -0.6, -0.8]},
+            {"name": "lamp", "x": None, "y": None, "frame": "map", "reliability": 0.2, "origin": [1, 1, 1],
+             "direction": [0, 0, 1]}]  # fmt: skip
+    state.feed("/recog/objects", codec.encode({"objects": rays}), 101.0)
     view.show_state(state.snapshot())
-    assert view.labels == []
+    assert [item.text() for item in view.labels] == ["box 0.30 (ray)"]
+    line = next(item for item in view.scene().items() if isinstance(item, QGraphicsLineItem))
+    assert close(line.line().p1(), to_scene(7.6, 6.78)) and close(line.line().p2(), to_scene(7.6, 4.78))
 
 
 def test_the_zoom_area_moves_by_the_zoom_map_rules(lab: System) -> None:
