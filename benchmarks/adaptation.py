@@ -35,7 +35,7 @@ import numpy as np
 
 from ckmconf.loader import load
 from ckmconf.model.resources import Policy, Scenario, Service, SmartResource
-from runtime.network import open_transport
+from runtime.host_network import joined
 from runtime.resources.client import ServiceClient, ServiceDirectory
 from runtime.resources.quality import probability_within
 from runtime.resources.resource import SmartResourceRuntime
@@ -145,48 +145,44 @@ def experiment(
     def source() -> Any:
         return frames[next(counter) % len(frames)]
 
-    server, remote = open_transport(network, name="resource"), open_transport(network, name="clients")
-    for transport in (server, remote):
-        transport.setup()
-        transport.start()
-    runtime = SmartResourceRuntime(
-        resource,
-        server,
-        sources={resource.profiles[0].root.plugin: source},
-        frame_period=FRAME_PERIOD,
-        supply_period=SUPPLY_PERIOD,
-        share=False,
-        primary=False,
-        selector=ThresholdSelector if baseline else TaskConfiguringModule,
-    )
     clients: dict[str, ServiceClient] = {}
     timeline: list[tuple[float, int]] = []
-    try:
-        with runtime:
-            entry = ServiceDirectory(remote).wait_for(resource.name, "RGBRecog", timeout=10)
-            all_clients = [ServiceClient(remote, entry, f"client{i + 1}") for i in range(max(schedule))]
-            active: list[ServiceClient] = []
-            start = time.monotonic()
-            for index, count in enumerate(schedule):
-                while len(active) < count:
-                    client = all_clients[len(active)]
-                    client.connect(parameters=parameters, timeout=10)
-                    active.append(client)
-                    clients[client.client] = client
-                while len(active) > count:
-                    active.pop().disconnect(timeout=10)
-                timeline.append((runtime.now(), count))
-                time.sleep(max(0.0, start + (index + 1) * phase - time.monotonic()))
-            for client in active:
-                client.disconnect(timeout=10)
-            timeline.append((runtime.now(), 0))
-            stream = next(iter(runtime.streams.values()))
-            buffer = stream.buffer.stats()
-    finally:
-        for client in clients.values():
-            client.close()
-        for transport in (remote, server):
-            transport.stop()
+    # the host's way onto the network; the clients' transport stops first, as the clients close
+    with joined(network, "resource") as server, joined(network, "clients") as remote:
+        runtime = SmartResourceRuntime(
+            resource,
+            server,
+            sources={resource.profiles[0].root.plugin: source},
+            frame_period=FRAME_PERIOD,
+            supply_period=SUPPLY_PERIOD,
+            share=False,
+            primary=False,
+            selector=ThresholdSelector if baseline else TaskConfiguringModule,
+        )
+        try:
+            with runtime:
+                entry = ServiceDirectory(remote).wait_for(resource.name, "RGBRecog", timeout=10)
+                all_clients = [ServiceClient(remote, entry, f"client{i + 1}") for i in range(max(schedule))]
+                active: list[ServiceClient] = []
+                start = time.monotonic()
+                for index, count in enumerate(schedule):
+                    while len(active) < count:
+                        client = all_clients[len(active)]
+                        client.connect(parameters=parameters, timeout=10)
+                        active.append(client)
+                        clients[client.client] = client
+                    while len(active) > count:
+                        active.pop().disconnect(timeout=10)
+                    timeline.append((runtime.now(), count))
+                    time.sleep(max(0.0, start + (index + 1) * phase - time.monotonic()))
+                for client in active:
+                    client.disconnect(timeout=10)
+                timeline.append((runtime.now(), 0))
+                stream = next(iter(runtime.streams.values()))
+                buffer = stream.buffer.stats()
+        finally:
+            for client in clients.values():
+                client.close()
     return {
         "timeline": timeline,
         "clients": {

@@ -10,7 +10,7 @@ import sys
 import time
 from typing import Any
 
-from runtime.network import open_transport
+from runtime.host_network import joined
 from runtime.network.ports import private_base
 
 from .networker import TOPIC, network_from
@@ -76,10 +76,7 @@ def pubsub_one(kind: str, paced: int = 3000, total: int = 50000) -> dict[str, An
     worker = _spawn("sub", json.loads(json.dumps(sub_settings)))
     try:
         _line(worker, 60)
-        transport = open_transport(network_from(pub_settings), name="bench-pub")
-        transport.setup()
-        transport.start()
-        try:
+        with joined(network_from(pub_settings), "bench-pub") as transport:  # the host's way onto the network
             if not transport.wait_for_subscribers(TOPIC.name, 1, 30):
                 raise RuntimeError(f"{kind}: the subscriber never appeared")
             publisher = transport.publisher(TOPIC)
@@ -90,8 +87,6 @@ def pubsub_one(kind: str, paced: int = 3000, total: int = 50000) -> dict[str, An
             for _ in range(total):
                 publisher.publish(PAYLOAD)
             result = _line(worker, 120)
-        finally:
-            transport.stop()
     finally:
         worker.kill()
         worker.wait(10)

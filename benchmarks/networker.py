@@ -14,7 +14,8 @@ import time
 from typing import Any
 
 from ckmconf.model import Connect, Listen, Network, Zenoh
-from runtime.network import Sample, TopicQoS, open_transport
+from runtime.host_network import joined
+from runtime.network import Sample, TopicQoS
 
 TOPIC = TopicQoS("/bench", "bytes", reliability="reliable", history=1)
 
@@ -30,7 +31,6 @@ def network_from(settings: dict[str, Any]) -> Network:
 
 def subscriber(settings: dict[str, Any]) -> dict[str, Any]:
     paced, total, limit = settings.pop("paced"), settings.pop("total"), settings.pop("limit")
-    transport = open_transport(network_from(settings), name="bench-sub")
     latencies: list[float] = []
     arrivals: list[float] = []
     done = threading.Event()
@@ -44,27 +44,21 @@ def subscriber(settings: dict[str, Any]) -> dict[str, Any]:
         if len(latencies) + len(arrivals) >= paced + total:
             done.set()
 
-    transport.setup()
-    transport.start()
-    try:
+    with joined(network_from(settings), "bench-sub") as transport:  # the host's way onto the network
         transport.subscribe(TOPIC, on_sample)
         print(json.dumps({"ready": True}), flush=True)
         done.wait(limit)
-    finally:
-        transport.stop()
     span = arrivals[-1] - arrivals[0] if len(arrivals) > 1 else 0.0
     return {"latencies": latencies, "received": len(arrivals), "span_s": span}
 
 
 def peer(settings: dict[str, Any]) -> dict[str, Any]:
     count, limit = settings.pop("count"), settings.pop("limit")
-    transport = open_transport(network_from(settings), name="bench-peer")
-    transport.setup()
-    print(json.dumps({"ready": True}), flush=True)
-    sys.stdin.readline()  # "go": every peer starts at once
-    started = time.time()
-    transport.start()
-    try:
+    with joined(network_from(settings), "bench-peer", start=False) as transport:
+        print(json.dumps({"ready": True}), flush=True)
+        sys.stdin.readline()  # "go": every peer starts at once
+        started = time.time()
+        transport.start()
         linked_at = None
         deadline = time.monotonic() + limit
         while time.monotonic() < deadline:
@@ -74,8 +68,6 @@ def peer(settings: dict[str, Any]) -> dict[str, Any]:
             time.sleep(0.0005)
         print(json.dumps({"started": started, "linked_at": linked_at}), flush=True)
         sys.stdin.readline()  # stay up until everyone is done, so nobody sees a peer leave
-    finally:
-        transport.stop()
     return {"stopped": True}
 
 

@@ -22,7 +22,8 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from runtime.network import Sample, open_transport
+from runtime.host_network import joined
+from runtime.network import Sample
 
 from .netbench import _line, private_settings
 from .networker import network_from
@@ -120,10 +121,7 @@ def run(duration: float = 30.0, *, periods: Mapping[str, float] | None = None, w
 
         return on_sample
 
-    transport = open_transport(network_from(dict(settings)), name="bench-rates")
-    transport.setup()
-    transport.start()
-    try:
+    with joined(network_from(dict(settings)), "bench-rates") as transport:  # the host's way onto the network
         for name in set_rates:
             transport.subscribe(qos(name), recorder(name))
         device_settings = dict(settings, periods=set_rates, duration=duration, settle=SETTLE_S, limit=30.0)
@@ -139,8 +137,6 @@ def run(duration: float = 30.0, *, periods: Mapping[str, float] | None = None, w
         finally:
             device.kill()
             device.wait(10)
-    finally:
-        transport.stop()
     with lock:
         samples = {name: list(values) for name, values in collected.items()}
     services = [_figures(name, set_rates[name], samples[name], warmup) for name in set_rates]

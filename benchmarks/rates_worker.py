@@ -18,8 +18,9 @@ from typing import Any
 
 import msgpack
 
+from runtime.host_network import joined
 from runtime.kernel.scheduler import Scheduler, Task
-from runtime.network import TopicQoS, open_transport
+from runtime.network import TopicQoS
 
 from .networker import network_from
 
@@ -101,10 +102,7 @@ def device(settings: dict[str, Any]) -> dict[str, Any]:
     duration: float = settings.pop("duration")
     settle: float = settings.pop("settle")
     limit: float = settings.pop("limit")
-    transport = open_transport(network_from(settings), name="remote-device")
-    transport.setup()
-    transport.start()
-    try:
+    with joined(network_from(settings), "remote-device") as transport:  # the host's way onto the network
         for name in periods:
             if not transport.wait_for_subscribers(SERVICES[name][0], 1, limit):
                 return {"error": f"nobody subscribed to {SERVICES[name][0]} within {limit} s"}
@@ -127,8 +125,6 @@ def device(settings: dict[str, Any]) -> dict[str, Any]:
         scheduler.stop()
         time.sleep(0.2)  # let the last samples leave before the links close
         return {"published": published, "statistics": scheduler.statistics()}
-    finally:
-        transport.stop()
 
 
 def main() -> None:
