@@ -4,7 +4,9 @@ A system tree on the left, the selected element's form, its mission canvas, the 
 the plan view in the middle, the problems at the bottom. Every edit is an undoable command;
 File offers new, open, save, save as and recent files, and closing with unsaved changes asks.
 With ``--screenshot`` the window is rendered offscreen to PNG and the program exits 0 (``--view``
-picks what is shown: ``tree``, ``element:NAME``, ``mission:NAME``, ``topics``, ``plan``).
+picks what is shown: ``tree``, ``element:NAME``, ``mission:NAME``, ``topics``, ``plan``, or
+``monitor``: the Monitor tab after listening to the system's network for ``MONITOR_WAIT`` seconds,
+with the live map of a running simulation).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -41,6 +44,7 @@ from .views.tree import SystemTree
 from .workspace import Workspace
 
 MAX_RECENT = 8
+MONITOR_WAIT = 3.0  # s a monitor screenshot listens before it is taken (the use case's poses come every 0.8 s)
 Ask = Callable[[QWidget, str], QMessageBox.StandardButton]
 
 
@@ -306,7 +310,7 @@ class MainWindow(QMainWindow):
     # ------------------------------------------------------------------ screenshots
 
     def show_view(self, view: str) -> None:
-        """Bring ``view`` forward: tree, topics, plan, mission:NAME or element:NAME."""
+        """Bring ``view`` forward: tree, topics, plan, monitor, mission:NAME or element:NAME."""
         if view.startswith("mission:"):
             self.open_mission(view.split(":", 1)[1])
         elif view.startswith("element:"):  # the first element of that name, its form in front
@@ -318,6 +322,8 @@ class MainWindow(QMainWindow):
             self.tabs.setCurrentWidget(self.topics)
         elif view == "plan":
             self.tabs.setCurrentWidget(self.plan)
+        elif view == "monitor":
+            self.tabs.setCurrentWidget(self.monitor)
         else:
             self.tabs.setCurrentIndex(0)
 
@@ -327,7 +333,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("file", nargs="?", type=Path, help="configuration to open")
     parser.add_argument("--screenshot", type=Path, help="render the window offscreen to this PNG and exit")
     parser.add_argument(
-        "--view", default="tree", help="with --screenshot: tree, element:NAME, mission:NAME, topics or plan"
+        "--view", default="tree", help="with --screenshot: tree, element:NAME, mission:NAME, topics, plan or monitor"
     )
     args = parser.parse_args(argv)
     if args.screenshot is not None:
@@ -350,8 +356,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             window.canvas.fit()
         elif args.view in ("topics", "plan"):
             getattr(window, args.view).fit()
+        elif args.view == "monitor":  # what the running system publishes meanwhile
+            deadline = time.monotonic() + MONITOR_WAIT
+            while time.monotonic() < deadline:
+                app.processEvents()
+                time.sleep(0.02)
+            window.monitor.refresh()
+            window.monitor.live.map.fit()
         app.processEvents()
-        if not window.grab().save(str(args.screenshot)):
+        saved = window.grab().save(str(args.screenshot))
+        window.close()  # leaves the network, if the view joined it
+        if not saved:
             print(f"ckm-editor: cannot write {args.screenshot}", file=sys.stderr)
             return 1
         return 0

@@ -4,20 +4,25 @@ and the mission canvas highlights the agent's active state at the level it shows
 
 from __future__ import annotations
 
+import re
+import shutil
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from PySide6.QtCore import QSettings
+from PySide6.QtGui import QImage
 from PySide6.QtWidgets import QMessageBox
 from pytestqt.qtbot import QtBot
 
-from editor.app import MainWindow
-from editor.views.sim_map import to_scene
+from editor.app import MainWindow, main
+from editor.views.sim_map import ESTIMATE, to_scene
 from runtime.network import Publisher, TopicQoS, Transport, open_transport
 from runtime.resources import codec
-from tests.editor.test_live import cell
+from tests.editor.test_live import _network_xml, cell
 from tests.runtime.network.conftest import private_network
 
 LAB = Path(__file__).resolve().parents[2] / "configs" / "usecase" / "lab.xml"
@@ -75,3 +80,37 @@ def test_the_window_follows_a_run_on_the_map_and_the_mission_canvas(qtbot: QtBot
     finally:
         win.close()
         sim.stop()
+
+
+def test_a_monitor_screenshot_shows_the_running_simulation(tmp_path: Path) -> None:
+    network = private_network()
+    lab = tmp_path / "usecase"
+    shutil.copytree(LAB.parent, lab)
+    part = lab / "network.xml"
+    part.write_text(re.sub(r"<Network\b[^>]*/>", _network_xml(network), part.read_text(), count=1, flags=re.S))
+    sim = open_transport(network, name="sim")
+    sim.setup()
+    sim.start()
+    stop = threading.Event()
+    estimate = sim.publisher(TopicQoS("/nav/pose", "PoseEstimate"))
+
+    def publish() -> None:  # the estimate, every 50 ms while the editor listens
+        message = {"pose": {"x": 5.0, "y": 3.5, "yaw": 0.0}, "covariance": [0.04, 0, 0, 0, 0.04, 0, 0, 0, 0.01]}
+        while not stop.wait(0.05):
+            estimate.publish(codec.encode(message))
+
+    worker = threading.Thread(target=publish, daemon=True)
+    worker.start()
+    try:
+        target = tmp_path / "monitor.png"
+        assert main([str(lab / "lab.xml"), "--screenshot", str(target), "--view", "monitor"]) == 0
+    finally:
+        stop.set()
+        worker.join(timeout=5)
+        sim.stop()
+    image = QImage(str(target)).convertToFormat(QImage.Format.Format_RGB888)
+    rows = np.frombuffer(image.constBits(), dtype=np.uint8).reshape(image.height(), image.bytesPerLine())
+    pixels = rows[:, : image.width() * 3].reshape(image.height(), image.width(), 3).astype(int)
+    blue = np.array([ESTIMATE.red(), ESTIMATE.green(), ESTIMATE.blue()])
+    near = int(np.all(np.abs(pixels - blue) <= 12, axis=2).sum())
+    assert near >= 10, f"the estimate's outline is not in the screenshot ({near} pixels of its colour)"
