@@ -202,7 +202,7 @@ class EnvironmentMap(ProcessingPlugin):
             if float(values[3]) >= self.params["minReliability"] and self.holds(float(values[0]), float(values[1])):
                 kept.append(item)
         outcomes = ingest_fused(self.model, {"objects": kept}, stamp=float(own), gate=self.params["gate"],
-                                source=self.robot)
+                                source=self.robot, suffix=f"@{self.robot}")
         return sum(outcome in ("added", "moved", "confirmed") for _, outcome in outcomes)
 
     def _update(self, *, full: bool) -> list[dict[str, Any]]:

@@ -86,13 +86,16 @@ def ingest_fused(
     frame: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
     gate: float = 0.3,
     source: str = "fusion",
+    suffix: str = "",
 ) -> list[tuple[str, str]]:
     """Enter the fusion service's recognised objects into the map; ``(map object, outcome)`` per object.
 
     ``frame`` is the pose ``(x, y, z, yaw)`` in the map of the fusion's common frame (z up).
     Objects without a position (a lone 2D ray) are skipped. A recognised name already in the
     map updates that object; a shape class (``cylinder``) updates the nearest object of that tag
-    within ``gate``; anything else is added, tagged with its shape, with its reliability.
+    within ``gate``; anything else is added, tagged with its shape, with its reliability, named
+    ``name{suffix}-N`` (a robot's map service puts ``@robot`` there: two robots' new objects never
+    share a name, so newer-wins merging never fuses two different objects).
     """
     outcomes = []
     for item in result.get("objects", ()):
@@ -109,7 +112,7 @@ def ingest_fused(
             outcome = model.observe(target, x, y, z=z, stamp=stamp, reliability=reliability, source=source)
             outcomes.append((target, outcome))
             continue
-        new = fresh_name(model, name)
+        new = fresh_name(model, name + suffix)
         tag = str(shape or name)
         model.add(small_object(new, tag, x, y, z=z, stamp=stamp, reliability=reliability, source=source,
                                texture=item.get("texture")))

@@ -68,13 +68,14 @@ def test_two_robots_maps_converge_on_one_object_list_newer_time_marks_winning() 
     exchange(turtlebot, nao, {"recognized": mine}, {"recognized": theirs}, 4)
     assert turtlebot.model is not None and nao.model is not None
     assert turtlebot.model.fingerprint() == nao.model.fingerprint()
-    names = sorted(o.name for o in turtlebot.objects())  # a new object is named after it and the map's size
-    assert names == sorted(["workbench", "drop_table", "shelf", "desk", "chair", "cylinder_red_stripes", "cup-10",
-                            "cylinder_blue_dots", "cylinder_green_checker", "box_cereal", "box_orange", "person-10"])
+    names = sorted(o.name for o in turtlebot.objects())  # a new object: its name, its robot's, the map's size
+    assert names == sorted(["workbench", "drop_table", "shelf", "desk", "chair", "cylinder_red_stripes",
+                            "cylinder_blue_dots", "cylinder_green_checker", "box_cereal", "box_orange",
+                            "cup@turtlebot-10", "person@NaoMap-10"])
     for model in (turtlebot.model, nao.model):
         chair = model.get("chair")  # both saw it; the Nao later: its pose wins everywhere
         assert (chair.x, chair.y, chair.stamp, chair.source) == (4.5, 1.5, BASE + 20, "NaoMap")
-        cup = model.get("cup-10")
+        cup = model.get("cup@turtlebot-10")
         assert (cup.tag, cup.x, cup.y, cup.source, cup.reliability) == ("box", 2.0, 3.0, "turtlebot", 0.8)
     # the same result handed again (the stream gives every input's newest value) is not a new sighting
     assert turtlebot.process({"recognized": mine, "peer": None}, Context(9, BASE + 200, "TurtlebotMap"))["applied"] == 0
@@ -94,9 +95,9 @@ def test_the_params_choose_the_environment_and_the_areas_the_map_holds(tmp_path:
                     "cylinder_red_stripes", "workbench"]
     out = bench.process({"recognized": seen(BASE + 5, ("cup", "box", 2.0, 3.0), ("mug", "cylinder", 7.0, 5.0))},
                         Context(0, BASE + 5, "NaoMap"))
-    assert bench.model is not None and sorted(o.name for o in bench.objects()) == sorted([*held, "mug-6"])
-    assert sorted(o["name"] for o in out["objects"]) == sorted([*held, "mug-6"])  # the first frame: all
-    mug = encode_object(bench.model.get("mug-6"))
+    assert bench.model is not None and sorted(o.name for o in bench.objects()) == sorted([*held, "mug@nao-6"])
+    assert sorted(o["name"] for o in out["objects"]) == sorted([*held, "mug@nao-6"])  # the first frame: all
+    mug = encode_object(bench.model.get("mug@nao-6"))
     outside = mug | {"name": "sofa", "pose": [2.0, 3.0, 0.0, 0.0]}
     inside = mug | {"name": "plate", "pose": [8.0, 5.0, 0.0, 0.0]}
     broken = {"name": "junk", "pose": [1, 2]}
@@ -191,7 +192,7 @@ def test_two_robots_map_services_converge_in_smart_resource_runtimes(tmp_path: P
             for robot, publisher in recog.items():  # each robot's recognition keeps publishing
                 publisher.publish(codec.encode(results[robot]))
             one, two = (m.model.fingerprint() if m.model is not None else [] for m in maps)
-            return bool(one) and one == two and {"cup-10", "person-10"} <= {name for name, *_ in one}
+            return bool(one) and one == two and {"cup@TurtlebotMap-10", "person@NaoMap-10"} <= {n for n, *_ in one}
 
         assert until(converged), [sorted(o.name for o in m.objects()) for m in maps]
         for m in maps:
