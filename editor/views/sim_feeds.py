@@ -8,7 +8,9 @@ Fig. 7.16 picture of §7.4.1, drawn as the run goes).
   **true pose** is the topic of a sensor on a ``sim`` channel of that body with ``sensor=pose``
   (the simulator's ground truth, ``/sim/turtlebot/pose``), a body without one stays where it was
   placed (the Nao); its **estimate** is a ``PoseEstimate`` topic (``/nav/pose``): the one naming
-  the body, else the only robot with a ground truth gets them all;
+  the body, else the only robot with a ground truth gets them all; its **head** is a ``PanTilt``
+  topic naming the body that no controller takes as its set-point (the angles, not the goal:
+  ``/nao/head_state``, not ``/nao/head_goal``);
 - **recognised objects**: every ``Detections`` topic (only objects in the ``map`` frame, the fused
   ``/recog/objects``, have a place on the map) and every ``ObjectPosition`` topic in that frame
   (the Nao's spotted target);
@@ -207,6 +209,7 @@ class Robot:
     placed: tuple[float, float, float]
     truth: str | None = None
     estimates: tuple[str, ...] = ()
+    head: str | None = None
 
 
 @dataclass(frozen=True)
@@ -263,13 +266,16 @@ def feeds_of(system: System) -> Feeds:
         if not any(t.type == "Image" and t.scope == "external" for t in node.topics):
             cameras += [_wire(t, node.name) for t in node.topics if t.type == "Image"]
     estimates = [name for name, kind in topics.items() if kind == "PoseEstimate"]
+    setpoints = {i.topic for n in system.nodes for c in n.controllers for i in c.inputs if i.role == "setpoint"}
+    pan_tilt = [name for name, kind in topics.items() if kind == "PanTilt" and name not in setpoints]
     moving = [body for body in placed if body in truth]
     robots = []
     for body, pose in placed.items():
         mine = [t for t in estimates if body in t.lower()]
         if not mine and moving == [body]:
             mine = [t for t in estimates if not any(other in t.lower() for other in placed if other != body)]
-        robots.append(Robot(body, pose, truth.get(body), tuple(mine)))
+        heads = sorted(t for t in pan_tilt if body in t.lower())
+        robots.append(Robot(body, pose, truth.get(body), tuple(mine), heads[0] if heads else None))
 
     def named(word: str) -> tuple[str, ...]:
         return tuple(sorted(n for n, kind in topics.items() if word in n.lower() or word in kind.lower()))

@@ -7,7 +7,8 @@ a :class:`~editor.views.sim_state.Snapshot`:
 
 - each robot's **true pose** (a filled arrow, green) and **estimated pose** (an outlined arrow,
   blue) with the **2σ covariance ellipse** of its position; a robot with no ground-truth topic is
-  drawn where the configuration placed it (the Nao stands still);
+  drawn where the configuration placed it (the Nao stands still), and where its head's pan turns
+  its camera (dotted) when it publishes its head angles;
 - the **particle cloud**, when the system publishes one;
 - the **zoom-map area** (dashed, purple), published or replayed (:mod:`.sim_state`);
 - the **recognised objects** in the map frame, each labelled with its name and reliability (an
@@ -28,6 +29,7 @@ from PySide6.QtGui import QBrush, QColor, QPainter, QPainterPath, QPen, QPolygon
 from PySide6.QtWidgets import (
     QGraphicsEllipseItem,
     QGraphicsItem,
+    QGraphicsLineItem,
     QGraphicsPathItem,
     QGraphicsPolygonItem,
     QGraphicsRectItem,
@@ -51,6 +53,7 @@ from .sim_state import LiveState, Snapshot
 
 SCALE = 100.0  # scene units per metre
 RAY = 2.0  # m of an unplaced sighting's ray drawn from its camera
+GAZE = 1.5  # m of a robot's head direction drawn from it
 TRUE, ESTIMATE, ZOOM, OBJECT = QColor("#2e7d32"), QColor("#1565c0"), QColor("#8e24aa"), QColor("#e65100")
 
 
@@ -123,6 +126,7 @@ class SimMapView(QGraphicsView):
         self.robots: dict[str, dict[str, QGraphicsItem]] = {}
         self.labels: list[QGraphicsSimpleTextItem] = []  # the recognised objects' labels (on white plates)
         self._marks: list[QGraphicsItem] = []
+        self._where: dict[str, tuple[float, float, float]] = {}  # each robot's last true pose drawn
         self.particles = QGraphicsPathItem()
         self.zoom = QGraphicsRectItem()
         self.zoom_label = QGraphicsSimpleTextItem()
@@ -131,7 +135,7 @@ class SimMapView(QGraphicsView):
         """Draw the environment and make the robots' markers (hidden until their first pose)."""
         scene = self.scene()
         scene.clear()
-        self.robots, self.labels, self._marks = {}, [], []
+        self.robots, self.labels, self._marks, self._where = {}, [], [], {}
         thin = QPen(QColor("#424242"), 1)
         thin.setCosmetic(True)
         if env is not None:
@@ -178,12 +182,18 @@ class SimMapView(QGraphicsView):
             markers["label"] = QGraphicsSimpleTextItem(robot.name if robot.truth or robot.estimates
                                                        else f"{robot.name} (placed)")  # fmt: skip
             markers["label"].setZValue(25)
+            gaze = QGraphicsLineItem()
+            dotted = QPen(TRUE, 2, Qt.PenStyle.DotLine)
+            dotted.setCosmetic(True)
+            gaze.setPen(dotted)
+            markers["gaze"] = gaze
             for marker in markers.values():
                 scene.addItem(marker)
                 marker.setVisible(False)
             if robot.truth is None:  # it does not move: its configured placement is its true pose
                 _place(markers["truth"], robot.placed)
                 self._label(markers["label"], robot.placed)
+                self._where[robot.name] = robot.placed
             self.robots[robot.name] = markers
         self.fit()
 
@@ -213,6 +223,14 @@ class SimMapView(QGraphicsView):
             if name in now.truth:
                 _place(markers["truth"], now.truth[name])
                 self._label(markers["label"], now.truth[name])
+                self._where[name] = now.truth[name]
+            if name in now.head and name in self._where:  # where its head (camera) looks
+                x, y, yaw = self._where[name]
+                end = (x + GAZE * math.cos(yaw + now.head[name]), y + GAZE * math.sin(yaw + now.head[name]))
+                gaze = markers["gaze"]
+                assert isinstance(gaze, QGraphicsLineItem)
+                gaze.setLine(QLineF(to_scene(x, y), to_scene(*end)))
+                gaze.setVisible(True)
             if name in now.estimate:
                 _place(markers["estimate"], now.estimate[name])
                 if name not in now.truth:

@@ -22,7 +22,18 @@ import numpy as np
 from ckmconf.model.environment import ZoomMap
 from runtime.network import Sample
 
-from .sim_feeds import FeedError, Feeds, Seen, covariance_of, objects_of, particles_of, plain, pose_of, zoom_of
+from .sim_feeds import (
+    FeedError,
+    Feeds,
+    Seen,
+    covariance_of,
+    number,
+    objects_of,
+    particles_of,
+    plain,
+    pose_of,
+    zoom_of,
+)
 
 Pose = tuple[float, float, float]
 
@@ -45,6 +56,7 @@ class Snapshot:
     truth: dict[str, Pose] = field(default_factory=dict)
     estimate: dict[str, Pose] = field(default_factory=dict)
     covariance: dict[str, np.ndarray] = field(default_factory=dict)
+    head: dict[str, float] = field(default_factory=dict)  # robot → head pan (rad, left of its heading)
     particles: np.ndarray | None = None
     zoom: Zoom | None = None
     objects: list[Seen] = field(default_factory=list)
@@ -72,6 +84,8 @@ class LiveState:
                 roles.setdefault(robot.truth, []).append(self._truth(robot.name))
             for topic in robot.estimates:
                 roles.setdefault(topic, []).append(self._estimate(robot.name))
+            if robot.head is not None:
+                roles.setdefault(robot.head, []).append(self._head(robot.name))
         for topic in self.feeds.objects:
             roles.setdefault(topic, []).append(self._objects)
         for topic in self.feeds.cameras:
@@ -130,6 +144,15 @@ class LiveState:
 
         return take
 
+    def _head(self, robot: str) -> Callable[[str, Any, float], None]:
+        def take(_: str, value: Any, __: float) -> None:
+            pan = number(value.get("pan")) if isinstance(value, Mapping) else None
+            if pan is not None:
+                with self._lock:
+                    self._now.head[robot] = pan
+
+        return take
+
     def _replay_zoom(self, pose: Pose, stamp: float) -> None:
         settings, area = self.settings, self._now.zoom
         if settings is None:
@@ -170,5 +193,5 @@ class LiveState:
         """A copy of the newest values (the arrays and payloads are shared: they are never changed)."""
         with self._lock:
             now = self._now
-            return Snapshot(dict(now.truth), dict(now.estimate), dict(now.covariance), now.particles, now.zoom,
-                            list(now.objects), dict(now.images), dict(now.errors))  # fmt: skip
+            return Snapshot(dict(now.truth), dict(now.estimate), dict(now.covariance), dict(now.head), now.particles,
+                            now.zoom, list(now.objects), dict(now.images), dict(now.errors))  # fmt: skip

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QPointF
+from PySide6.QtCore import QPointF, Qt
 from PySide6.QtWidgets import QGraphicsEllipseItem, QGraphicsLineItem
 from pytestqt.qtbot import QtBot
 
@@ -62,6 +62,7 @@ def test_the_use_case_topics_are_found_in_its_configuration(lab: System) -> None
     assert robots["turtlebot"].placed == (1.5, 1.5, 0.785)
     assert robots["nao"].truth is None and robots["nao"].estimates == ()  # it stands where nodes.xml puts it
     assert robots["nao"].placed == (7.6, 6.78, -1.5708)
+    assert robots["nao"].head == "/nao/head_state" and robots["turtlebot"].head is None  # not /nao/head_goal
     assert "/recog/objects" in feeds.objects and "/pantilt/target" in feeds.objects
     # the Nao's frames are on the network; the Xtion's only under their node-internal wire name
     assert feeds.cameras == ("/nao/camera/image", "/turtlebot/~xtion_rgb_raw")
@@ -110,8 +111,21 @@ def test_robots_objects_and_the_zoom_area_are_drawn_where_the_messages_put_them(
     state.feed("/recog/objects", codec.encode({"objects": rays}), 101.0)
     view.show_state(state.snapshot())
     assert [item.text() for item in view.labels] == ["box 0.30 (ray)"]
-    line = next(item for item in view.scene().items() if isinstance(item, QGraphicsLineItem))
-    assert close(line.line().p1(), to_scene(7.6, 6.78)) and close(line.line().p2(), to_scene(7.6, 4.78))
+    lines = [
+        i for i in view.scene().items() if isinstance(i, QGraphicsLineItem) and i.pen().style() == Qt.PenStyle.DashLine
+    ]
+    assert len(lines) == 1
+    assert close(lines[0].line().p1(), to_scene(7.6, 6.78)) and close(lines[0].line().p2(), to_scene(7.6, 4.78))
+
+    # The Nao's head turned 0.5 rad to its left: its camera looks that way from where it stands.
+    gaze = nao["gaze"]
+    assert isinstance(gaze, QGraphicsLineItem) and not gaze.isVisible()
+    state.feed("/nao/head_state", codec.encode({"pan": 0.5, "tilt": 0.1}), 102.0)
+    view.show_state(state.snapshot())
+    looks = (7.6 + 1.5 * math.cos(-1.5708 + 0.5), 6.78 + 1.5 * math.sin(-1.5708 + 0.5))
+    assert (
+        gaze.isVisible() and close(gaze.line().p1(), to_scene(7.6, 6.78)) and close(gaze.line().p2(), to_scene(*looks))
+    )
 
 
 def test_the_zoom_area_moves_by_the_zoom_map_rules(lab: System) -> None:
