@@ -8,18 +8,22 @@ and lists what it sees, and forgets an endpoint whose token goes.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 import zenoh
 from pytestqt.qtbot import QtBot
 
+import ckmconf
 from ckmconf.model import Network
 from editor.views.ros_bridge import HEADERS, RosBridgePanel
+from runtime.network import Transport
 from runtime.network.rmw_graph import GraphEndpoint, parse_endpoint
 from runtime.network.zenoh_transport import zenoh_config
+from runtime.ros.bridge import RmwZenohBridge
 from runtime.ros.rmw_zenoh import Endpoint, EntityKind, RmwQos, liveliness_token, parse_liveliness_token
-from tests.runtime.network.conftest import private_network
+from tests.conftest import REPO
+from tests.runtime.network.conftest import private_network, transports  # noqa: F401 (fixture)
 
 HASH = "RIHS01_" + "ab" * 32
 ZID = "1234abcd"
@@ -104,3 +108,27 @@ def test_the_view_lists_ros_topics_seen_on_zenoh(qtbot: QtBot, ros_node: tuple[z
         panel.stop()
         for declared in tokens[2:]:
             declared.undeclare()  # type: ignore[no-untyped-call]
+
+
+@pytest.mark.timeout(60)
+def test_the_view_shows_what_the_ckm_bridge_offers(
+    qtbot: QtBot,
+    ros_node: tuple[zenoh.Session, Network],
+    transports: Callable[..., Transport],  # noqa: F811
+) -> None:
+    session, network = ros_node  # here the bridge's session, on the Zenoh network the view opens
+    system = ckmconf.load(REPO / "tests" / "data" / "ros" / "ros_typed_loop.xml")
+    bridge = RmwZenohBridge(system, transports(private_network("multipeer"), "ckm"))
+    bridge.start(session)
+    panel = RosBridgePanel()
+    qtbot.addWidget(panel)
+    panel.open(network)
+    try:
+        qtbot.waitUntil(lambda: len(panel.rows()) == 2, timeout=30_000)
+        assert panel.rows() == [
+            ["/reading", "ckm_test_msgs/msg/Reading", "topic", "1", "1", "/ckm_bridge"],
+            ["/scan", "sensor_msgs/msg/LaserScan", "topic", "1", "1", "/ckm_bridge"],
+        ]
+    finally:
+        panel.stop()
+        bridge.stop()
