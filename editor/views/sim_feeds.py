@@ -162,6 +162,7 @@ class Seen:
     sources: int
     topic: str
     ray: tuple[float, float] | None = None
+    chosen: bool = False  # an ObjectPosition: the one object a behavior or a robot singled out
 
 
 def objects_of(payload: Any, topic: str) -> list[Seen]:
@@ -183,7 +184,7 @@ def objects_of(payload: Any, topic: str) -> list[Seen]:
         label = " ".join(dict.fromkeys(w for w in words if w)) or "object"
         sources = item.get("sources")
         count = len(sources) if isinstance(sources, list) else 1
-        found.append(Seen(label, x, y, r if r is not None else 0.0, count, topic, ray))
+        found.append(Seen(label, x, y, r if r is not None else 0.0, count, topic, ray, "objects" not in payload))
     return found
 
 
@@ -222,6 +223,7 @@ class Feeds:
     zoom: tuple[str, ...]
     particles: tuple[str, ...]
     types: Mapping[str, str]
+    lifespans: Mapping[str, float]  # topic → its <Topic lifespan>: older results are no longer shown
 
 
 def _wire(topic: Topic, node: str | None) -> str:
@@ -241,12 +243,13 @@ def _pose_param(text: str) -> tuple[float, float, float] | None:
 
 def feeds_of(system: System) -> Feeds:
     """The robots, recognition, camera, zoom and particle topics of ``system`` (see the module docstring)."""
-    topics: dict[str, str] = {_wire(t, None): t.type for t in system.topics}
+    every = [(_wire(t, None), t) for t in system.topics]
+    every += [(_wire(t, n.name), t) for n in system.nodes for t in n.topics]
+    topics = {name: t.type for name, t in every}
     placed: dict[str, tuple[float, float, float]] = {}
     truth: dict[str, str] = {}
     for node in system.nodes:
         local = {t.name: t for t in node.topics}
-        topics.update({_wire(t, node.name): t.type for t in node.topics})
         body = ""
         channels: dict[str, tuple[HWChannel | None, dict[str, str], str]] = {}
         for channel in node.channels:
@@ -287,4 +290,5 @@ def feeds_of(system: System) -> Feeds:
         zoom=named("zoom"),
         particles=named("particle"),
         types=topics,
+        lifespans={name: t.lifespan for name, t in every if t.lifespan is not None},
     )

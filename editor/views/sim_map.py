@@ -12,7 +12,8 @@ a :class:`~editor.views.sim_state.Snapshot`:
 - the **particle cloud**, when the system publishes one;
 - the **zoom-map area** (dashed, purple), published or replayed (:mod:`.sim_state`);
 - the **recognised objects** in the map frame, each labelled with its name and reliability (an
-  observation the fusion could not place yet as its camera's ray, dashed).
+  observation the fusion could not place yet as its camera's ray, dashed; an object singled out on
+  an ObjectPosition topic, the Nao's spotted target, with that topic's name).
 
 Scene coordinates are the map's metres × :data:`SCALE`, y pointing up the screen (``to_scene``).
 :class:`SimLivePanel` puts the map, the camera images (:mod:`.camera`) and a line saying what the
@@ -136,6 +137,7 @@ class SimMapView(QGraphicsView):
         scene = self.scene()
         scene.clear()
         self.robots, self.labels, self._marks, self._where = {}, [], [], {}
+        self.bounds = QRectF()
         thin = QPen(QColor("#424242"), 1)
         thin.setCosmetic(True)
         if env is not None:
@@ -263,8 +265,8 @@ class SimMapView(QGraphicsView):
                 mark = scene.addLine(QLineF(to_scene(seen.x, seen.y), at), pen)
             mark.setZValue(26)
             mark.setToolTip(f"{seen.label} from {seen.topic}, {seen.sources} source(s)")
-            ray = " (ray)" if seen.ray is not None else ""
-            label = QGraphicsSimpleTextItem(f"{seen.label} {seen.reliability:.2f}{ray}")
+            note = " (ray)" if seen.ray is not None else f" ({seen.topic})" if seen.chosen else ""
+            label = QGraphicsSimpleTextItem(f"{seen.label} {seen.reliability:.2f}{note}")
             label.setBrush(QBrush(OBJECT.darker(130)))
             plate = scene.addRect(label.boundingRect().adjusted(-2, 0, 2, 0), QPen(Qt.PenStyle.NoPen),
                                   QBrush(QColor(255, 255, 255, 200)))  # fmt: skip

@@ -2,7 +2,9 @@
 
 Network callbacks only store what arrived, under a lock; the Monitor tab's Qt timer takes a
 :class:`Snapshot` and redraws from it (the same split as editor/views/live.py). Images are kept as
-they arrived and turned into pixels at most once each, on the GUI thread.
+they arrived and turned into pixels at most once each, on the GUI thread. A recognition result is
+shown for its topic's ``lifespan`` after it arrived (``/recog/objects``: 2.4 s), so objects no
+longer recognised leave the map.
 
 The zoom-map area (§6.1.3) is the newest one a zoom topic carried; when the system publishes none
 (the use case), it is replayed from the pose estimate with the ``<ZoomMap>`` triggers of
@@ -12,7 +14,9 @@ within ``border`` × the size of the area's edge, and after ``timeout`` s — at
 
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -67,13 +71,14 @@ class Snapshot:
 class LiveState:
     """The newest sample of every topic of ``feeds``, turned into what the map draws."""
 
-    def __init__(self, feeds: Feeds, zoom: ZoomMap | None = None) -> None:
+    def __init__(self, feeds: Feeds, zoom: ZoomMap | None = None, clock: Callable[[], float] = time.monotonic) -> None:
         self.feeds = feeds
+        self.clock = clock  # arrival times, for the lifespans
         self.settings = zoom
         self._lock = threading.Lock()
         self._now = Snapshot()
         self._zoom_stamp = 0.0
-        self._by_topic: dict[str, list[Seen]] = {}
+        self._by_topic: dict[str, tuple[float, list[Seen]]] = {}  # topic → (arrival, objects)
         self._frames: dict[str, int] = {}
 
     def handlers(self) -> dict[str, Callable[[Sample], None]]:
@@ -168,8 +173,7 @@ class LiveState:
     def _objects(self, topic: str, value: Any, _: float) -> None:
         seen = objects_of(value, topic)
         with self._lock:
-            self._by_topic[topic] = seen  # each topic's newest result replaces its last one
-            self._now.objects = [s for t in sorted(self._by_topic) for s in self._by_topic[t]]
+            self._by_topic[topic] = (self.clock(), seen)  # each topic's newest result replaces its last one
 
     def _image(self, topic: str, value: Any, _: float) -> None:
         if isinstance(value, Mapping):
@@ -191,7 +195,14 @@ class LiveState:
 
     def snapshot(self) -> Snapshot:
         """A copy of the newest values (the arrays and payloads are shared: they are never changed)."""
+        moment = self.clock()
         with self._lock:
             now = self._now
+            now.objects = [
+                s
+                for t, (arrived, seen) in sorted(self._by_topic.items())
+                if moment - arrived <= self.feeds.lifespans.get(t, math.inf)  # a result past its lifespan is gone
+                for s in seen
+            ]
             return Snapshot(dict(now.truth), dict(now.estimate), dict(now.covariance), dict(now.head), now.particles,
                             now.zoom, list(now.objects), dict(now.images), dict(now.errors))  # fmt: skip

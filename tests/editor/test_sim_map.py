@@ -160,6 +160,26 @@ def test_particles_are_drawn_when_an_estimate_carries_them(qtbot: QtBot, lab: Sy
     assert view.zoom.isVisible() is False  # no <ZoomMap> given to this state: nothing replayed
 
 
+def test_results_leave_the_map_after_their_topics_lifespan(qtbot: QtBot, lab: System) -> None:
+    now = [0.0]
+    state = LiveState(feeds_of(lab), clock=lambda: now[0])
+    view = SimMapView()
+    qtbot.addWidget(view)
+    view.show_environment(lab.environment, feeds_of(lab).robots)
+    state.feed("/recog/objects", recognised(("mug", 8.0, 6.1, 0.87)), 1.0)  # lifespan 2.4 s (nodes.xml)
+    target = {"stamp": 1.0, "label": "mug", "frame": "map", "x": 8.0, "y": 6.2, "z": 0.8, "reliability": 0.8}
+    state.feed("/pantilt/target", codec.encode(target), 1.0)  # the Nao's target, lifespan 5 s
+    now[0] = 2.0
+    view.show_state(state.snapshot())
+    assert sorted(item.text() for item in view.labels) == ["mug 0.80 (/pantilt/target)", "mug cylinder 0.87"]
+    now[0] = 3.0  # the fusion has said nothing for 3 s: its objects are gone, the target stays
+    view.show_state(state.snapshot())
+    assert [item.text() for item in view.labels] == ["mug 0.80 (/pantilt/target)"]
+    now[0] = 6.0
+    view.show_state(state.snapshot())
+    assert view.labels == []
+
+
 def test_unreadable_messages_are_reported_not_drawn(lab: System) -> None:
     state = LiveState(feeds_of(lab))
     state.feed("/sim/turtlebot/pose", {"~nd": ["|O", [1], b"x"]}, 1.0)
