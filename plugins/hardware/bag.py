@@ -39,8 +39,9 @@ from typing import Any
 import numpy as np
 from rosbags.interfaces import Nodetype
 
-from ckmconf.errors import ConfigError
+from ckmconf.errors import MEMORY_FILE, ConfigError
 from ckmconf.model import HWChannel, Param
+from ckmconf.source import Limits, read_source
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.ros.bag import BagError, BagSource
 from runtime.ros.convert import IMAGE, decode_payload
@@ -234,6 +235,13 @@ class BagBackend(Backend):
         return float(payload)
 
     def _error(self, param: str, message: str) -> ConfigError:
-        """The problem at the Param that causes it (its value), else at the channel."""
+        """The problem at the value of the Param that causes it (as ``verify`` places it), else at the channel."""
         record: Param | HWChannel = next((p for p in self.channel.params if p.name == param), self.channel)
-        return ConfigError.of(record, message, "value" if isinstance(record, Param) else None)
+        if not isinstance(record, Param):
+            return ConfigError.of(record, message)
+        if record.loc is not None and record.loc.file != MEMORY_FILE:
+            try:
+                return ConfigError.at(read_source(record.loc.file, Limits()).attr_loc_at(record.loc, "value"), message)
+            except ConfigError:  # the file changed or went since it was loaded: the element will do
+                pass
+        return ConfigError.of(record, message, "value")

@@ -124,10 +124,10 @@ def test_configuration_errors_name_the_param(tmp_path: Path) -> None:
     file = tmp_path / "replay.xml"
     where = "/System[@name='replay']/Node[@name='n']/HWChannel[@name='ch']/Param"
     assert _error(tmp_path, bag="nothing", topic="/speed") == (
-        f"{file}:5:7: {where}[@name='bag']/@value: bag channel 'ch': the bag {tmp_path / 'nothing'} does not exist"
+        f"{file}:5:25: {where}[@name='bag']/@value: bag channel 'ch': the bag {tmp_path / 'nothing'} does not exist"
     )
     assert _error(tmp_path, bag="bag", topic="/sped") == (
-        f"{file}:6:7: {where}[@name='topic']/@value: bag channel 'ch': the bag {bag} has no topic '/sped' (topics: "
+        f"{file}:6:27: {where}[@name='topic']/@value: bag channel 'ch': the bag {bag} has no topic '/sped' (topics: "
         "/camera (sensor_msgs/msg/Image), /empty (std_msgs/msg/Float64), /odom (nav_msgs/msg/Odometry), "
         "/scan (sensor_msgs/msg/LaserScan), /speed (std_msgs/msg/Float64))"
     )
@@ -149,7 +149,7 @@ def test_configuration_errors_name_the_param(tmp_path: Path) -> None:
         "field 'child_frame_id' of nav_msgs/msg/Odometry holds no numbers to read"
     )
     size = _error(tmp_path, 4, bag="bag", topic="/scan", field="ranges")
-    assert size.startswith(f"{file}:7:7: {where}[@name='field']/@value: ")
+    assert size.startswith(f"{file}:7:27: {where}[@name='field']/@value: ")
     assert size.endswith(
         "the channel's size is 4, but message 0 of /scan gives 5 value(s) (sensor_msgs/msg/LaserScan.ranges)"
     )

@@ -118,6 +118,6 @@ def test_a_missing_bag_stops_the_run_before_it_starts(tmp_path: Path) -> None:
     done = _ckm_run(str(replay), "--duration", "1", "--log-dir", str(tmp_path / "play"))
     assert done.returncode == 1
     assert done.stderr.strip().splitlines()[-1] == (
-        f"{replay}:6:7: /System[@name='replay']/Node[@name='replay']/HWChannel[@name='probe']/Param[@name='bag']"
+        f"{replay}:6:25: /System[@name='replay']/Node[@name='replay']/HWChannel[@name='probe']/Param[@name='bag']"
         f"/@value: bag channel 'probe': the bag {tmp_path / 'no-such-bag'} does not exist"
     )
