@@ -56,12 +56,15 @@ R = TypeVar("R", bound=Record)
 
 
 def camel(name: str) -> str:
+    """XML attribute name of a Python field: ``max_frame`` → ``maxFrame`` (a trailing ``_`` dropped: ``type_``)."""
     head, *rest = name.rstrip("_").split("_")
     return head + "".join(part[:1].upper() + part[1:] for part in rest)
 
 
 @dataclass(frozen=True)
 class FieldPlan:
+    """How one record field maps to XML: ``kind`` (attr/child/children/text), XML name, converters, default."""
+
     name: str
     kind: str
     xml: str
@@ -72,6 +75,7 @@ class FieldPlan:
 
 
 def format_float(value: float) -> str:
+    """Shortest text that reads back to ``value``, without a trailing ``.0`` (``2.0`` → ``2``)."""
     text = repr(float(value))
     return text[:-2] if text.endswith(".0") else text
 

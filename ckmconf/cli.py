@@ -36,6 +36,7 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point: parse ``argv`` and :func:`run`; exit status 0 when every file is valid."""
     return run(parser().parse_args(argv))
 
 

@@ -25,10 +25,12 @@ class Located(Protocol):
     """What :meth:`ConfigError.of` needs of a record: where it was read and its element name."""
 
     @property
-    def loc(self) -> Loc | None: ...
+    def loc(self) -> Loc | None:
+        """Where the record was read (file, line, column, XPath), None if built in memory."""
 
     @property
-    def TAG(self) -> str: ...  # the records' class constant
+    def TAG(self) -> str:  # the records' class constant
+        """The record's XML element name."""
 
 
 def located(record: Located) -> Loc:
@@ -67,6 +69,7 @@ class ConfigError(Exception):
         return cls(loc.file, loc.line, loc.column, xpath, message)
 
     def as_dict(self) -> dict[str, object]:
+        """The error as JSON-ready fields (``ckm-validate --json``)."""
         return {
             "file": self.file,
             "line": self.line,
@@ -76,6 +79,7 @@ class ConfigError(Exception):
         }
 
     def sort_key(self) -> tuple[str, int, int, str]:
+        """Report order: file, line, column, message."""
         return (self.file, self.line, self.column, self.message)
 
     def __eq__(self, other: object) -> bool:

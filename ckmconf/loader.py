@@ -30,6 +30,7 @@ class LoadResult:
 
     @property
     def ok(self) -> bool:
+        """True if no problem was found."""
         return not self.errors
 
 

@@ -38,6 +38,7 @@ def local_name(tag: object) -> str:
 
 
 def in_namespace(tag: object) -> bool:
+    """True if ``tag`` is an element of the CKM namespace (not a comment or a foreign element)."""
     return isinstance(tag, str) and tag.startswith(_NS_PREFIX)
 
 
@@ -61,6 +62,7 @@ class SourceFile:
     _seen: dict[etree._Element, dict[str, int]] = field(default_factory=dict)
 
     def line_col(self, offset: int) -> tuple[int, int]:
+        """1-based line and column of byte ``offset`` in the file."""
         if not self._line_starts:
             self._line_starts = [0] + [m.end() for m in re.finditer(rb"\n", self.data)]
         line = bisect.bisect_right(self._line_starts, offset)

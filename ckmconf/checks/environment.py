@@ -15,6 +15,7 @@ from .report import Reporter, missing
 
 
 def check_environment(system: System, report: Reporter) -> None:
+    """Check ``<Environment>`` (environment.xsd, §6.1): map bounds, polygons, references, Zoom Map."""
     env = system.environment
     if env is None:
         return

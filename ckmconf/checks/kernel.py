@@ -12,6 +12,7 @@ _TASK_MEASURES = ("deadline-misses", "jitter", "exec-time")
 
 
 def check_kernel(system: System, scope: Scope, report: Reporter) -> None:
+    """Check the kernel layer (kernel.xsd, §3.1): network, message types, topic scopes and names, nodes."""
     _check_network(system, report)
     _check_types(system, scope, report)
     report.unique(system.nodes, "node", "the system")

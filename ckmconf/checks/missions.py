@@ -11,6 +11,7 @@ _TOLERANCE = 1e-6
 
 
 def check_missions(system: System, scope: Scope, report: Reporter) -> None:
+    """Check behaviors, composition matrices, missions and plans (missions.xsd, ch. 5): names, references."""
     report.unique(system.behaviors, "behavior", "the system")
     report.unique(system.matrices, "composition matrix", "the system")
     report.unique(system.missions, "mission", "the system")

@@ -9,6 +9,7 @@ from .scope import Scope
 
 
 def check_resources(system: System, scope: Scope, report: Reporter) -> None:
+    """Check every ``<SmartResource>`` (resources.xsd, ch. 4): node, plugins, profiles, services, TCM."""
     report.unique(system.resources, "SmartResource", "the system")
     nodes = [n.name for n in system.nodes]
     for resource in system.resources:

@@ -20,6 +20,7 @@ class Scope:
 
     @classmethod
     def of(cls, system: System) -> Scope:
+        """Build the name tables of ``system`` (the first declaration of a name wins; duplicates are checked apart)."""
         scope = cls(system)
         for topic in system.topics:
             scope.external.setdefault(topic.name, topic)
@@ -46,11 +47,14 @@ class Scope:
         return self.external.get(name)
 
     def visible_topics(self, node: Node | None) -> list[str]:
+        """Topic names ``node`` can use: its own, then the system's external ones."""
         own = list(self.node_topics.get(node.name, {})) if node is not None else []
         return own + list(self.external)
 
     def type_exists(self, name: str) -> bool:
+        """True if ``name`` is a built-in type or a declared ``<MessageType>``."""
         return name in BUILTIN_TYPES or name in self.types
 
     def type_names(self) -> list[str]:
+        """Every usable type name, built-ins first (for error messages)."""
         return sorted(BUILTIN_TYPES) + sorted(self.types)

@@ -39,6 +39,7 @@ class Region(Record):
     vertices: tuple[Vertex, ...] = children()
 
     def points(self) -> list[tuple[float, float]]:
+        """The polygon's ``<Vertex>`` elements as (x, y) pairs, in order."""
         return [(v.x, v.y) for v in self.vertices]
 
 

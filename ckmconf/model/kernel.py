@@ -23,6 +23,7 @@ class Param(Record):
 
 
 def params_dict(params: tuple[Param, ...]) -> dict[str, str]:
+    """``<Param name value>`` elements as {name: value text} (conversion is the kind's manifest's job)."""
     return {p.name: p.value for p in params}
 
 

@@ -48,10 +48,12 @@ class Uses(Record):
 
     @property
     def resource(self) -> str:
+        """The SmartResource part of ``service`` (``RESOURCE.SERVICE``)."""
         return self.service.split(".", 1)[0]
 
     @property
     def service_name(self) -> str:
+        """The service part of ``service`` (``RESOURCE.SERVICE``)."""
         return self.service.split(".", 1)[1]
 
 
@@ -121,6 +123,7 @@ class CompositionMatrix(Record):
     rows: tuple[Row, ...] = children()
 
     def refs(self) -> list[str]:
+        """The ``RESOURCE.SERVICE`` references of the matrix's columns, in order (eq. 5.1)."""
         return [s.ref for s in self.services]
 
 
@@ -170,9 +173,11 @@ class Mission(Record):
     transitions: tuple[Transition, ...] = children()
 
     def state(self, name: str) -> State | None:
+        """The ``<State>`` named ``name``, None if the mission has none."""
         return next((s for s in self.states if s.name == name), None)
 
     def outcomes(self) -> list[str]:
+        """Names of the mission's ``<Final>`` states, its outcomes (the first is success by convention)."""
         return [f.name for f in self.finals]
 
 
@@ -223,6 +228,7 @@ class Plan(Record):
     dependencies: tuple[Dependency, ...] = children()
 
     def signal_topic(self, signal: Signal) -> str:
+        """Topic of ``signal``: its ``topic`` attribute, else ``/plan/PLAN/SIGNAL`` (§5.3)."""
         return signal.topic or f"/plan/{self.name}/{signal.name}"
 
 

@@ -35,6 +35,7 @@ class Use(Record):
         return found
 
     def leaves(self) -> list[str]:
+        """Plugin names of the tree's leaves (the profile's final outputs), depth first."""
         if not self.uses:
             return [self.plugin]
         return [leaf for use in self.uses for leaf in use.leaves()]

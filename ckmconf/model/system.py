@@ -56,9 +56,11 @@ class System(Content):
     description: str | None = attr(default=None)
 
     def node(self, name: str) -> Node | None:
+        """The ``<Node>`` named ``name``, None if absent."""
         return next((n for n in self.nodes if n.name == name), None)
 
     def resource(self, name: str) -> SmartResource | None:
+        """The ``<SmartResource>`` named ``name``, None if absent."""
         return next((r for r in self.resources if r.name == name), None)
 
     def service(self, ref: str) -> tuple[SmartResource, Service] | None:
@@ -71,15 +73,19 @@ class System(Content):
         return (resource, found) if found is not None else None
 
     def behavior(self, name: str) -> Behavior | None:
+        """The ``<Behavior>`` named ``name``, None if absent."""
         return next((b for b in self.behaviors if b.name == name), None)
 
     def mission(self, name: str) -> Mission | None:
+        """The ``<Mission>`` named ``name``, None if absent."""
         return next((m for m in self.missions if m.name == name), None)
 
     def plan(self, name: str) -> Plan | None:
+        """The ``<Plan>`` named ``name``, None if absent."""
         return next((p for p in self.plans if p.name == name), None)
 
     def matrix(self, name: str) -> CompositionMatrix | None:
+        """The ``<CompositionMatrix>`` named ``name``, None if absent."""
         return next((m for m in self.matrices if m.name == name), None)
 
 
