@@ -184,6 +184,7 @@ class SimMapView(QGraphicsView):
             markers["label"] = QGraphicsSimpleTextItem(robot.name if robot.truth or robot.estimates
                                                        else f"{robot.name} (placed)")  # fmt: skip
             markers["label"].setZValue(25)
+            markers["label"].setFlag(QGraphicsItem.GraphicsItemFlag.ItemIgnoresTransformations)
             gaze = QGraphicsLineItem()
             dotted = QPen(TRUE, 2, Qt.PenStyle.DotLine)
             dotted.setCosmetic(True)
@@ -204,6 +205,7 @@ class SimMapView(QGraphicsView):
         item.setBrush(QBrush(colour))
         item.setPos(to_scene(x, y))
         item.setZValue(30)
+        item.setFlag(QGraphicsItem.GraphicsItemFlag.ItemIgnoresTransformations)  # readable at any zoom
         return item
 
     @staticmethod
@@ -273,6 +275,7 @@ class SimMapView(QGraphicsView):
             label.setParentItem(plate)  # readable over the objects' footprints
             plate.setPos(at + QPointF(8, -16))
             plate.setZValue(30)
+            plate.setFlag(QGraphicsItem.GraphicsItemFlag.ItemIgnoresTransformations)
             self._marks += [mark, plate]
             self.labels.append(label)
 
