@@ -6,9 +6,9 @@ The ``<Environment>`` is drawn once: the map's bounds, its areas (named), the av
 a :class:`~editor.views.sim_state.Snapshot`:
 
 - each robot's **true pose** (a filled arrow, green) and **estimated pose** (an outlined arrow,
-  blue) with the **2σ covariance ellipse** of its position; a robot with no ground-truth topic is
-  drawn where the configuration placed it (the Nao stands still), and where its head's pan turns
-  its camera (dotted) when it publishes its head angles;
+  blue) with the **2σ covariance ellipse** of its position, and both trajectories so far; a robot
+  with no ground-truth topic is drawn where the configuration placed it (the Nao stands still),
+  and where its head's pan turns its camera (dotted) when it publishes its head angles;
 - the **particle cloud**, when the system publishes one;
 - the **zoom-map area** (dashed, purple), published or replayed (:mod:`.sim_state`);
 - the **recognised objects** in the map frame, each labelled with its name and reliability (an
@@ -185,6 +185,13 @@ class SimMapView(QGraphicsView):
                                                        else f"{robot.name} (placed)")  # fmt: skip
             markers["label"].setZValue(25)
             markers["label"].setFlag(QGraphicsItem.GraphicsItemFlag.ItemIgnoresTransformations)
+            for kind, colour in (("truth", TRUE), ("estimate", ESTIMATE)):  # the trajectories so far
+                trail = QGraphicsPathItem()
+                line = QPen(colour, 1.5)
+                line.setCosmetic(True)
+                trail.setPen(line)
+                trail.setZValue(12)
+                markers[f"{kind}_track"] = trail
             gaze = QGraphicsLineItem()
             dotted = QPen(TRUE, 2, Qt.PenStyle.DotLine)
             dotted.setCosmetic(True)
@@ -241,6 +248,15 @@ class SimMapView(QGraphicsView):
                     self._label(markers["label"], now.estimate[name])
             if name in now.covariance and name in now.estimate:
                 self._ellipse(markers["ellipse"], now.estimate[name], now.covariance[name])
+            for kind in ("truth", "estimate"):
+                points = now.tracks.get((name, kind), [])
+                trail = markers[f"{kind}_track"]
+                if len(points) > 1 and isinstance(trail, QGraphicsPathItem):
+                    path = QPainterPath(to_scene(*points[0]))
+                    for x, y in points[1:]:
+                        path.lineTo(to_scene(x, y))
+                    trail.setPath(path)
+                    trail.setVisible(True)
         self._cloud(now.particles)
         if now.zoom is not None:
             z = now.zoom

@@ -14,6 +14,7 @@ within ``border`` × the size of the area's edge, and after ``timeout`` s — at
 
 from __future__ import annotations
 
+import collections
 import math
 import threading
 import time
@@ -40,6 +41,7 @@ from .sim_feeds import (
 )
 
 Pose = tuple[float, float, float]
+TRACK = 5000  # poses kept per trajectory: 1000 s of the use case's ground truth (0.2 s)
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,7 @@ class Snapshot:
     estimate: dict[str, Pose] = field(default_factory=dict)
     covariance: dict[str, np.ndarray] = field(default_factory=dict)
     head: dict[str, float] = field(default_factory=dict)  # robot → head pan (rad, left of its heading)
+    tracks: dict[tuple[str, str], list[tuple[float, float]]] = field(default_factory=dict)  # (robot, kind) → path
     particles: np.ndarray | None = None
     zoom: Zoom | None = None
     objects: list[Seen] = field(default_factory=list)
@@ -80,6 +83,7 @@ class LiveState:
         self._zoom_stamp = 0.0
         self._by_topic: dict[str, tuple[float, list[Seen]]] = {}  # topic → (arrival, objects)
         self._frames: dict[str, int] = {}
+        self._tracks: dict[tuple[str, str], collections.deque[tuple[float, float]]] = {}
 
     def handlers(self) -> dict[str, Callable[[Sample], None]]:
         """One callback per topic to subscribe (a topic feeding several roles gets one that does all)."""
@@ -129,6 +133,7 @@ class LiveState:
             if pose is not None:
                 with self._lock:
                     self._now.truth[robot] = pose
+                    self._track(robot, "truth", pose)
 
         return take
 
@@ -140,6 +145,7 @@ class LiveState:
             covariance, cloud = covariance_of(value), particles_of(value)
             with self._lock:
                 self._now.estimate[robot] = pose
+                self._track(robot, "estimate", pose)
                 if covariance is not None:
                     self._now.covariance[robot] = covariance
                 if cloud is not None:
@@ -148,6 +154,9 @@ class LiveState:
                     self._replay_zoom(pose, stamp)
 
         return take
+
+    def _track(self, robot: str, kind: str, pose: Pose) -> None:
+        self._tracks.setdefault((robot, kind), collections.deque(maxlen=TRACK)).append((pose[0], pose[1]))
 
     def _head(self, robot: str) -> Callable[[str, Any, float], None]:
         def take(_: str, value: Any, __: float) -> None:
@@ -204,5 +213,6 @@ class LiveState:
                 if moment - arrived <= self.feeds.lifespans.get(t, math.inf)  # a result past its lifespan is gone
                 for s in seen
             ]
-            return Snapshot(dict(now.truth), dict(now.estimate), dict(now.covariance), dict(now.head), now.particles,
-                            now.zoom, list(now.objects), dict(now.images), dict(now.errors))  # fmt: skip
+            tracks = {key: list(points) for key, points in self._tracks.items()}
+            return Snapshot(dict(now.truth), dict(now.estimate), dict(now.covariance), dict(now.head), tracks,
+                            now.particles, now.zoom, list(now.objects), dict(now.images), dict(now.errors))  # fmt: skip

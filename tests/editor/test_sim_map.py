@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QPointF, Qt
-from PySide6.QtWidgets import QGraphicsEllipseItem, QGraphicsLineItem
+from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtWidgets import QGraphicsEllipseItem, QGraphicsLineItem, QGraphicsPathItem
 from pytestqt.qtbot import QtBot
 
 import ckmconf
@@ -82,6 +82,7 @@ def test_robots_objects_and_the_zoom_area_are_drawn_where_the_messages_put_them(
     turtlebot = view.robots["turtlebot"]
     assert not turtlebot["truth"].isVisible()  # nothing heard yet
 
+    state.feed("/sim/turtlebot/pose", codec.encode({"x": 1.5, "y": 3.0, "yaw": 0.0}), 99.0)
     state.feed("/sim/turtlebot/pose", codec.encode({"x": 2.0, "y": 3.0, "yaw": 0.5}), 100.0)
     state.feed("/nav/pose", estimate(2.1, 2.9, 0.45), 100.0)
     state.feed("/recog/objects", recognised(("mug", 8.0, 6.1, 0.87), ("can", 7.5, 6.3, 0.4)), 100.0)
@@ -89,6 +90,10 @@ def test_robots_objects_and_the_zoom_area_are_drawn_where_the_messages_put_them(
     assert close(turtlebot["truth"].pos(), QPointF(200.0, -300.0))
     assert turtlebot["truth"].rotation() == pytest.approx(-math.degrees(0.5))
     assert close(turtlebot["estimate"].pos(), to_scene(2.1, 2.9))
+    trail = turtlebot["truth_track"]  # the true trajectory so far: 1.5 → 2 m along y = 3 m
+    assert isinstance(trail, QGraphicsPathItem) and trail.isVisible()
+    assert trail.path().boundingRect() == QRectF(to_scene(1.5, 3.0), to_scene(2.0, 3.0))
+    assert not turtlebot["estimate_track"].isVisible()  # one estimate: no trajectory yet
     ellipse = turtlebot["ellipse"]
     assert isinstance(ellipse, QGraphicsEllipseItem) and ellipse.isVisible()
     # 2σ: σx 0.2 m, σy 0.1 m → half-axes 40 and 20 scene units, the major one along the map's x
