@@ -221,10 +221,12 @@ class SimMapView(QGraphicsView):
         label.setVisible(True)
 
     def fit(self) -> None:
+        """Show the whole map (its bounds with a margin)."""
         if not self.bounds.isNull():
             self.fitInView(self.bounds.adjusted(-30, -30, 30, 30), Qt.AspectRatioMode.KeepAspectRatio)
 
     def resizeEvent(self, event: QResizeEvent) -> None:
+        """Keep the whole map in view as the tab is resized."""
         super().resizeEvent(event)
         self.fit()
 
@@ -380,6 +382,7 @@ class SimLivePanel(QWidget):
         return " ".join(out)
 
     def stop(self) -> None:
+        """Unsubscribe the live topics (the transport stays: the Monitor tab owns it)."""
         for subscription in self._subscriptions:
             subscription.close()
         self._subscriptions, self.state, self.system = [], None, None
