@@ -1,4 +1,4 @@
-"""ckmconf: load, validate and write CKM configurations.
+"""ckmconf: load, validate and write CKM configurations (thesis §3.1.5.1–3.1.5.2, schemas/ckm.xsd).
 
 ``load(path)`` parses safely, validates against ``schemas/`` and checks cross-references,
 returning frozen records; ``dump(record)`` writes them back as stable, diff-friendly XML.

@@ -1,4 +1,4 @@
-"""Generic mapping between XML elements and frozen record dataclasses.
+"""Generic mapping between XML elements and frozen record dataclasses (the XSD model of §3.1.5.1).
 
 Each record class declares its fields with ``attr()``, ``child()``, ``children()`` or
 ``text()``; the type hints say how values convert. One reader and one writer then serve

@@ -1,4 +1,4 @@
-"""ckm-validate: check configuration files; one line per problem, FILE:LINE:COL: XPATH: message.
+"""ckm-validate: check configuration files (§3.1.5.2); one line per problem, FILE:LINE:COL: XPATH: message.
 
 This module is the schema-and-references check (``ckmconf`` alone). The installed ``ckm-validate``
 (``runtime.validate_cli``) adds the verification of kinds, Params and message types through

@@ -1,4 +1,4 @@
-"""Configuration errors: every problem found in a file, located to the character."""
+"""Configuration errors: every problem found in a file, located to the character (§3.1.5.2)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The condition language of transitions and controller switches.
+"""The condition language of transitions (§5.2, ``<Transition when>``) and controller switches (§3.1.2.7).
 
 A condition is a Python-like boolean expression, parsed with ``ast`` and checked against a
 whitelist: comparisons, and/or/not, numbers, strings, names, ``alias.field`` and calls

@@ -1,4 +1,4 @@
-"""load(): files → schema validation → records → includes merged → semantic checks."""
+"""load(): files → schema validation → records → includes merged → semantic checks (§3.1.5.2)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""XSD validation with xmlschema, and the translation of its findings into plain messages.
+"""XSD validation (schemas/ckm.xsd, §3.1.5.2) with xmlschema, and the translation of its findings into plain messages.
 
 The schema files in ``schemas/`` are the single source of truth; this module only loads
 them (sandboxed: no network, no file outside the schema folder) and words the errors the

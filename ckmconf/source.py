@@ -1,4 +1,4 @@
-"""Safe parsing of one configuration file, and locating its elements and attributes.
+"""Safe parsing of one configuration file (§3.1.5.2), and locating its elements and attributes.
 
 The parser never resolves entities, never reads a DTD and never touches the network; a
 DOCTYPE is refused outright because a configuration has no use for one and it is the door

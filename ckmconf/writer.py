@@ -1,4 +1,4 @@
-"""Writing records back as XML: stable element and attribute order, two-space indent."""
+"""Writing records back as XML (the editor's output, §3.1.5.3): stable element and attribute order, two-space indent."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Semantic checks: cross-references, uniqueness, shapes and orderings the XSD cannot express."""
+"""Semantic checks (§3.1.5.2): cross-references, uniqueness, shapes and orderings the XSD cannot express."""
 
 from __future__ import annotations
 

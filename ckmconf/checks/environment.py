@@ -1,4 +1,4 @@
-"""Semantic checks of the environment model: bounds, polygons, references, Zoom Map."""
+"""Semantic checks of the environment model (environment.xsd, §6.1): bounds, polygons, references, Zoom Map."""
 
 from __future__ import annotations
 

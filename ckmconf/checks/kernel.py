@@ -1,4 +1,4 @@
-"""Semantic checks of the kernel layer: network, message types, topics, nodes."""
+"""Semantic checks of the kernel layer (kernel.xsd, §3.1.5.1): network, message types, topics, nodes."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Semantic checks of behaviors, composition matrices, missions and plans."""
+"""Semantic checks of behaviors, composition matrices, missions and plans (missions.xsd, thesis ch. 5)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Collecting semantic problems with precise locations, and wording common ones alike."""
+"""Collecting semantic problems with precise locations, and wording common ones alike (§3.1.5.2)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Semantic checks of Smart Resources: plugins, profiles, services, quality, scenarios, TCM."""
+"""Semantic checks of Smart Resources (resources.xsd, ch. 4): plugins, profiles, services, quality, scenarios, TCM."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Name tables of a merged system, built once and shared by every check."""
+"""Name tables of a merged system (§3.1.5.2), built once and shared by every check."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Typed, immutable records of every element kind of the CKM model (one class per element)."""
+"""Typed, immutable records of every element kind of the CKM model (schemas/*.xsd, §3.1.5.1; one class per element)."""
 
 from .environment import (
     Affordance,

@@ -1,4 +1,4 @@
-"""Every problem a run left in its run directory, counted, for the HTML run report (:mod:`.html_report`).
+"""Every problem a run left in its run directory, counted, for the HTML run report (:mod:`.html_report`, §7.5).
 
 Sources (what ``ckm-run`` writes, issue G, and the mission recordings of :mod:`.recording`):
 

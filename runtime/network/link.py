@@ -1,4 +1,4 @@
-"""One TCP connection between two peers: handshake, authenticated framing, reader thread."""
+"""One TCP connection between two peers (§3.1.4.1): handshake, authenticated framing, reader thread."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Port ranges for private test and benchmark networks on one host.
+"""Port ranges for private test and benchmark networks on one host (``<Network basePort>``, §3.1.4.1).
 
 A random base port inside the kernel's ephemeral range (Linux: 32768–60999) can collide with a
 port the kernel has just handed to some outgoing connection, and a bind then fails with

@@ -1,4 +1,4 @@
-"""Publish/subscribe over CKMultiPeer: TOPICLINKS tell who subscribes what; TOPICDATA goes only there.
+"""Publish/subscribe over CKMultiPeer (§3.1.4.3): TOPICLINKS tell who subscribes what; TOPICDATA goes only there.
 
 Local subscribers get the very object published, with no serialization. Remote peers get one
 TOPICDATA frame per sample — ``[topic, seq, stamp, value]``, or ``[topic, seq, stamp, cdr,

@@ -1,4 +1,4 @@
-"""QoS and event plumbing shared by every transport: event emission, deadlines and lifespan.
+"""QoS and event plumbing shared by every transport: event emission, deadlines and lifespan (``<Topic>``, §3.1.2.10).
 
 The transports differ in how samples travel; what a subscriber sees once a sample arrives —
 events on callbacks and on ``EVENTS_TOPIC``, one missed-deadline event per silent period,

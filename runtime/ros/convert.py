@@ -1,4 +1,4 @@
-"""CKM payloads ⇄ ROS 2 messages (issue L point 1).
+"""CKM payloads ⇄ ROS 2 messages (issue L point 1; the ROS MultiPeer architecture of §4.4.1).
 
 CKM topics carry msgpack-able values (:mod:`runtime.resources.codec`): dicts of fields, numbers,
 strings, bytes and numpy arrays. A ROS 2 message becomes the CKM payload

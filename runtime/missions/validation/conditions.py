@@ -1,4 +1,4 @@
-"""Transition conditions as sets of conjunctions, for the static checks of mission graphs.
+"""Transition conditions as sets of conjunctions, for the static checks of mission graphs (§5.4).
 
 A condition (docs/decisions.md D9) is rewritten in disjunctive normal form over *literals*: an
 atom, possibly negated. Atoms are the calls (``done()``, ``outcome('x')``), numeric comparisons of
