@@ -46,7 +46,7 @@ def text() -> Any:
 
 @dataclass(frozen=True, kw_only=True)
 class Record:
-    """Base of every configuration record; ``loc`` says where it was read (not compared)."""
+    """Base of every configuration record (one XSD element, §3.1.5.1); ``loc`` says where it was read (not compared)."""
 
     TAG: ClassVar[str] = ""
     loc: Loc | None = field(default=None, compare=False, repr=False)

@@ -39,7 +39,7 @@ def located(record: Located) -> Loc:
 
 
 class ConfigError(Exception):
-    """One problem in a configuration file.
+    """One problem in a configuration file (§3.1.5.2: validated before it is distributed).
 
     Its text is ``FILE:LINE:COL: XPATH: message``; ``ckm-validate`` prints exactly that,
     and the tests compare it verbatim.

@@ -41,7 +41,7 @@ SWITCH = Vocabulary(functions={"alarm": 1, "stale": 1, "value": 1}, names=frozen
 
 @dataclass
 class Condition:
-    """A parsed condition and the references it makes (for cross-reference checks)."""
+    """A parsed ``when`` condition (``<Transition>``, ``<Switch>``) and the references it makes (for checks)."""
 
     text: str
     tree: ast.Expression
@@ -128,7 +128,7 @@ def _known(vocab: Vocabulary) -> str:
 
 
 class Environment:
-    """What a condition is evaluated against; the runtime fills it in."""
+    """What a condition is evaluated against; the runtime fills it in (HFSM §5.2, switching §3.1.2.7)."""
 
     def __init__(
         self,

@@ -47,7 +47,7 @@ LOG = logging.getLogger("ckm.missions")
 
 
 class LiveFactory:
-    """Behaviors of the registry, wired to the network."""
+    """Behaviors of the registry, wired to the network: services (§5.1.1), topics and plan signals (§5.3)."""
 
     def __init__(
         self, system: System, transport: Transport, signals: Signals, registry: Registry | None = None
@@ -117,7 +117,7 @@ class LiveFactory:
 
 
 class AgentRunner:
-    """One agent of a plan, run on this node (see the module docstring)."""
+    """One agent of a ``<Plan>`` (§5.3), run on this node (see the module docstring)."""
 
     def __init__(
         self,

@@ -26,7 +26,7 @@ from ..resources.api import Bounds
 
 @dataclass(frozen=True)
 class BehaviorStatus:
-    """What one step of a behavior reports."""
+    """What one step of a behavior reports (its progress, for mission progress and eq. 5.1)."""
 
     progress: float = 0.0
     done: bool = False
@@ -35,7 +35,7 @@ class BehaviorStatus:
 
 
 class ServiceHandle(Protocol):
-    """A service as a behavior sees it (a network client in a live run, a simulation off-line)."""
+    """A service a behavior ``<Uses>`` (§5.1.1): a network client in a live run, a simulation off-line."""
 
     ref: str
 
@@ -80,7 +80,7 @@ def requirements_of(requires: tuple[Require, ...]) -> tuple[Bounds, ...]:
 
 
 class Behavior(abc.ABC):
-    """The behavior interface (see the module docstring). ``PARAMS`` maps accepted Params to defaults."""
+    """The behavior interface (§5.1, ``<Behavior kind>``). ``PARAMS`` maps accepted Params to defaults."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = {}
 

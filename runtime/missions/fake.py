@@ -123,7 +123,7 @@ class Coverage:
 
 
 class FakeInteraction(MissionEngine):
-    """The engine with conditions answered by the fake interaction (see the module docstring)."""
+    """The engine with conditions answered by the fake interaction (§5.4, Fig. 7.21; see the module docstring)."""
 
     def __init__(
         self, system: System, mission: str, coverage: Coverage, dwell: float, assumable: set[str] | None = None,

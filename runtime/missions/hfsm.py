@@ -104,7 +104,7 @@ def distances_to_success(mission: Mission) -> dict[str, int]:
 
 
 class MissionRun:
-    """One level of the HFSM: a mission record and its active state."""
+    """One level of the HFSM (§5.2): a ``<Mission>`` record and its active ``<State>``."""
 
     def __init__(self, engine: MissionEngine, mission: Mission, path: str) -> None:
         self.engine, self.mission, self.path = engine, mission, path
@@ -257,7 +257,7 @@ class MissionRun:
 
 
 class MissionEngine:
-    """Runs one agent's top mission (see the module docstring)."""
+    """Runs one agent's top mission as an HFSM (§5.2; see the module docstring)."""
 
     def __init__(
         self,

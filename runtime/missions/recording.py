@@ -86,7 +86,7 @@ def _finite(value: Any) -> Any:
 
 
 class RunRecorder:
-    """Append-only JSON-lines recorder of one agent's mission run; thread-safe, a context manager.
+    """Append-only JSON-lines recorder of one agent's mission run (§7.5); thread-safe, a context manager.
 
     The file is opened on the first :meth:`write` (no I/O in the constructor); ``t`` counts from
     construction. ``start`` and ``end`` events get ``wall`` (epoch seconds) when not given.

@@ -77,7 +77,7 @@ class StateRow:
 
 @dataclass
 class AgentReport:
-    """One agent's rows (in order of first entry), mission time and outcome."""
+    """One agent's rows of Table 7.9 (in order of first entry), mission time and outcome."""
 
     agent: str
     mission: str | None

@@ -28,7 +28,7 @@ RESENDS = 40  # 10 s of resending, then the request is given up and reported in 
 
 
 class NetworkServiceHandle:
-    """One service, as every behavior of this agent sees it."""
+    """One service, as every behavior of this agent sees it, reached through the service API (§4.3)."""
 
     _ids = itertools.count(1)
 

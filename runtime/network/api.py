@@ -44,7 +44,7 @@ class TopicQoS:
 
 @dataclass(frozen=True)
 class Sample:
-    """One received value. ``stamp`` is on the publisher's clock; ``received`` on ours."""
+    """One received value. ``stamp`` is on the publisher's clock (§3.1.2.10); ``received`` on ours."""
 
     topic: str
     value: Any
@@ -71,7 +71,7 @@ class NetworkEvent:
 
 
 class Subscription:
-    """A subscriber's end of a topic: an optional callback and the last ``history`` samples."""
+    """A subscriber's end of a topic: an optional callback (a listener, §3.1.4.4) and the last ``history`` samples."""
 
     def __init__(
         self, qos: TopicQoS, callback: Callable[[Sample], None] | None, on_close: Callable[[Subscription], None]
@@ -135,7 +135,7 @@ class Publisher:
 
 
 class Transport(abc.ABC):
-    """What the runtime uses to talk: the same for CKMultiPeer and Zenoh."""
+    """What the runtime uses to talk (``<Network transport>``): the same for CKMultiPeer (§3.1.4) and Zenoh."""
 
     guid: int = 0
     codec: WireCodec | None = None  # serialises the topic types it knows (runtime.network.wire)

@@ -44,7 +44,7 @@ class Known:
 
 
 class Discovery:
-    """The multicast side of a peer. Callbacks run on the discovery thread."""
+    """The multicast side of a peer (peer discovery, §3.1.4.2). Callbacks run on the discovery thread."""
 
     def __init__(
         self,

@@ -48,7 +48,7 @@ class FrameError(ValueError):
 
 @dataclass(frozen=True)
 class Frame:
-    """A decoded frame: its type and msgpack body (a list: header fields then the load)."""
+    """A decoded frame (a message type of §3.1.4.3): its type and msgpack body (a list: header fields then the load)."""
 
     type: FrameType
     body: list[Any]

@@ -24,7 +24,7 @@ _HELLO_SESSION = b"ckm-hello"
 
 
 class Link:
-    """A connected socket to one remote peer.
+    """A connected socket to one remote peer (one edge of the mandala of §3.1.4.1, Fig. 3.5).
 
     Both ends send HELLO (GUID, name, fresh nonce); with a group key the HELLOs are
     authenticated and every later frame is bound to the session (both nonces), the sender's

@@ -48,7 +48,7 @@ class NetworkError(RuntimeError):
 
 
 class MultiPeer:
-    """One member of a CKMultiPeer group."""
+    """One member of a CKMultiPeer group (§3.1.4), configured by ``<Network>``."""
 
     def __init__(self, network: Network, *, name: str = "peer", key: bytes | None = None) -> None:
         self.network = network

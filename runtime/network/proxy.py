@@ -19,7 +19,7 @@ from .frames import Frame, FrameType
 
 
 class Router:
-    """Routes through neighbours for one MultiPeer (which owns it and calls its hooks)."""
+    """PROXYWRAPPER routes (§3.1.4.3) through neighbours for one MultiPeer (which owns it and calls its hooks)."""
 
     def __init__(
         self,

@@ -67,7 +67,7 @@ def stale_event(sample: Sample) -> NetworkEvent:
 
 
 class DeadlineWatchdog:
-    """Emits ``deadline-missed`` once per deadline period in which a subscription got no sample."""
+    """Emits ``deadline-missed`` once per ``<Topic deadline>`` period in which a subscription got no sample."""
 
     def __init__(
         self, watched: Callable[[], list[Subscription]], emit: Callable[[NetworkEvent], None], name: str

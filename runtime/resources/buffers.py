@@ -104,7 +104,7 @@ class BufferStats:
 
 
 class TripleBuffer(Generic[T, R]):
-    """Acquisition and supply at fixed rates around a slower processing step (see the module docstring).
+    """Acquisition and supply at fixed rates around a slower processing step (§3.2.3, Fig. 3.12).
 
     ``acquire(reuse)`` returns the next frame; ``reuse`` is the frame this slot held before (None
     at first), which the producer may overwrite in place and return. ``process(frame)`` returns

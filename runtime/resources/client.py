@@ -31,7 +31,7 @@ class ServiceError(RuntimeError):
 
 
 class ServiceDirectory:
-    """The services announced on the network, by (resource, service)."""
+    """The services announced on the network (service API, §4.3), by (resource, service)."""
 
     def __init__(self, transport: Transport) -> None:
         self._entries: dict[tuple[str, str], dict[str, Any]] = {}
@@ -68,7 +68,7 @@ class ServiceDirectory:
 
 
 class ServiceClient:
-    """One client of one service: its requests, its data, its quality messages, events and alarms."""
+    """One client of one service (§4.3): its requests, its data, its quality messages, events and alarms."""
 
     _ids = itertools.count(1)
 

@@ -91,7 +91,7 @@ class _Mailbox:
 
 
 class DelegatedPlugin(ProcessingPlugin):
-    """Stands in for a local plugin and runs each call locally or on the node it was delegated to.
+    """Stands in for a local plugin; runs each call locally or on the node it was delegated to (§3.1.2.5–6).
 
     Install it with ``wrap()`` (before or while frames run: while local it only forwards to the
     original, so swapping mid-frame changes no result), then ``delegate()`` and ``recall()`` from

@@ -47,7 +47,7 @@ class MeasureLog:
 
 
 class Instance:
-    """A service run for one client (see the module docstring)."""
+    """A service run for one client, with its own TCM (§4.2.1.5; see the module docstring)."""
 
     def __init__(
         self,

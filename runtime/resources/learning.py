@@ -36,7 +36,7 @@ import numpy as np
 
 
 class ScenarioLearner:
-    """Recorded (features, label) pairs of one scenario and the linear soft-margin SVM fitted to them."""
+    """Recorded (features, label) pairs of one scenario and the linear soft-margin SVM (eq. 4.10) fitted to them."""
 
     def __init__(self, c: float = 1.0, *, min_records: int = 4, max_records: int = 200, retrain_every: int = 1) -> None:
         if c <= 0:

@@ -36,7 +36,7 @@ class _Hosted:
 
 
 class PluginHost:
-    """The taker side: runs processing plugins delegated by other nodes, one worker thread.
+    """The taker of code delegation (§3.1.2.5–6): runs processing plugins delegated by other nodes, one worker thread.
 
     Requests are queued by the transport's thread and served in order by the worker, so a slow
     plugin never stalls the network (heartbeats, other topics). A giver has one request in flight

@@ -42,7 +42,7 @@ DEFAULT_WINDOW = 50
 
 
 class QualityBounds(Protocol):
-    """What a Policy and a client's Require have in common: bounds and a least probability."""
+    """What a ``<Policy>`` and a client's ``<Require>`` have in common: bounds and a least probability (eq. 4.2)."""
 
     @property
     def measure(self) -> str:
@@ -211,7 +211,7 @@ def combined_distribution(windows: Sequence[Iterable[float]], resolution: float 
 
 @dataclass(frozen=True)
 class PolicyResult:
-    """One evaluation of a policy: ``met`` is None when there were no samples (unknown).
+    """One evaluation of a policy (eq. 4.2): ``met`` is None when there were no samples (unknown).
 
     ``margin`` is how far, in units of the bounds' scale, the distribution's quantile at the
     required probability lies inside the bounds (negative: outside). It is ≥ 0 when the policy

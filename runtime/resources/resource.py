@@ -57,7 +57,7 @@ DEFAULT_FRAME_PERIOD = 1 / 30
 
 
 class SmartResourceRuntime:
-    """Runs the SPT services of one SmartResource record on a transport (see the module docstring)."""
+    """Runs the SPT services of one ``<SmartResource>`` on a transport (§3.2, §4.2–4.3)."""
 
     def __init__(
         self,

@@ -76,7 +76,7 @@ class ScenarioEvaluation:
 
 @dataclass(frozen=True)
 class ScenarioEvent:
-    """A scenario change, for the service's quality topic."""
+    """A scenario change, for the service's quality topic (§4.3)."""
 
     time: float
     previous: str
@@ -116,7 +116,7 @@ class Decision:
 
 
 class ScenarioSelector(Protocol):
-    """Selects one service instance's active scenario from its measures and requirements."""
+    """Selects one service instance's active scenario from its measures and requirements (§4.2.1.4)."""
 
     @property
     def active(self) -> str:

@@ -129,7 +129,7 @@ class FramePass:
 
 
 class Composite:
-    """A node of a composition tree (Composite pattern): a plugin and the nodes consuming its output."""
+    """A ``<Use>`` of a composition tree (Composite pattern, Fig. 3.11): a plugin and the nodes consuming its output."""
 
     def __init__(self, plugin: ProcessingPlugin, children: Sequence[Composite] = ()) -> None:
         self.plugin = plugin
@@ -191,7 +191,7 @@ def _error(record: Record, message: str, attr: str | None = None) -> ConfigError
 
 
 class Topology:
-    """The SPT of one Smart Resource: its plugin instances, its profiles, and the active selection.
+    """The SPT of one Smart Resource (§3.2.2): its plugin instances, its profiles, and the active selection.
 
     Built from the SmartResource record and the registry (category ``plugin``, by kind): an unknown
     kind, a bad Param or a class that is not a ProcessingPlugin is a ConfigError at the Plugin; a

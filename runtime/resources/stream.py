@@ -34,7 +34,7 @@ class _Input:
 
 
 class Stream:
-    """The profiles rooted at one acquisition plugin: a Topology, a triple buffer and its instances."""
+    """The profiles rooted at one acquisition plugin (§3.2.2): a Topology, a triple buffer and its instances."""
 
     def __init__(self, root: str, topology: Topology, period: float, supply: float, source: Source) -> None:
         self.root, self.topology, self.period, self.source = root, topology, period, source

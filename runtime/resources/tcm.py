@@ -109,7 +109,7 @@ def _within(policy: QualityBounds, requirement: QualityBounds) -> bool:
 
 
 class TaskConfiguringModule:
-    """Selects the active scenario of one service (see the module docstring for the rules)."""
+    """Selects the active scenario of one service (Algorithm 1, eq. 4.7; see the module docstring for the rules)."""
 
     def __init__(
         self,

@@ -65,8 +65,10 @@ def _number(value: float) -> str:
 
 @dataclass(frozen=True)
 class P:
-    """One declared parameter. ``default`` is :data:`REQUIRED` for a parameter that must be given,
-    or None for one whose default the kind computes from its element (say so in ``doc``).
+    """One declared parameter, read from a ``<Param name value>`` element.
+
+    ``default`` is :data:`REQUIRED` for a parameter that must be given, or None for one whose default
+    the kind computes from its element (say so in ``doc``).
 
     ``min``/``max`` bound the value inclusively, ``above``/``below`` strictly; ``choices`` lists
     the accepted values. The type is the default's unless ``type`` is given.
@@ -165,7 +167,7 @@ class P:
 
 
 class Params(Mapping[str, Any]):
-    """The parameters of a kind, in declaration order; as a mapping, name → default."""
+    """The parameters (``<Param>``) of a kind, in declaration order; as a mapping, name → default."""
 
     def __init__(self, *specs: P) -> None:
         self.specs: dict[str, P] = {}

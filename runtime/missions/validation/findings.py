@@ -12,7 +12,7 @@ Severity = Literal["error", "warning"]
 
 @dataclass(frozen=True)
 class Finding:
-    """One problem of a mission, located at the record that causes it.
+    """One problem of a mission found by the validation mechanism (§5.4), located at the record that causes it.
 
     ``kind`` is a stable identifier (``unreachable-state``, ``shadowed-transition`` …) that tests
     and tools match on; ``message`` says what is wrong and how to fix it, naming the mission,

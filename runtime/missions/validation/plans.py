@@ -150,7 +150,7 @@ def _blocking(flat: AgentGraph, node: str, signal: str, record: Record) -> None:
 
 @dataclass
 class PlanGraph:
-    """A plan's agents' graphs and its signals' needs (the wait-for graph)."""
+    """A ``<Plan>``'s agents' graphs and its signals' needs (the wait-for graph, §5.3)."""
 
     plan: Plan
     agents: dict[str, AgentGraph]

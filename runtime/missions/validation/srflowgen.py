@@ -57,7 +57,7 @@ MAX_CHAINS = 32
 
 @dataclass(frozen=True)
 class VariableFlow:
-    """One variable of a behavior state traced back to its sources."""
+    """One variable v_i of a behavior state traced back to its sources (EvalFlow, Algorithm 2)."""
 
     name: str
     chains: tuple[tuple[str, ...], ...]
@@ -114,7 +114,7 @@ class StateFlow:
 
 @dataclass(frozen=True)
 class FlowReport:
-    """SRFlowGen over a mission and the missions it nests."""
+    """SRFlowGen (Algorithm 2) over a mission and the missions it nests, against ``<Validation>`` (eq. 5.7)."""
 
     mission: str
     p_min: float
@@ -314,7 +314,7 @@ def service_probability(service: Service, requires: tuple[Require, ...] = ()) ->
 
 
 class ProcessGraph:
-    """The system's processes and topics as a networkx DiGraph: producer → topic → consumer."""
+    """The system's processes and topics (eq. 5.2–5.4) as a networkx DiGraph: producer → topic → consumer."""
 
     def __init__(self, system: System) -> None:
         self.system = system
