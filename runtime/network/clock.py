@@ -33,7 +33,15 @@ class ClockSync:
         self._lock = threading.Lock()
 
     def add(self, guid: int, t1: float, t2: float, t3: float, t4: float) -> Offset:
-        """Record one exchange with peer ``guid`` from its four timestamps; returns its offset and delay."""
+        """Record one exchange with peer ``guid``; returns its offset and delay.
+
+        Args:
+            guid: The responding peer.
+            t1: Our clock when the request left.
+            t2: The peer's clock when the request arrived.
+            t3: The peer's clock when the answer left.
+            t4: Our clock when the answer arrived.
+        """
         sample = Offset(((t2 - t1) + (t3 - t4)) / 2, (t4 - t1) - (t3 - t2))
         with self._lock:
             self._samples.setdefault(guid, deque(maxlen=self._window)).append(sample)

@@ -78,7 +78,17 @@ class Authenticator:
         return sequence + self._mac(direction, sequence, head, body)
 
     def check(self, direction: bytes, head: bytes, body: bytes, trailer: bytes) -> int:
-        """Verify a frame's trailer; returns its sequence number, FrameError on bad MAC or replay."""
+        """Verify a frame's trailer; returns its sequence number.
+
+        Args:
+            direction: Which side sent the frame (part of the MAC, so a frame cannot be reflected).
+            head: The frame's prologue bytes.
+            body: The frame's msgpack body.
+            trailer: Sequence number and MAC as received.
+
+        Raises:
+            FrameError: Bad MAC (wrong key, tampering) or a sequence number not above the last seen.
+        """
         sequence, mac = trailer[: AUTH.size], trailer[AUTH.size :]
         if not hmac.compare_digest(mac, self._mac(direction, sequence, head, body)):
             self.rejected += 1

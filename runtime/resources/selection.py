@@ -179,4 +179,15 @@ class SelectorFactory(Protocol):
         on_alarm: Callable[[Alarm], None] | None = None,
         alarm_after: int = 1,
     ) -> ScenarioSelector:
-        """Build the selector of one instance from its ``<Scenario>`` and ``<TCM>`` records."""
+        """Build the selector of one instance from its ``<Scenario>`` and ``<TCM>`` records.
+
+        Args:
+            scenarios: The service's scenarios (eq. 4.6), highest weight first by convention.
+            settings: The service's ``<TCM>`` (period, penalty, learning…); defaults when absent.
+            requirements: The client's quality requirements QR in force at the start.
+            combined: Each ``<CombinedMeasure>`` name → the measures whose samples it sums.
+            resolutions: Each combined measure's histogram resolution (None: exact values).
+            on_event: Called with every scenario change (the quality topic).
+            on_alarm: Called when an alarm is raised or cleared (the alarm topic).
+            alarm_after: Consecutive evaluations with no scenario holding before a measures alarm.
+        """
