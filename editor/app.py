@@ -300,6 +300,7 @@ class MainWindow(QMainWindow):
         if self._may_discard():
             self.agents.timer.stop()
             self.monitor.timer.stop()
+            self.monitor.ros.stop()  # closes the Zenoh session it opened, if any
             if self._transport is not None:
                 self._transport.stop()
                 self._transport = None

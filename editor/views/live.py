@@ -43,6 +43,7 @@ from runtime.network import Sample, TopicQoS, Transport, open_transport, read_gr
 from runtime.resources.api import DIRECTORY_TOPIC
 
 from ..distribution import Ack, AgentDirectory, distribute
+from .ros_bridge import RosBridgePanel
 from .sim_map import SimLivePanel
 
 
@@ -181,6 +182,9 @@ class MonitorPanel(QWidget):
                              ("Mission states", self.agents_table)):  # fmt: skip
             layout.addWidget(QLabel(title))
             layout.addWidget(table)
+        self.ros = RosBridgePanel()  # ROS 2 topics seen through rmw_zenoh liveliness tokens (issue L)
+        layout.addWidget(QLabel("ROS 2 bridge"))
+        layout.addWidget(self.ros)
         self.live = SimLivePanel()  # the map, the robots, the recognised objects and the cameras
         split = QSplitter()
         split.addWidget(tables)
@@ -210,6 +214,12 @@ class MonitorPanel(QWidget):
             qos = TopicQoS(f"/plan/{plan.name}/agents", "ckm/agent-heartbeat", history=8)
             self._subscribe(transport, qos, self._on_beat)
         self.live.start(system, transport)
+        network = system.network if system is not None else None
+        if network is not None and network.transport == "zenoh":  # a multipeer system has no ROS side to see
+            try:
+                self.ros.open(network)
+            except Exception as exc:  # zenoh.ZError: the session could not be opened; the rest still monitors
+                self.ros.status.setText(f"ROS 2 (rmw_zenoh): not watching ({exc})")
         self.timer.start(500)
 
     def _subscribe(self, transport: Transport, qos: TopicQoS, callback: Callable[[Sample], None]) -> None:

@@ -9,13 +9,15 @@ and lists what it sees, and forgets an endpoint whose token goes.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
 from pytestqt.qtbot import QtBot
 
 import ckmconf
-from ckmconf.model import Network
+from ckmconf.model import Network, System
+from editor.views.live import MonitorPanel, open_network
 from editor.views.ros_bridge import HEADERS, RosBridgePanel
 from runtime.network import Transport
 from runtime.network.rmw_graph import GraphEndpoint, parse_endpoint
@@ -132,3 +134,32 @@ def test_the_view_shows_what_the_ckm_bridge_offers(
     finally:
         panel.stop()
         bridge.stop()
+
+
+@pytest.mark.timeout(60)
+def test_the_monitor_tab_watches_the_ros_side_of_a_zenoh_system(
+    qtbot: QtBot, ros_node: tuple[zenoh.Session, Network]
+) -> None:
+    session, network = ros_node
+    token_ = session.liveliness().declare_token(token(EntityKind.PUBLISHER, 20, "/odom", "nav_msgs/msg/Odometry"))
+    system = System(name="zenoh-system", version="1.0", network=network)
+    monitor = MonitorPanel(lambda: open_network(system, Path.cwd(), network))
+    qtbot.addWidget(monitor)
+    try:
+        monitor.start(system)
+        qtbot.waitUntil(lambda: any(row[0] == "/odom" for row in monitor.ros.rows()), timeout=30_000)
+    finally:
+        monitor.timer.stop()
+        monitor.ros.stop()
+        token_.undeclare()  # type: ignore[no-untyped-call]
+
+
+def test_a_multipeer_system_opens_no_ros_session(qtbot: QtBot) -> None:
+    system = System(name="multipeer-system", version="1.0", network=private_network("multipeer"))
+    monitor = MonitorPanel(lambda: open_network(system, Path.cwd(), system.network))
+    qtbot.addWidget(monitor)
+    try:
+        monitor.start(system)
+        assert monitor.ros.status.text() == "ROS 2 (rmw_zenoh): not watching"
+    finally:
+        monitor.timer.stop()
