@@ -43,9 +43,11 @@ class CdrWire:
         self._bare: dict[str, bool] = {}
 
     def encodes(self, type_name: str) -> bool:
+        """True for a ROS 2 type (``pkg/msg/Name``) the configuration's type store knows (§4.4.1)."""
         return is_ros_type(type_name) and type_name in self.types.ros
 
     def encode(self, type_name: str, value: Any) -> bytes:
+        """``value`` as a CDR message of ``type_name``; ValueError naming the type when it does not fit."""
         ros = self.types.ros
         try:
             return ros.encode(type_name, to_message(ros, type_name, self.types.payload(type_name, value)))
@@ -53,6 +55,7 @@ class CdrWire:
             raise ValueError(f"not a {type_name}: {error}") from error
 
     def decode(self, type_name: str, data: bytes) -> Any:
+        """The CKM payload of CDR ``data``; a type whose only field is ``data`` gives that field bare."""
         payload = decode_payload(self.types.ros, type_name, data)  # RosTypeError is a ValueError
         bare = self._bare.get(type_name)
         if bare is None:
