@@ -9,17 +9,21 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 import ckmconf
 from ckmconf.model import System
+from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.host import Host, stop_on_signals
 from runtime.host_network import JoinError, joined
+from runtime.kernel.interfaces import Controller
 from runtime.kernel.runlog import RunLog
 from runtime.network import TopicQoS
+from runtime.registry import Registry
 from runtime.runrecord import EXIT_FAILED
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
@@ -47,8 +51,8 @@ def hosts() -> Iterator[Callable[..., Host]]:
     """Hosts joined to their system's network; every one is stopped at the end of the test."""
     made: list[Host] = []
 
-    def make(config: Path, run_dir: Path, **options: float) -> Host:
-        host = Host(private(config), config, run_dir, **options)  # type: ignore[arg-type]
+    def make(config: Path, run_dir: Path, **options: Any) -> Host:
+        host = Host(private(config), config, run_dir, **options)
         made.append(host)
         host.join("host-test").start()
         return host
@@ -98,6 +102,38 @@ def test_an_alarm_the_configuration_calls_an_error_reaches_the_exit_code(
     host.stop()
     assert host.failures() == [EXIT_FAILED]
     assert "base: alarm heartbeat_lost (error) raised" in capsys.readouterr().err
+
+
+class Faulty(Controller):
+    """A control law whose every step raises: a part that fails while the node runs."""
+
+    def __init__(self, record: ControllerRecord) -> None:
+        super().__init__(record)
+
+    def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        raise ZeroDivisionError("the law divides by a zero gain")
+
+
+def test_a_task_that_raises_reaches_the_exit_code_with_its_first_error(
+    hosts: Callable[..., Host], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "faulty.xml"  # closed_loop.xml with the PID replaced by the faulty law
+    config.write_text(CLOSED_LOOP.read_text().replace('kind="pid"', 'kind="faulty"'))
+    registry = Registry()
+    registry.register("controller", "faulty", Faulty)
+    host = hosts(config, tmp_path, registry=registry)
+    assert host.transport is not None
+    runtime = host.build(host.system.nodes[0], host.transport)
+    host.start()
+
+    def failed() -> bool:
+        return bool(runtime.statistics()["tasks"]["motor-node.pid"]["failures"])
+
+    assert until(failed, 15), "the faulty controller never ran"
+    host.stop()
+    assert host.failures() == [EXIT_FAILED]
+    err = capsys.readouterr().err
+    assert "motor-node: task motor-node.pid failed" in err and "the law divides by a zero gain" in err
 
 
 def test_a_failure_while_running_stops_the_run_with_its_code_and_message(
