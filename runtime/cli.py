@@ -6,7 +6,9 @@ runs its unpartitioned components and its monitor here and each partition as a c
 (``--partition``), supervised and restarted on its own, logging to RUN_DIR/PART (RUN_DIR/NODE/PART
 when several nodes run). SIGINT or SIGTERM stop the run cleanly: the partitions stop, the
 services stop, every actuator is driven to its safe value, the hardware closes. The run
-directory receives the log, the events and each task's statistics.
+directory receives the log, the events and each task's statistics. That lifecycle is the host's
+(:mod:`runtime.host`); this module adds what is ckm-run's own: its arguments, the check before
+anything starts, ``--record``, a partition's memory budget and the plans' agents.
 
 With ``--plan`` the agents of that plan whose node runs here run their missions too (§5.3),
 recording them in the run directory (``ckm-mission report RUN_DIR``); the run then also ends when
