@@ -88,6 +88,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``ckm-run``: parse ``argv`` (default: the command line), run, return the exit code (docs/exit-codes.md)."""
     parser = _parser()
     args = parser.parse_args(argv)
     if args.await_config:

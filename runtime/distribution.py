@@ -118,6 +118,7 @@ class ConfigAgent:
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
+        """Listen for pushes on the agent's config topic; start announcing and applying them."""
         self._subscription = self.transport.subscribe(TopicQoS(config_topic(self.name), "config"), self._receive)
         for target, label in ((self._announce_loop, "announce"), (self._work_loop, "apply")):
             thread = threading.Thread(target=target, name=f"ckm-agent-{label}", daemon=True)
@@ -141,6 +142,7 @@ class ConfigAgent:
         self._announcer.publish(self.announcement())
 
     def announcement(self) -> dict[str, Any]:
+        """The agent's ``/ckm/agents`` message now (:mod:`runtime.distribution_protocol`)."""
         with self._lock:
             push = self.current.push if self.current is not None else None
             return {

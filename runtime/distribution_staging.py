@@ -36,23 +36,29 @@ class ScopedTransport(Transport):
 
     @property
     def guid(self) -> int:  # type: ignore[override]
+        """The agent's transport's identity: the runtime speaks as the agent."""
         return self.inner.guid
 
-    def setup(self) -> None: ...  # the agent owns the real transport's lifecycle
+    def setup(self) -> None:
+        """Nothing: the agent owns the real transport's lifecycle."""
 
     def start(self) -> None:
+        """Let the runtime's subscriptions through: it has taken over."""
         self.open.set()
 
     def stop(self) -> None:
+        """Mute and close every subscription the runtime made; the real transport stays up."""
         self.open.clear()
         for subscription in self._subscriptions:
             subscription.close()
         self._subscriptions.clear()
 
     def publisher(self, qos: TopicQoS) -> Publisher:
+        """A publisher of the agent's transport."""
         return self.inner.publisher(qos)
 
     def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+        """A subscription of the agent's transport whose callback stays muted until :meth:`start`."""
         gated = None
         if callback is not None:
 
@@ -65,12 +71,15 @@ class ScopedTransport(Transport):
         return subscription
 
     def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
+        """Network events of the agent's transport."""
         self.inner.on_event(callback)
 
     def peers(self) -> list[int]:
+        """The peers of the agent's transport."""
         return self.inner.peers()
 
     def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
+        """As the agent's transport does."""
         return self.inner.wait_for_subscribers(topic, count, timeout)
 
 

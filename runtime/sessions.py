@@ -42,6 +42,7 @@ class HardwareSessions:
         self._stack = contextlib.ExitStack()
 
     def start(self) -> None:
+        """Enter the session of each backend kind the nodes' channels use, in name order."""
         for kind in sorted({channel.backend for node in self.nodes for channel in node.channels}):
             backend = self.registry.find("hardware", kind)  # an unknown kind is NodeRuntime's error to report
             hook = getattr(backend, "run_session", None)
@@ -49,4 +50,5 @@ class HardwareSessions:
                 self._stack.enter_context(hook(self.system, self.config, self.run_dir, list(self.nodes), self.failed))
 
     def stop(self) -> None:
+        """Leave every session entered, the last first."""
         self._stack.close()
