@@ -43,6 +43,7 @@ from .kernel.partitions import PartitionSupervisor
 from .kernel.runlog import RunLog
 from .network import NetworkEvent, Transport
 from .registry import Registry
+from .ros.wire import install as install_cdr
 from .runrecord import EXIT_FAILED, keep_statistics, write_run
 from .sessions import HardwareSessions
 
@@ -156,9 +157,10 @@ class Host:
 
     def join(self, name: str, on_event: Callable[[NetworkEvent], None] | None = None) -> Transport:
         """Join the system's network as ``name`` (set up, not started); raises
-        :class:`~runtime.host_network.JoinError`."""
+        :class:`~runtime.host_network.JoinError`. Topics of a ROS 2 type travel as CDR (D157)."""
         network = self.system.network or Network()
         self.transport = join(network, name, key_dir=self.config.parent, on_event=on_event)
+        install_cdr(self.transport, self.system)
         return self.transport
 
     def start_sessions(self, nodes: Iterable[Node]) -> None:

@@ -224,3 +224,14 @@ def test_joined_stops_its_transport_however_the_block_ends() -> None:
             assert until(lambda: transport.guid in watcher.peers(), 20), "the peers never found each other"
             raise RuntimeError("inside")
         assert until(lambda: transport.guid not in watcher.peers(), 20), "the bench peer never left"
+
+
+def test_a_host_joins_with_the_cdr_codec_when_a_topic_has_a_ros_type(tmp_path: Path) -> None:
+    ros_typed = REPO / "tests" / "data" / "ros" / "ros_typed_loop.xml"
+    for config, cdr in ((ros_typed, True), (CLOSED_LOOP, False)):
+        host = Host(private(config), config, tmp_path / config.stem)
+        transport = host.join("host-cdr-test")
+        try:
+            assert (getattr(transport, "codec", None) is not None) is cdr, config.name
+        finally:
+            transport.stop()
