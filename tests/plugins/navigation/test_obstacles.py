@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pybullet as p
 import pytest
 import shapely
 
@@ -18,7 +19,7 @@ from plugins.navigation.frames import Pose
 from plugins.navigation.obstacles import ScanObstacles
 from runtime.resources.spt import Context
 
-from .loop import room
+from .loop import Bench, room
 from .test_amcl import grid, navigation, odometry, scan
 
 BOX = shapely.box(2.2, 0.1, 2.8, 0.7)
@@ -100,3 +101,38 @@ def test_an_obstacle_out_of_view_is_forgotten_after_the_time_out(tmp_path: Path)
     assert nav.routes.extra  # not seen, but not for 3 s yet
     run(nav, grid(file, BOX), away, (0.0, 0.0, math.pi), 4, 4)
     assert not nav.routes.extra and len(nav.routes.obstacles) == 0
+
+
+def test_in_the_closed_loop_the_robot_takes_the_way_a_removed_box_no_longer_blocks(tmp_path: Path) -> None:
+    """On the real pybullet world (tests/plugins/navigation/loop.py): the box closing the south gap is
+    seen and planned round (north); it is taken away; the beams see through where it stood, and the
+    robot turns back to the shorter south way and arrives."""
+    nav_params = {"particles": 1000, "initialPose": "1 1.8 0", "initialSpread": "0.05 0.03"}
+    bench = Bench(room(tmp_path), (1.0, 1.8, 0.0), nav=nav_params)
+    try:
+        cid = bench.world.client
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.3, 0.3, 0.25], physicsClientId=cid)
+        box = p.createMultiBody(0, shape, -1, [2.5, 0.4, 0.25], physicsClientId=cid)
+        nav: AmclNavigation = bench.services["nav"].plugin  # type: ignore[assignment]
+        nav.apply_service_parameters({"goal": "Target"})
+
+        def path() -> dict[str, Any]:
+            return bench.latest("/base/path") or {"id": 0, "points": []}
+
+        assert bench.run(lambda: bool(nav.routes.extra) and path()["id"] >= 2, 20.0), "the box was never seen"
+        detour = path()
+        assert not south(detour)
+        p.removeBody(box, physicsClientId=cid)
+        trajectory: list[tuple[float, float, float]] = []
+
+        def arrived() -> bool:
+            trajectory.append(bench.truth())
+            return (bench.latest("/nav/status") or {}).get("state") in ("arrived", "failed")
+
+        assert bench.run(arrived, 40.0), f"no arrival: {bench.latest('/nav/status')}, at {bench.truth()}"
+        assert bench.latest("/nav/status")["state"] == "arrived"
+        assert not nav.routes.extra  # every point of the box was seen through
+        assert min(t[1] for t in trajectory) < 1.1 and max(t[1] for t in trajectory) < 2.9  # south, not north
+        assert math.dist(bench.truth()[:2], (4.0, 1.8)) < 0.2
+    finally:
+        bench.close()
