@@ -57,9 +57,11 @@ class Identity(Step):
     """y = x: what filters become in an inverse chain."""
 
     def __call__(self, value: float, now: float) -> float:
+        """Return ``value`` unchanged."""
         return value
 
     def inverse(self) -> AdaptationFunction:
+        """Itself."""
         return self
 
 
@@ -70,9 +72,15 @@ class Linear(Step):
         self.gain, self.offset = gain, offset
 
     def __call__(self, value: float, now: float) -> float:
+        """Return ``gain·value + offset`` (kernel.xsd ``Linear``)."""
         return self.gain * value + self.offset
 
     def inverse(self) -> AdaptationFunction:
+        """``(y − offset) / gain``.
+
+        Raises:
+            NotInvertibleError: the gain is 0.
+        """
         if self.gain == 0.0:
             raise NotInvertibleError("Linear with gain 0 has no inverse")
         return Linear(1.0 / self.gain, -self.offset / self.gain)
@@ -88,12 +96,18 @@ class Polynomial(Step):
         self.coefficients = tuple(coefficients) or (0.0,)
 
     def __call__(self, value: float, now: float) -> float:
+        """Evaluate the polynomial at ``value`` (Horner's rule; kernel.xsd ``Polynomial``)."""
         result = 0.0
         for c in reversed(self.coefficients):
             result = result * value + c
         return result
 
     def inverse(self) -> AdaptationFunction:
+        """The linear inverse of a degree-1 polynomial.
+
+        Raises:
+            NotInvertibleError: the degree is not 1.
+        """
         if len(self.coefficients) != 2:
             raise NotInvertibleError(
                 f"Polynomial of degree {len(self.coefficients) - 1} has no inverse (only degree 1)"
@@ -117,6 +131,7 @@ class LowPass(Step):
         self._t: float | None = None
 
     def __call__(self, value: float, now: float) -> float:
+        """One first-order low-pass step over the time since the last sample (kernel.xsd ``LowPass``)."""
         if self._t is None:
             self._y = value
         else:
@@ -126,9 +141,11 @@ class LowPass(Step):
         return self._y
 
     def reset(self) -> None:
+        """Forget the filter state: the next sample passes through."""
         self._t = None
 
     def inverse(self) -> AdaptationFunction:
+        """The identity (steady-state gain 1)."""
         return Identity()
 
 
@@ -151,6 +168,7 @@ class MovingAverage(_Window):
     """Mean of the last ``window`` samples (of those seen so far, at the start)."""
 
     def __call__(self, value: float, now: float) -> float:
+        """Add ``value`` to the window and return the window's mean (kernel.xsd ``MovingAverage``)."""
         self.samples.append(value)
         return math.fsum(self.samples) / len(self.samples)
 
@@ -159,6 +177,7 @@ class Median(_Window):
     """Median of the last ``window`` samples: rejects spikes shorter than half the window."""
 
     def __call__(self, value: float, now: float) -> float:
+        """Add ``value`` to the window and return the window's median (kernel.xsd ``Median``)."""
         self.samples.append(value)
         return float(statistics.median(self.samples))
 
@@ -172,9 +191,11 @@ class Clamp(Step):
         self.low, self.high = low, high
 
     def __call__(self, value: float, now: float) -> float:
+        """Return ``value`` limited to [low, high] (kernel.xsd ``Clamp``)."""
         return min(max(value, self.low), self.high)
 
     def inverse(self) -> AdaptationFunction:
+        """Itself: a projection is its own right inverse."""
         return self
 
 
@@ -185,9 +206,11 @@ class Deadband(Step):
         self.width = width
 
     def __call__(self, value: float, now: float) -> float:
+        """Return 0 within ±width, ``value`` otherwise (kernel.xsd ``Deadband``)."""
         return 0.0 if abs(value) <= self.width else value
 
     def inverse(self) -> AdaptationFunction:
+        """Itself: a projection is its own right inverse."""
         return self
 
 
@@ -203,6 +226,7 @@ class Lookup(Step):
             raise ValueError("Lookup x values must increase strictly")
 
     def __call__(self, value: float, now: float) -> float:
+        """Interpolate the table at ``value``, held at the end values (kernel.xsd ``Lookup``)."""
         xs, ys = self.xs, self.ys
         if value <= xs[0]:
             return ys[0]
@@ -213,6 +237,11 @@ class Lookup(Step):
         return y0 + (y1 - y0) * (value - x0) / (x1 - x0)
 
     def inverse(self) -> AdaptationFunction:
+        """The table with x and y swapped.
+
+        Raises:
+            NotInvertibleError: the y values are not strictly monotonic.
+        """
         pairs = list(zip(self.ys, self.xs, strict=True))
         if all(b > a for a, b in zip(self.ys, self.ys[1:], strict=False)):
             return Lookup(pairs)
@@ -228,6 +257,7 @@ class Chain:
         self.functions = tuple(functions)
 
     def __call__(self, value: float, now: float) -> float:
+        """Apply the steps in document order (kernel.xsd ``Adaptation``)."""
         for function in self.functions:
             value = function(value, now)
         return value

@@ -40,6 +40,7 @@ _ids = itertools.count(1)
 
 
 def channel(node: str) -> TopicQoS:
+    """The topic on which ``node`` receives delegation messages (code delegation, §3.1.2.6)."""
     return TopicQoS(f"/ckm/delegation/{node}", "delegation", history=16)
 
 
@@ -49,22 +50,34 @@ class DelegationHost(Protocol):
     join the scheduler), its future actions, its topics' network names and its event log."""
 
     @property
-    def node(self) -> Node: ...
+    def node(self) -> Node:
+        """The node's configuration record (kernel.xsd ``NodeType``)."""
+        ...
 
     @property
-    def transport(self) -> Transport: ...
+    def transport(self) -> Transport:
+        """The node's transport."""
+        ...
 
     @property
-    def registry(self) -> Registry: ...
+    def registry(self) -> Registry:
+        """The plugin registry that builds delegated controllers."""
+        ...
 
     @property
-    def scheduler(self) -> Scheduler: ...
+    def scheduler(self) -> Scheduler:
+        """The node's scheduler, which runs taken controllers."""
+        ...
 
     @property
-    def controllers(self) -> dict[str, ControlService]: ...
+    def controllers(self) -> dict[str, ControlService]:
+        """The node's control services by controller name."""
+        ...
 
     @property
-    def futures(self) -> dict[str, FutureActions]: ...
+    def futures(self) -> dict[str, FutureActions]:
+        """The future actions each controller last published, by output topic."""
+        ...
 
     def topic(self, name: str) -> TopicQoS:
         """The QoS, with the network name, of topic ``name`` as the node sees it."""

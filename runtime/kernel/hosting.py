@@ -65,6 +65,7 @@ class ResourceHost:
             self.resources[resource.name] = runtime
 
     def start(self) -> None:
+        """Start every hosted resource."""
         for resource in self.resources.values():
             resource.start()
 

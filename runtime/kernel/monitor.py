@@ -24,6 +24,8 @@ from .scheduler import Scheduler
 
 @dataclass
 class AlarmState:
+    """The run-time state of one kernel.xsd ``Alarm``: active or not, since when, last value, raise count."""
+
     record: Alarm
     active: bool = False
     since: float | None = None  # when the condition started to hold
@@ -58,10 +60,17 @@ class MonitorService:
         psutil.cpu_percent(None)  # the first reading only starts the measurement
 
     def active(self, name: str) -> bool:
+        """Whether alarm ``name`` is raised now (False for an unknown name)."""
         state = self.alarms.get(name)
         return state is not None and state.active
 
     def measure(self, alarm: Alarm) -> float:
+        """Sample the alarm's measure (kernel.xsd ``Alarm/@measure``, §3.1.2.4).
+
+        Returns:
+            A fraction for cpu and memory, seconds of staleness, the count of new deadline misses or
+            partition crashes since the last sample, or the largest recent jitter or execution time.
+        """
         kind = alarm.measure
         if kind == "cpu":
             return float(psutil.cpu_percent(None)) / 100
@@ -87,6 +96,7 @@ class MonitorService:
         return max((abs(v) for v in recent), default=0.0)
 
     def tick(self) -> None:
+        """Sample every alarm, raise or clear it, report the change and trigger its reaction (§3.1.2.4)."""
         now = time.monotonic()
         for state in self.alarms.values():
             alarm = state.record

@@ -238,6 +238,7 @@ class NodeRuntime:
         return service
 
     def start(self) -> None:
+        """Schedule the sensors, controllers, monitor and actuators; start the scheduler and hosted resources."""
         for name, sensor in self.sensors.items():
             self.scheduler.add(
                 Task(f"{self.node.name}.{name}", sensor.record.period, sensor.tick, priority=sensor.record.priority)

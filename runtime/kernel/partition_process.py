@@ -129,6 +129,7 @@ class MemoryWatch:
                 return
 
     def statistics(self) -> dict[str, int | None]:
+        """Baseline, limit and peak of the partition's private memory, in bytes."""
         return {"baseline_bytes": self.baseline, "limit_bytes": self.limit, "peak_bytes": self.peak}
 
 

@@ -124,6 +124,7 @@ class PartitionSupervisor:
     # ------------------------------------------------------------------ public interface
 
     def start(self) -> None:
+        """Start the supervising thread; every partition is due to start at once (§3.1.3.2)."""
         now = time.monotonic()
         for state in self.states.values():
             state.due = now
@@ -159,6 +160,7 @@ class PartitionSupervisor:
         self.restart(alarm.partition or "", if_down=alarm.measure == "partition-crash")
 
     def statistics(self) -> dict[str, Any]:
+        """Per partition: its kernel.xsd ``Partition`` settings, CPU used, crashes, restarts and last exit."""
         stats: dict[str, Any] = {}
         for name, state in self.states.items():
             record, lives = state.record, list(state.lives)

@@ -31,16 +31,24 @@ class ReactionHost(Protocol):
     """What the reactions need of their node (the kernel's ``NodeRuntime`` is one)."""
 
     @property
-    def actuators(self) -> Mapping[str, ActuationService]: ...
+    def actuators(self) -> Mapping[str, ActuationService]:
+        """The node's actuation services by actuator name."""
+        ...
 
     @property
-    def controllers(self) -> Mapping[str, ControlService]: ...
+    def controllers(self) -> Mapping[str, ControlService]:
+        """The node's control services by controller name."""
+        ...
 
     @property
-    def delegation(self) -> Delegation | None: ...
+    def delegation(self) -> Delegation | None:
+        """The node's code delegation, if it has one."""
+        ...
 
     @property
-    def partitions(self) -> Restarts | None: ...
+    def partitions(self) -> Restarts | None:
+        """The node's partition supervisor, if it has partitions."""
+        ...
 
     def switch(self, to: str, reason: str = "command") -> None:
         """Hand the outputs over to controller ``to``."""

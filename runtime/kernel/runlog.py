@@ -66,6 +66,7 @@ class RunLog:
         os.replace(scratch, self.stats_path)
 
     def close(self) -> None:
+        """Close the event file; later events are dropped."""
         with self._lock:
             if self._events is not None:
                 self._events.close()

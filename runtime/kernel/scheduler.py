@@ -50,6 +50,7 @@ class Ring:
         self._count = 0
 
     def append(self, value: float) -> None:
+        """Store ``value``, overwriting the oldest sample once full."""
         self._values[self._next] = value
         self._next = (self._next + 1) % self.maxlen
         self._count = min(self._count + 1, self.maxlen)
@@ -177,6 +178,11 @@ class Scheduler:
     # ------------------------------------------------------------------ tasks
 
     def add(self, task: Task, *, first_release: float | None = None) -> Task:
+        """Schedule ``task``, first released one period from now unless ``first_release`` is given (§3.1.2.8).
+
+        Raises:
+            ValueError: a task of that name already runs on this scheduler.
+        """
         with self._lock:
             if task.name in self.tasks:
                 raise ValueError(f"a task named {task.name!r} already runs on {self.name}")
@@ -187,6 +193,7 @@ class Scheduler:
         return task
 
     def remove(self, name: str) -> Task | None:
+        """Unschedule task ``name``; returns it, or None when no such task runs."""
         with self._lock:
             task = self.tasks.pop(name, None)
             if task is not None:
@@ -224,10 +231,12 @@ class Scheduler:
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
+        """Start the scheduler's thread."""
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop the loop and wait (at most 5 s) for its thread to end."""
         self._stop.set()
         self._wake.set()
         if self._thread is not None and self._thread is not threading.current_thread():

@@ -58,6 +58,7 @@ class SensorService:
         self.samples: deque[tuple[float, Any]] = deque(maxlen=8)  # (wall time, engineering value)
 
     def tick(self) -> None:
+        """Read the channel, adapt and publish the value (sensory perception service, §3.1.2.1)."""
         raw = self.backend.read()
         if self.shape is None:
             value: Any = self.chain(float(raw if not isinstance(raw, tuple) else raw[0]), time.monotonic())
@@ -134,6 +135,11 @@ class ControlService:
         return stale_after(subscription.qos, self.record.period)
 
     def read_inputs(self) -> dict[str, Any] | None:
+        """The latest value of each input, extrapolated to now by its ``Input/@extrapolation``.
+
+        Returns:
+            The values by role, or None when a required input is stale (a missing setpoint is allowed).
+        """
         now = time.time()
         values: dict[str, Any] = {}
         for role, subscription in self.inputs.items():
@@ -186,6 +192,7 @@ class ControlService:
         self.optional_used += 1
 
     def publish(self) -> None:
+        """Publish the pending action on every output, with its predicted future actions (§3.1.2.2)."""
         self._optional_ran = self._optional_now
         if self._pending is None:
             return
@@ -211,6 +218,7 @@ class ControlService:
         self.since = time.monotonic()
 
     def deactivate(self) -> None:
+        """Give the outputs up (controller switching, §3.1.2.7)."""
         self.active = False
 
 
