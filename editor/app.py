@@ -175,6 +175,7 @@ class MainWindow(QMainWindow):
             self.canvas.show_mission(mission)
 
     def open_mission(self, name: str) -> None:
+        """Show mission ``name`` (missions.xsd ``Mission``) on the canvas and select it in the tree."""
         element = self.document.mission(name)
         if element is not None:
             self.tree.select(element)
@@ -237,10 +238,16 @@ class MainWindow(QMainWindow):
         return answer == QMessageBox.StandardButton.Discard
 
     def new(self) -> None:
+        """Start an empty configuration, after asking about unsaved changes."""
         if self._may_discard():
             self._open_document(Workspace(None, parent=self))
 
     def open_path(self, path: Path) -> bool:
+        """Open the configuration at ``path`` with the files it includes.
+
+        Returns:
+            False when the user kept the unsaved changes or the file could not be read (a message says why).
+        """
         if not self._may_discard():
             return False
         try:
@@ -253,6 +260,7 @@ class MainWindow(QMainWindow):
         return True
 
     def open_dialog(self) -> None:
+        """Ask for a configuration file and open it."""
         chosen, _ = QFileDialog.getOpenFileName(self, "Open configuration", "", "CKM configurations (*.xml)")
         if chosen:
             self.open_path(Path(chosen))
@@ -273,6 +281,7 @@ class MainWindow(QMainWindow):
         self._remember(path)
 
     def save_as_dialog(self) -> bool:
+        """Ask for a file name and save the main file under it; False when cancelled."""
         chosen, _ = QFileDialog.getSaveFileName(self, "Save configuration", "", "CKM configurations (*.xml)")
         if not chosen:
             return False
@@ -280,6 +289,7 @@ class MainWindow(QMainWindow):
         return True
 
     def recent(self) -> list[str]:
+        """The recently opened or saved files, newest first (from the settings)."""
         value = self.settings.value("recent", [])
         items = [value] if isinstance(value, str) else list(value) if isinstance(value, list | tuple) else []
         return [str(v) for v in items]
@@ -297,6 +307,7 @@ class MainWindow(QMainWindow):
         self.recent_menu.setEnabled(bool(self.recent_menu.actions()))
 
     def closeEvent(self, event: QCloseEvent) -> None:
+        """Close the window unless the user keeps unsaved changes; stop the live views and the transport."""
         if self._may_discard():
             self.agents.timer.stop()
             self.monitor.timer.stop()
@@ -330,6 +341,11 @@ class MainWindow(QMainWindow):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the configuration editor (§3.1.5.3, graphic configuration interface); ``ckm-editor``'s entry point.
+
+    Returns:
+        The process exit code.
+    """
     parser = argparse.ArgumentParser(prog="ckm-editor", description="Edit, validate and distribute CKM configurations.")
     parser.add_argument("file", nargs="?", type=Path, help="configuration to open")
     parser.add_argument("--screenshot", type=Path, help="render the window offscreen to this PNG and exit")

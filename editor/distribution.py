@@ -47,23 +47,28 @@ class Agent:
 
     @property
     def status(self) -> str:
+        """The agent's announced status (``unknown`` when missing)."""
         return str(self.announcement.get("status", "unknown"))
 
     @property
     def config_hash(self) -> str | None:
+        """The hash of the configuration the agent runs, if any."""
         value = self.announcement.get("config_hash")
         return value if isinstance(value, str) else None
 
     @property
     def node(self) -> str | None:
+        """The node the agent runs, if any."""
         value = self.announcement.get("node")
         return value if isinstance(value, str) else None
 
     @property
     def age(self) -> float:
+        """Seconds since the agent was last heard."""
         return time.monotonic() - self.seen
 
     def stale(self, after: float = STALE_AFTER) -> bool:
+        """Whether the agent has been silent for more than ``after`` seconds."""
         return self.age > after
 
 
@@ -89,10 +94,12 @@ class AgentDirectory:
             self._on_change(agent)
 
     def agents(self) -> list[Agent]:
+        """The agents heard so far, by name."""
         with self._cond:
             return sorted(self._agents.values(), key=lambda a: a.name)
 
     def get(self, name: str) -> Agent | None:
+        """Agent ``name``, or None when not heard."""
         with self._cond:
             return self._agents.get(name)
 
@@ -102,9 +109,11 @@ class AgentDirectory:
             return self._cond.wait_for(lambda: predicate(dict(self._agents)), timeout)
 
     def wait_for(self, names: list[str], timeout: float) -> bool:
+        """Wait until every agent of ``names`` is heard; False after ``timeout`` seconds."""
         return self.wait_until(lambda agents: all(n in agents for n in names), timeout)
 
     def close(self) -> None:
+        """Stop listening to the announcements."""
         self._subscription.close()
 
 
@@ -121,6 +130,7 @@ class Bundle:
 
     @property
     def hash(self) -> str:
+        """The hash the receiving agent acknowledges for this bundle."""
         return bundle_hash(self.files)
 
 

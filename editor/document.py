@@ -34,10 +34,12 @@ Element = etree._Element
 
 
 def qname(tag: str) -> str:
+    """``tag`` in the CKM configuration namespace, as lxml spells it."""
     return f"{{{NS}}}{tag}"
 
 
 def local(element: Element) -> str:
+    """The tag of ``element`` without its namespace."""
     return etree.QName(element).localname
 
 
@@ -54,6 +56,7 @@ class Problem:
     source: str = "config"  # "config" (ckmconf), "mission" (off-line checks) or "plan" (wait-for graph)
 
     def text(self) -> str:
+        """``file:line: message``, as the problems panel shows it."""
         return f"{Path(self.file).name}:{self.line}: {self.message}"
 
 
@@ -101,14 +104,24 @@ class Document(QObject):
 
     @property
     def root(self) -> Element:
+        """The root element of the file."""
         return self.tree.getroot()
 
     def to_bytes(self) -> bytes:
+        """The file as written: its XML declaration and prolog kept, ending with a newline."""
         body: bytes = etree.tostring(self.root, encoding="UTF-8", with_tail=False)
         data = self.declaration + self.prolog + body
         return data if data.endswith(b"\n") else data + b"\n"
 
     def save(self, path: Path | None = None) -> Path:
+        """Write the file to ``path`` (default: where it came from) and mark it unmodified.
+
+        Returns:
+            The path written.
+
+        Raises:
+            ValueError: the document has no file name yet and ``path`` is None.
+        """
         target = path or self.path
         if target is None:
             raise ValueError("no file name: use save as")
@@ -122,6 +135,7 @@ class Document(QObject):
 
     @property
     def modified(self) -> bool:
+        """Whether the file has edits not saved."""
         return self.edits != self.saved_edits
 
     def count(self, step: int) -> None:
@@ -132,21 +146,26 @@ class Document(QObject):
     # ------------------------------------------------------------------ edits (all undoable)
 
     def set_attribute(self, element: Element, name: str, value: str | None) -> None:
+        """Set (or, with None, remove) attribute ``name`` of ``element`` as an undoable command."""
         if element.get(name) != value:
             self.undo.push(SetAttribute(self, element, name, value))
 
     def set_text(self, element: Element, text: str) -> None:
+        """Set the text of ``element`` as an undoable command."""
         if (element.text or "") != text:
             self.undo.push(SetText(self, element, text))
 
     def insert(self, parent: Element, index: int, element: Element) -> None:
+        """Insert ``element`` under ``parent`` at ``index`` as an undoable command."""
         self.undo.push(InsertElement(self, parent, index, element))
 
     def remove(self, element: Element) -> None:
+        """Remove ``element`` from its parent as an undoable command."""
         if element.getparent() is not None:
             self.undo.push(RemoveElement(self, element))
 
     def new_element(self, tag: str, attributes: dict[str, str] | None = None) -> Element:
+        """A new element ``tag`` of the CKM namespace with ``attributes`` (not inserted yet)."""
         element = etree.Element(qname(tag), nsmap=None)
         for key, value in (attributes or {}).items():
             element.set(key, value)
@@ -266,6 +285,8 @@ class _Command(QUndoCommand):
 
 
 class SetAttribute(_Command):
+    """Undoable edit of one attribute (None removes it)."""
+
     def __init__(self, document: Document, element: Element, name: str, value: str | None) -> None:
         super().__init__(document, f"set {local(element)}/@{name}")
         self.element, self.name, self.value, self.old = element, name, value, element.get(name)
@@ -279,33 +300,42 @@ class SetAttribute(_Command):
         self.document.changed.emit(self.element)
 
     def apply(self) -> None:
+        """Set the new value."""
         self._apply(self.value)
 
     def revert(self) -> None:
+        """Restore the old value."""
         self._apply(self.old)
 
 
 class SetText(_Command):
+    """Undoable edit of an element's text."""
+
     def __init__(self, document: Document, element: Element, text: str) -> None:
         super().__init__(document, f"edit {local(element)} text")
         self.element, self.new, self.old = element, text, element.text
 
     def apply(self) -> None:
+        """Set the new text."""
         self.element.text = self.new
         self.document.changed.emit(self.element)
 
     def revert(self) -> None:
+        """Restore the old text."""
         self.element.text = self.old
         self.document.changed.emit(self.element)
 
 
 class InsertElement(_Command):
+    """Undoable insertion of an element, indented like its siblings."""
+
     def __init__(self, document: Document, parent: Element, index: int, element: Element) -> None:
         super().__init__(document, f"add {local(element)}")
         self.parent, self.index, self.element = parent, index, element
         self._tails: tuple[str | None, str | None, str | None] | None = None
 
     def apply(self) -> None:
+        """Insert the element, indented like its siblings."""
         children = list(self.parent)
         last = children[-1] if children else None
         self._tails = (self.parent.text, last.tail if last is not None else None, self.element.tail)
@@ -314,6 +344,7 @@ class InsertElement(_Command):
         self.document.structure_changed.emit()
 
     def revert(self) -> None:
+        """Remove the element and restore the whitespace around it."""
         self.parent.remove(self.element)
         if self._tails is not None:
             text, last_tail, own = self._tails
@@ -326,6 +357,8 @@ class InsertElement(_Command):
 
 
 class RemoveElement(_Command):
+    """Undoable removal of an element."""
+
     def __init__(self, document: Document, element: Element) -> None:
         super().__init__(document, f"remove {local(element)}")
         parent = element.getparent()
@@ -335,6 +368,7 @@ class RemoveElement(_Command):
         self._previous_tail: str | None = None
 
     def apply(self) -> None:
+        """Remove the element; the closing tag keeps its indentation."""
         previous = self.element.getprevious()
         if previous is not None and self.index == len(self.parent) - 1:
             self._previous_tail = previous.tail
@@ -343,6 +377,7 @@ class RemoveElement(_Command):
         self.document.structure_changed.emit()
 
     def revert(self) -> None:
+        """Put the element back where it was."""
         self.parent.insert(self.index, self.element)
         previous = self.element.getprevious()
         if previous is not None and self._previous_tail is not None:

@@ -72,6 +72,7 @@ class Workspace(QObject):
     # ------------------------------------------------------------------ files
 
     def all(self) -> list[Document]:
+        """The main file and the included files open here."""
         return [self.main, *self.documents.values()]
 
     def included(self, include: Element) -> Document | None:
@@ -82,11 +83,13 @@ class Workspace(QObject):
         return self.documents.get((owner.path.parent / include.get("href", "")).resolve())
 
     def document_of(self, element: Element) -> Document | None:
+        """The file ``element`` belongs to, if open here."""
         root = element.getroottree().getroot()
         return next((d for d in self.all() if d.root is root), None)
 
     @property
     def modified(self) -> bool:
+        """Whether any file has unsaved edits."""
         return any(d.modified for d in self.all())
 
     def save_all(self) -> list[Path]:
@@ -107,26 +110,33 @@ class Workspace(QObject):
         return document
 
     def set_attribute(self, element: Element, name: str, value: str | None) -> None:
+        """Set an attribute in the file that holds ``element`` (undoable)."""
         self._doc(element).set_attribute(element, name, value)
 
     def set_text(self, element: Element, text: str) -> None:
+        """Set the text of ``element`` in the file that holds it (undoable)."""
         self._doc(element).set_text(element, text)
 
     def insert(self, parent: Element, index: int, element: Element) -> None:
+        """Insert ``element`` under ``parent`` in the file that holds it (undoable)."""
         self._doc(parent).insert(parent, index, element)
 
     def remove(self, element: Element) -> None:
+        """Remove ``element`` from the file that holds it (undoable)."""
         self._doc(element).remove(element)
 
     def new_element(self, tag: str, attributes: dict[str, str] | None = None) -> Element:
+        """A new element of the CKM namespace, not inserted yet."""
         return self.main.new_element(tag, attributes)
 
     # ------------------------------------------------------------------ queries
 
     def elements(self, tag: str) -> list[Element]:
+        """Every element ``tag`` across the open files."""
         return [e for d in self.all() for e in d.root.iter(f"{{{NAMESPACE}}}{tag}")]
 
     def mission(self, name: str) -> Element | None:
+        """The ``Mission`` named ``name`` in any open file, if any."""
         return next((m for m in self.elements("Mission") if m.get("name") == name), None)
 
     # ------------------------------------------------------------------ validation

@@ -59,18 +59,30 @@ class ElementSpec:
 
     @property
     def text_kind(self) -> Kind | None:
+        """The kind of the element's text content, or None when it holds no text."""
         return self.text.kind if self.text is not None else None
 
     def attribute(self, name: str) -> AttributeSpec:
+        """The spec of attribute ``name``.
+
+        Raises:
+            KeyError: the element has no such attribute (the message lists the allowed ones).
+        """
         for spec in self.attributes:
             if spec.name == name:
                 return spec
         raise KeyError(f"{self.tag} has no attribute {name!r} (allowed: {', '.join(self.attribute_names())})")
 
     def attribute_names(self) -> list[str]:
+        """The names of the element's attributes, in schema order."""
         return [spec.name for spec in self.attributes]
 
     def child(self, tag: str) -> ChildSpec:
+        """The spec of child element ``tag``.
+
+        Raises:
+            KeyError: the content model allows no such child.
+        """
         for spec in self.children:
             if spec.tag == tag:
                 return spec

@@ -55,6 +55,7 @@ class AttributeForm(QWidget):
         document.changed.connect(self._changed)
 
     def show_element(self, element: Element | None) -> None:
+        """Rebuild the form for ``element``'s attributes and text (empty for None)."""
         self.element = element
         self.error.clear()
         while self.rows.rowCount():

@@ -77,6 +77,7 @@ class TopicGraph(_Board):
     """Producers → topics → consumers of the loaded system."""
 
     def show_system(self, system: System | None) -> None:
+        """Draw producers, topics and consumers of ``system`` (a message when it does not load)."""
         scene = self.scene()
         scene.clear()
         if system is None:
@@ -105,6 +106,7 @@ class PlanView(_Board):
     """Agents, their missions, and the signals between them."""
 
     def show_system(self, system: System | None) -> None:
+        """Draw each plan of ``system``: its agents, nodes, missions and signals (§5.3)."""
         scene = self.scene()
         scene.clear()
         if system is None or not system.plans:

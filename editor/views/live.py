@@ -102,11 +102,13 @@ class AgentsPanel(QWidget):
         self.timer.timeout.connect(self.refresh)
 
     def start(self) -> None:
+        """Start listening for agents and refreshing the table."""
         if self.directory is None:
             self.directory = AgentDirectory(self._transport())
         self.timer.start(500)
 
     def show_system(self, system: System | None, main: Path | None) -> None:
+        """Take the system's nodes and rebuild the node → agent mapping (each defaults to the agent of its name)."""
         self.system, self.main = system, main
         while self.mapping.rowCount():
             self.mapping.removeRow(0)
@@ -119,6 +121,7 @@ class AgentsPanel(QWidget):
             self.combos[node.name] = combo
 
     def refresh(self) -> None:
+        """Redraw the agents table and the distribution answers."""
         agents = self.directory.agents() if self.directory is not None else []
         _fill(self.table, [
             [a.name, a.status + (" (silent)" if a.stale() else ""), a.node or "", (a.config_hash or "")[:12],
@@ -144,6 +147,7 @@ class AgentsPanel(QWidget):
             self.button.setEnabled(True)
 
     def mapping_now(self) -> dict[str, str]:
+        """The agent chosen for each node, by node name (nodes without one left out)."""
         return {node: combo.currentText() for node, combo in self.combos.items() if combo.currentText()}
 
     def distribute(self, timeout: float = 15.0) -> None:
@@ -203,6 +207,7 @@ class MonitorPanel(QWidget):
         self.timer.timeout.connect(self.refresh)
 
     def start(self, system: System | None) -> None:
+        """Subscribe to the service directory, the system's topics and its plans' agent heartbeats."""
         self.system = system
         transport = self._transport()
         self._subscribe(transport, TopicQoS(DIRECTORY_TOPIC, "ckm/service", history=64), self._on_service)
@@ -273,6 +278,7 @@ class MonitorPanel(QWidget):
                     self.progress[beat["agent"]] = float(beat["progress"])
 
     def refresh(self) -> None:
+        """Redraw topic rates and totals, services and plan agents."""
         now = time.monotonic()
         with self._lock:
             rates = {t: sum(1 for a in q if now - a <= 2.0) / 2.0 for t, q in self.arrivals.items()}

@@ -121,12 +121,14 @@ class NodeItem(QGraphicsPathItem):
         return QPointF(centre.x() + dx * scale, centre.y() + dy * scale)
 
     def itemChange(self, change: QGraphicsItem.GraphicsItemChange, value: object) -> object:
+        """Remember the state's position and reroute the arrows when it moves."""
         if change == QGraphicsItem.GraphicsItemChange.ItemPositionHasChanged:
             self.canvas.positions[(self.canvas.mission_name, self.name)] = self.pos()
             self.canvas.route()
         return super().itemChange(change, value)
 
     def mouseDoubleClickEvent(self, event: object) -> None:
+        """Open the nested mission of a state that has one."""
         nested = self.element.get("mission")
         if nested:
             self.canvas.open_mission.emit(nested)
@@ -150,6 +152,7 @@ class ArrowItem(QGraphicsPathItem):
         self.update_path()
 
     def update_path(self) -> None:
+        """Redraw the arrow between its states' current positions."""
         a, b = self.source.scenePos(), self.target.scenePos()
         middle = QPointF((a.x() + b.x()) / 2, (a.y() + b.y()) / 2)
         normal = QPointF(-(b.y() - a.y()), b.x() - a.x())
@@ -192,17 +195,20 @@ class MissionCanvas(QGraphicsView):
         return self.mission is not None and (element is self.mission or element.getparent() is self.mission)
 
     def show_mission(self, mission: Element | None) -> None:
+        """Show ``mission`` (missions.xsd ``Mission``, a hierarchical FSM, §5.2)."""
         self.mission = mission
         self.mission_name = mission.get("name", "") if mission is not None else ""
         self.redraw()
         self.fit()
 
     def fit(self) -> None:
+        """Fit the view to the states drawn."""
         rect = self.scene().itemsBoundingRect().adjusted(-40, -40, 40, 40)
         self.setSceneRect(rect)
         self.fitInView(rect, Qt.AspectRatioMode.KeepAspectRatio)
 
     def redraw(self) -> None:
+        """Draw the mission's states and transitions again from the document."""
         scene = self.scene()
         scene.clear()
         self.nodes, self.arrows = {}, []
@@ -242,6 +248,7 @@ class MissionCanvas(QGraphicsView):
                           QPen(QColor("#212121"), 1.5))  # fmt: skip
 
     def route(self) -> None:
+        """Redraw every arrow."""
         for arrow in self.arrows:
             arrow.update_path()
 
@@ -266,6 +273,11 @@ class MissionCanvas(QGraphicsView):
         return transition
 
     def add_state(self, name: str | None = None, at: QPointF | None = None) -> Element | None:
+        """Add a ``State`` to the mission (undoable), named ``name`` or the first free ``STATE<n>``.
+
+        Returns:
+            The new element, or None when no mission is shown.
+        """
         mission = self.mission
         if mission is None:
             return None
@@ -289,6 +301,7 @@ class MissionCanvas(QGraphicsView):
         return None
 
     def mousePressEvent(self, event: QMouseEvent) -> None:
+        """Start a link from a state (right or shift-click), offer to add a state (right-click on space), or select."""
         node = self._node_at(event)
         linking = event.button() == Qt.MouseButton.RightButton or (
             event.button() == Qt.MouseButton.LeftButton and event.modifiers() & Qt.KeyboardModifier.ShiftModifier
@@ -307,6 +320,7 @@ class MissionCanvas(QGraphicsView):
         super().mousePressEvent(event)
 
     def mouseReleaseEvent(self, event: QMouseEvent) -> None:
+        """Finish a link: a ``Transition`` between the two states."""
         if self._drag_from is not None:
             target = self._node_at(event)
             source, self._drag_from = self._drag_from, None

@@ -30,6 +30,7 @@ class ProblemsPanel(QListWidget):
         self.refresh()
 
     def refresh(self) -> None:
+        """List the document's problems again (a green line when it validates)."""
         self.clear()
         problems = self.document.problems
         if not problems:
@@ -46,6 +47,7 @@ class ProblemsPanel(QListWidget):
             self.addItem(item)
 
     def problems(self) -> list[Problem]:
+        """The problems listed, in order."""
         found = []
         for row in range(self.count()):
             problem = self.item(row).data(ROLE)

@@ -99,6 +99,7 @@ class RosBridgePanel(QWidget):
         return [row_of(topic) for topic in self.graph.topics()]
 
     def refresh(self) -> None:
+        """Redraw the table from the tokens alive."""
         rows = self.rows()
         self.table.setRowCount(len(rows))
         for r, row in enumerate(rows):
@@ -108,5 +109,6 @@ class RosBridgePanel(QWidget):
             self.status.setText(f"ROS 2 (rmw_zenoh): {len(rows)} topic(s) and service(s) seen")
 
     def closeEvent(self, event: Any) -> None:
+        """Stop watching the network, then close."""
         self.stop()
         super().closeEvent(event)

@@ -20,6 +20,7 @@ ROLE = Qt.ItemDataRole.UserRole
 
 
 def label(element: Element) -> str:
+    """The text of ``element``'s tree item: its tag and its name (or the nearest thing to one)."""
     name = element.get("name") or element.get("ref") or element.get("plugin") or element.get("measure")
     name = name or element.get("href")
     if local(element) == "Transition":
@@ -28,6 +29,7 @@ def label(element: Element) -> str:
 
 
 def parent_tag(element: Element) -> str | None:
+    """The tag of ``element``'s parent, or None at the root."""
     parent = element.getparent()
     return None if parent is None else local(parent)
 
@@ -52,6 +54,7 @@ class SystemTree(QTreeWidget):
     # ------------------------------------------------------------------ building
 
     def rebuild(self) -> None:
+        """Rebuild the tree from the documents, keeping the selection and the expanded items."""
         current = self.current_element()
         expanded = {key for key, item in self._items.items() if item.isExpanded()}
         self.blockSignals(True)
@@ -95,10 +98,12 @@ class SystemTree(QTreeWidget):
     # ------------------------------------------------------------------ selection
 
     def current_element(self) -> Element | None:
+        """The element selected, if any."""
         item = self.currentItem()
         return None if item is None else item.data(0, ROLE)
 
     def select(self, element: Element | None) -> None:
+        """Select ``element``'s item and expand its ancestors."""
         item = self._items.get(id(element)) if element is not None else None
         if item is not None:
             parent = item.parent()
@@ -115,6 +120,7 @@ class SystemTree(QTreeWidget):
     # ------------------------------------------------------------------ add / remove
 
     def addable(self, element: Element) -> list[str]:
+        """The child tags the content model still allows under ``element``."""
         existing = [local(c) for c in element if isinstance(c.tag, str)]
         try:
             specs = self.schema.allowed_children(local(element), existing, parent_tag(element))
@@ -135,6 +141,7 @@ class SystemTree(QTreeWidget):
         return child
 
     def remove_current(self) -> None:
+        """Remove the selected element (undoable) and select its parent."""
         element = self.current_element()
         if element is not None and element.getparent() is not None:
             parent = element.getparent()
