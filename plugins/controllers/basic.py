@@ -28,9 +28,11 @@ class Constant(Controller):
         )
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """The ``value`` Param, whatever the inputs."""
         return self.value
 
     def future(self) -> list[float]:
+        """``horizon`` copies of the value."""
         return [self.value] * self.record.horizon
 
 
@@ -49,14 +51,18 @@ class Relay(Controller):
         self.last = 0.0
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """``gain · input + offset`` of the one input."""
         self.last = self.gain * next(iter(inputs.values())) + self.offset
         return self.last
 
     def future(self) -> list[float]:
+        """``horizon`` copies of the last output."""
         return [self.last] * self.record.horizon
 
     def state(self) -> dict[str, Any]:
+        """The last output (code delegation, §3.1.2.6)."""
         return {"last": self.last}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from the last output of ``state()``."""
         self.last = float(state.get("last", 0.0))

@@ -46,6 +46,7 @@ def measure_and_setpoint(inputs: Mapping[str, float], *, owner: str) -> tuple[fl
 
 
 def clamp(value: float, low: float, high: float) -> float:
+    """``value`` limited to [low, high]."""
     return min(max(value, low), high)
 
 

@@ -80,6 +80,10 @@ class DiffDrive(MultiOutputController):
         return left * self.scale, right * self.scale
 
     def step_outputs(self, inputs: Mapping[str, Any], dt: float) -> Row:
+        """Left and right wheel speeds, ramped toward the Twist set point within ``maxAcceleration``.
+
+        A missing set point stops the base; the set point is a Twist message or a ``(linear, angular)`` pair.
+        """
         command = inputs.get("setpoint")
         if command is None:
             self._target = (0.0, 0.0)
@@ -104,14 +108,21 @@ class DiffDrive(MultiOutputController):
         return rows
 
     def bumpless(self, output: Any) -> None:
+        """Start the ramp from the wheel speeds ``output`` (when it is a pair)."""
         row = self.as_row(output, 2)
         if row is not None:
             self._wheels = row
 
     def state(self) -> dict[str, Any]:
+        """Wheel speeds and target (code delegation, §3.1.2.6)."""
         return {"kind": self.kind, "wheels": list(self._wheels), "target": list(self._target)}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a diff-drive controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, self.kind, ("wheels", "target"))
         self._wheels = tuple(float(v) for v in state["wheels"])
         self._target = tuple(float(v) for v in state["target"])
@@ -148,6 +159,7 @@ class RampStop(MultiOutputController):
         return tuple(v * factor for v in outputs)
 
     def step_outputs(self, inputs: Mapping[str, Any], dt: float) -> Row:
+        """Every output one period further toward 0 (starting from the measured speeds)."""
         if self._outputs is None:
             measured = [float(v) for v in role_values(inputs, "measure")]
             self._outputs = tuple(measured) if len(measured) == self.size else (0.0,) * self.size
@@ -155,6 +167,7 @@ class RampStop(MultiOutputController):
         return self._outputs
 
     def future_outputs(self) -> list[Row]:
+        """The ramp to 0 over the horizon (empty before the first step)."""
         rows, outputs = [], self._outputs
         if outputs is None:
             return []
@@ -164,12 +177,19 @@ class RampStop(MultiOutputController):
         return rows
 
     def bumpless(self, output: Any) -> None:
+        """Start from ``output``, or from the measured speeds at the next step when it is not a row."""
         self._outputs = self.as_row(output, self.size)  # None: start from the measured speeds
 
     def state(self) -> dict[str, Any]:
+        """The outputs (code delegation, §3.1.2.6)."""
         return {"kind": self.kind, "outputs": None if self._outputs is None else list(self._outputs)}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a ramp-stop controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, self.kind, ("outputs",))
         outputs = state["outputs"]
         self._outputs = None if outputs is None else tuple(float(v) for v in outputs)

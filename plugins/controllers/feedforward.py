@@ -56,6 +56,7 @@ class FrictionFeedforward(PID):
         return self.coulomb * direction + self.viscous * setpoint
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """The PID action plus the friction feed-forward of the set point, within the output limits."""
         _, setpoint = measure_and_setpoint(inputs, owner=self.owner)
         feedforward = self.feedforward(setpoint)
         # The PID runs with its limits shifted by the feed-forward, so its anti-windup acts on the total.
@@ -72,15 +73,22 @@ class FrictionFeedforward(PID):
         return self._output
 
     def future(self) -> list[float]:
+        """``horizon`` copies of P + I + feed-forward with the last error held (empty before the first step)."""
         if not self._stepped:
             return []
         held = clamp(self.kp * self._error + self._integral + self._feedforward, self.low, self.high)
         return [held] * self.record.horizon
 
     def state(self) -> dict[str, Any]:
+        """The PID's state plus the feed-forward (code delegation, §3.1.2.6)."""
         return {**super().state(), "kind": "friction-feedforward", "feedforward": self._feedforward}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a friction-feedforward controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, "friction-feedforward", (*_STATE_KEYS, "feedforward"))
         super().restore({**state, "kind": "pid"})
         self._feedforward = float(state["feedforward"])

@@ -100,6 +100,7 @@ class GPC(Controller):
         return out
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """One GPC step: the first move of the optimal increment sequence, clamped (see the module docstring)."""
         measure, setpoint = measure_and_setpoint(inputs, owner=self.owner)
         depth = len(self.a_tilde) - 1
         self._y = [measure, *self._y[: depth - 1]] if self._y else [measure] * depth  # at rest when new
@@ -114,16 +115,24 @@ class GPC(Controller):
         return applied
 
     def future(self) -> list[float]:
+        """The rest of the planned inputs, u[k+1…k+horizon]."""
         return list(self._plan)
 
     def bumpless(self, output: float) -> None:
+        """Continue from input ``output``; forget the output history and the plan."""
         self._u = float(output)
         self._y, self._du, self._plan = [], [0.0] * len(self.b), []
 
     def state(self) -> dict[str, Any]:
+        """Output history, increments, last input and plan (code delegation, §3.1.2.6)."""
         return {"kind": "gpc", "y": list(self._y), "du": list(self._du), "u": self._u, "plan": list(self._plan)}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a GPC controller.
+
+        Raises:
+            ValueError: the state is not one, or is of a model of another order.
+        """
         check_state(state, "gpc", ("y", "du", "u", "plan"))
         if len(state["du"]) != len(self.b) or len(state["y"]) not in (0, len(self.a_tilde) - 1):
             raise ValueError(f"{self.owner}: the state is of a model of another order")

@@ -84,6 +84,11 @@ class MultiOutputController(Controller):
         return []
 
     def step(self, inputs: Mapping[str, float], dt: float) -> Any:
+        """The one output's value (vector protocol, D91).
+
+        Raises:
+            TypeError: the controller writes several outputs; its service must call ``step_outputs``.
+        """
         values = self.step_outputs(inputs, dt)
         if len(values) != 1:
             raise TypeError(
@@ -93,6 +98,7 @@ class MultiOutputController(Controller):
         return values[0]
 
     def future(self) -> list[float]:
+        """The first column of ``future_outputs()`` for one output; empty for several."""
         rows = self.future_outputs()
         return [row[0] for row in rows] if rows and len(rows[0]) == 1 else []
 

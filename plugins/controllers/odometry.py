@@ -109,6 +109,7 @@ class DiffDriveOdometry(MultiOutputController):
         }
 
     def step_outputs(self, inputs: Mapping[str, Any], dt: float) -> Row:
+        """Integrate the wheel travel of this period and return the ``Odometry`` message."""
         dt = dt if dt > 0.0 else self.record.period
         left, right = self.wheels(inputs)
         self.advance(left * dt, right * dt)
@@ -116,6 +117,7 @@ class DiffDriveOdometry(MultiOutputController):
         return (self.message(),)
 
     def state(self) -> dict[str, Any]:
+        """Pose and covariance (code delegation, §3.1.2.6)."""
         return {
             "kind": self.kind,
             "pose": [float(v) for v in self.pose],
@@ -123,6 +125,11 @@ class DiffDriveOdometry(MultiOutputController):
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a diff-drive-odometry controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, self.kind, ("pose", "covariance"))
         self.pose = np.array([float(v) for v in state["pose"]], dtype=float)
         self.covariance = np.array([float(v) for v in state["covariance"]], dtype=float).reshape(3, 3)

@@ -104,6 +104,7 @@ class PanTiltPosition(MultiOutputController):
         return moved
 
     def step_outputs(self, inputs: Mapping[str, Any], dt: float) -> Row:
+        """Pan and tilt commands: the reference one period further toward the goal (see the module docstring)."""
         dt = dt if dt > 0.0 else self.record.period
         measured = self.measured(inputs)
         if self._reference is None:
@@ -117,6 +118,7 @@ class PanTiltPosition(MultiOutputController):
         return tuple(self._reference)
 
     def future_outputs(self) -> list[Row]:
+        """The reference continued toward the goal over the horizon (empty before the first step)."""
         if self._reference is None:
             return []
         rows, reference = [], list(self._reference)
@@ -127,13 +129,20 @@ class PanTiltPosition(MultiOutputController):
         return rows
 
     def bumpless(self, output: Any) -> None:
+        """Start the reference from ``output`` (a pan-tilt pair), or from the measured angles."""
         row = self.as_row(output, 2)
         self._reference = None if row is None else list(row)
 
     def state(self) -> dict[str, Any]:
+        """Reference and goal (code delegation, §3.1.2.6)."""
         return {"kind": self.kind, "reference": self._reference, "goal": self._goal}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a pan-tilt-position controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, self.kind, ("reference", "goal"))
         self._reference = None if state["reference"] is None else [float(v) for v in state["reference"]]
         self._goal = None if state["goal"] is None else [float(v) for v in state["goal"]]

@@ -65,6 +65,7 @@ class PID(Controller):
         self._stepped = False
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """One PID step (see the module docstring): P + I + D, clamped, with anti-windup."""
         measure, setpoint = measure_and_setpoint(inputs, owner=self.owner)
         dt = dt if dt > 0.0 else self.record.period
         if self._previous is not None:
@@ -92,16 +93,19 @@ class PID(Controller):
         return max(min(moved, max(integral, self.high)), min(integral, self.low))
 
     def future(self) -> list[float]:
+        """``horizon`` copies of P + I with the last error held (empty before the first step)."""
         if not self._stepped:
             return []
         held = clamp(self.kp * self._error + self._integral, self.low, self.high)
         return [held] * self.record.horizon
 
     def bumpless(self, output: float) -> None:
+        """The next step outputs exactly ``output`` (the integrator takes up the difference)."""
         self._target = float(output)
         self._previous, self._derivative = None, 0.0
 
     def state(self) -> dict[str, Any]:
+        """Integrator, derivative filter, last error and output (code delegation, §3.1.2.6)."""
         return {
             "kind": "pid",
             "integral": self._integral,
@@ -114,6 +118,11 @@ class PID(Controller):
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a PID controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, "pid", _STATE_KEYS)
         self._integral = float(state["integral"])
         self._previous = None if state["previous"] is None else float(state["previous"])

@@ -158,6 +158,13 @@ class JointTrajectory(MultiOutputController):
         return max(0.0, sum(d for _, _, d in self._plan) - self._elapsed)
 
     def step_outputs(self, inputs: Mapping[str, Any], dt: float) -> Row:
+        """The joint commands one period along the plan, with the ``ArmStatus`` if an output has that role.
+
+        A new set point is planned from the current command; a bad one empties the plan and is reported.
+
+        Raises:
+            KeyError: there is no ``measure`` input to start from.
+        """
         dt = dt if dt > 0.0 else self.record.period
         measure = inputs.get("measure")
         if self._command is None:
@@ -191,6 +198,7 @@ class JointTrajectory(MultiOutputController):
         return tuple(row)
 
     def future_outputs(self) -> list[Row]:
+        """The rest of the plan sampled over the horizon (joint commands only; empty before the first step)."""
         if self._command is None:
             return []
         rows = []
@@ -202,10 +210,12 @@ class JointTrajectory(MultiOutputController):
         return rows
 
     def bumpless(self, output: Any) -> None:
+        """Restart from the measured positions at the next step."""
         self._command = None  # restart from the measured positions
         self._plan, self._elapsed = [], 0.0
 
     def state(self) -> dict[str, Any]:
+        """Command, plan, time along it and pose (code delegation, §3.1.2.6)."""
         return {
             "kind": self.kind,
             "command": self._command,
@@ -215,6 +225,11 @@ class JointTrajectory(MultiOutputController):
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` of a joint-trajectory controller.
+
+        Raises:
+            ValueError: the state is not one.
+        """
         check_state(state, self.kind, ("command", "plan", "elapsed", "pose"))
         self._command = None if state["command"] is None else [float(v) for v in state["command"]]
         self._plan = [([float(v) for v in s], [float(v) for v in e], float(d)) for s, e, d in state["plan"]]
