@@ -39,10 +39,12 @@ class WrapAngle(Step):
         self.low: float = values["center"] - self.period / 2.0
 
     def __call__(self, value: float, now: float) -> float:
+        """``value`` wrapped into [center − period/2, center + period/2)."""
         wrapped = self.low + (value - self.low) % self.period
         return self.low if wrapped >= self.low + self.period else wrapped  # rounding can land on the top
 
     def inverse(self) -> AdaptationFunction:
+        """Itself: wrapping is an idempotent projection."""
         return self
 
 
@@ -73,6 +75,7 @@ class OutlierReject(Step):
         self.rejects = 0
 
     def __call__(self, value: float, now: float) -> float:
+        """``value``, or the last accepted value when ``value`` is an outlier of the window."""
         if len(self.accepted) >= 3 and self.rejects < self.max_rejects:
             mean = statistics.fmean(self.accepted)
             if abs(value - mean) > self.sigma * statistics.pstdev(self.accepted, mean):
@@ -85,8 +88,10 @@ class OutlierReject(Step):
         return value
 
     def reset(self) -> None:
+        """Forget the accepted values and the count of rejects."""
         self.accepted.clear()
         self.rejects = 0
 
     def inverse(self) -> AdaptationFunction:
+        """The identity (accepted samples pass unchanged)."""
         return Identity()
