@@ -71,10 +71,12 @@ class Cluster:
 
     @property
     def count(self) -> int:
+        """The number of points."""
         return len(self.points)
 
     @property
     def centroid(self) -> tuple[float, float, float]:
+        """The mean of the points (camera frame, metres)."""
         x, y, z = self.points.mean(axis=0, dtype=np.float64)
         return float(x), float(y), float(z)
 
@@ -161,6 +163,7 @@ class DepthAcquisition(ProcessingPlugin):
             raise ParamError(f"{self.owner}: parameter 'scale' = {self.params['scale']} must be greater than 0")
 
     def process(self, data: Any, context: Context) -> Depth:
+        """The frame as float32 metres (NaN where the sensor saw nothing); ValueError on a bad frame."""
         if isinstance(data, Mapping):
             image = _decode(data, self.owner)
         elif isinstance(data, np.ndarray):
@@ -335,6 +338,7 @@ class EuclideanClustering(ProcessingPlugin):
         return depth
 
     def process(self, data: Any, context: Context) -> list[Cluster]:
+        """The clusters of the depth image, left to right."""
         depth = self.depth_image(data)
         p = self.params
         return segment(
@@ -388,6 +392,7 @@ class KdTreeShapeClassifier(ProcessingPlugin):
         self.tree: KDTree | None = None
 
     def setup(self) -> None:
+        """Read the PCD model and build its k-d tree; ModelError when it is missing, malformed or too small."""
         try:
             model = read_pcd(self.path)
         except PcdError as exc:
@@ -399,6 +404,7 @@ class KdTreeShapeClassifier(ProcessingPlugin):
         self.model, self.tree = model, KDTree(model.descriptors)
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """The recognized shapes of ``data``'s clusters and their mean reliability (§7.4.1)."""
         if self.model is None or self.tree is None:
             raise RuntimeError(f"{self.owner}: setup() was not called")
         clusters = list(data)

@@ -223,6 +223,12 @@ class FeatureFusion(ProcessingPlugin):
         return self.poses.get(source, IDENTITY)
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """The fused objects of the recognition results in ``data`` and their reliability (Algorithm 4).
+
+        Raises:
+            RuntimeError: ``setup()`` was not called.
+            ValueError: ``data`` is not a mapping of input name to result.
+        """
         if not self._loaded:
             raise RuntimeError(f"{self.owner} is not set up")
         if not isinstance(data, Mapping):

@@ -47,9 +47,11 @@ class Pose:
         return cls(rotation, np.array([x, y, z], dtype=np.float64))
 
     def point(self, p: Vector) -> Vector:
+        """Point ``p`` of the sensor frame in the common frame."""
         return self.rotation @ p + self.translation
 
     def vector(self, v: Vector) -> Vector:
+        """Direction ``v`` of the sensor frame in the common frame (rotated only)."""
         return self.rotation @ v
 
 
@@ -76,6 +78,7 @@ class Ray:
     """The nearest a feature can be: ranges are clipped to it (and the lateral σ never reaches 0)."""
 
     def at(self, t: float) -> Vector:
+        """The ray's point at distance ``t`` from its origin."""
         return self.origin + t * self.direction
 
     def range_of(self, p: Vector) -> float:

@@ -92,6 +92,7 @@ class Resize(ProcessingPlugin):
         return max(1, round(rows * scale)), max(1, round(cols * scale))
 
     def process(self, data: Any, context: Context) -> Image:
+        """The image resized to the target size."""
         image = _image(data, self.owner)
         return resize(image, *self.target(*image.shape[:2]), area=self.area)
 
@@ -115,6 +116,7 @@ class Grayscale(ProcessingPlugin):
         self.weights = np.asarray(weights, dtype=np.float64)
 
     def process(self, data: Any, context: Context) -> Image:
+        """The luma of a colour image (a grey image passes unchanged)."""
         image = _image(data, self.owner)
         if image.ndim == 2:
             return image
@@ -161,6 +163,7 @@ class Undistort(ProcessingPlugin):
         return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
     def process(self, data: Any, context: Context) -> Image:
+        """The image with the lens distortion removed (unchanged when the coefficients are all 0)."""
         image = _image(data, self.owner)
         if not self.coefficients.any():
             return image

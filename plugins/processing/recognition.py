@@ -61,6 +61,11 @@ class CameraAcquisition(ProcessingPlugin):
             raise ParamError(f"{self.owner}: parameter 'encoding' = {self.encoding!r} is not one of {_known()}")
 
     def process(self, data: Any, context: Context) -> Image:
+        """The frame as an RGB or mono uint8 image.
+
+        Raises:
+            ValueError: ``data`` is neither an image array nor an Image-like message.
+        """
         if isinstance(data, np.ndarray):
             return self._convert(data, self.encoding)
         if isinstance(data, Mapping):
@@ -157,11 +162,13 @@ class OrbKeypoints(ProcessingPlugin):
         self._orb: cv2.ORB | None = None
 
     def setup(self) -> None:
+        """Create the ORB detector (and set OpenCV's thread count)."""
         _threads(self.params["threads"])
         p = self.params
         self._orb = cv2.ORB.create(nfeatures=p["features"], scaleFactor=p["scaleFactor"], nlevels=p["levels"])
 
     def process(self, data: Any, context: Context) -> Keypoints:
+        """The ORB keypoints of a uint8 image."""
         if self._orb is None:
             raise RuntimeError(f"{self.owner} is not set up")
         image = np.asarray(data)
@@ -170,6 +177,7 @@ class OrbKeypoints(ProcessingPlugin):
         return orb_keypoints(self._orb, image)
 
     def stop(self) -> None:
+        """Drop the ORB detector."""
         self._orb = None
 
 
@@ -226,6 +234,12 @@ class KeypointMatching(ProcessingPlugin):
         self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
 
     def setup(self) -> None:
+        """Build the texture model from the model file.
+
+        Raises:
+            OSError: the model file cannot be read.
+            ValueError: the model file is malformed.
+        """
         _threads(self.params["threads"])
         try:
             self.model = build_model(self.path)
@@ -235,9 +249,11 @@ class KeypointMatching(ProcessingPlugin):
             raise ValueError(f"{self.owner}: bad model file: {exc}") from exc
 
     def stop(self) -> None:
+        """Drop the texture model."""
         self.model = None
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """The learnt textures ``data``'s keypoints show, with their positions and reliability (§7.4.1)."""
         if self.model is None:
             raise RuntimeError(f"{self.owner} is not set up")
         if not isinstance(data, Keypoints):

@@ -35,12 +35,15 @@ class OrbRecognition(ProcessingPlugin):
         self.matching = KeypointMatching(_part(record, KeypointMatching))
 
     def setup(self) -> None:
+        """Set up the keypoint and the matching steps."""
         self.keypoints.setup()
         self.matching.setup()
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """The matching result of the image ``data``."""
         return self.matching.process(self.keypoints.process(data, context), context)
 
     def stop(self) -> None:
+        """Stop both steps."""
         self.matching.stop()
         self.keypoints.stop()

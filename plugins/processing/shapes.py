@@ -74,6 +74,7 @@ class Shape:
 
     @property
     def top(self) -> float:
+        """Height of the solid's top above the floor."""
         return 2 * self.size[0] if self.kind == "sphere" else self.size[-1]
 
     @property
@@ -96,6 +97,8 @@ class Truth:
 
 @dataclass(frozen=True)
 class RenderedScene:
+    """A rendered depth image (uint16 millimetres) and the ground truth of its objects."""
+
     depth: npt.NDArray[np.uint16]
     truth: list[Truth]
 

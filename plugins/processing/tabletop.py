@@ -109,6 +109,7 @@ class TabletopClustering(EuclideanClustering):
             raise ParamError(f"{self.owner}: parameter 'plane' must stay true (use euclidean-clustering without)")
 
     def process(self, data: Any, context: Context) -> list[Cluster]:
+        """The clusters standing on the floor or on a table, left to right."""
         depth = self.depth_image(data)
         p = self.params
         return tabletop_segment(
