@@ -60,6 +60,11 @@ class NaoQiBridge(ProcessingPlugin):
         self._head_seen: float | None = None
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """The image (once per new frame), head state, status and ``available`` measure (Table 7.2).
+
+        Raises:
+            ValueError: ``data`` is not a mapping of the inputs.
+        """
         if not isinstance(data, Mapping):
             raise ValueError(f"{self.owner} expects {{'camera', 'head_yaw', 'head_pitch'}}, got {type(data).__name__}")
         now = context.stamp

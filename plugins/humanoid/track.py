@@ -146,6 +146,7 @@ class PanTiltTrack(ProcessingPlugin):
             raise ValueError(f"{self.owner}: {exc}") from None
 
     def stop(self) -> None:
+        """Close the private head model."""
         if self.head is not None:
             self.head.close()
             self.head = None
@@ -166,6 +167,12 @@ class PanTiltTrack(ProcessingPlugin):
     # ------------------------------------------------------------------ frames
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """Head goal, track state, target's map position and ``moving`` measure (Table 7.2, OBJ_TRACK).
+
+        Raises:
+            RuntimeError: ``setup()`` was not called.
+            ValueError: ``data`` is not a mapping of the inputs.
+        """
         if self.head is None:
             raise RuntimeError(f"{self.owner} is not set up")
         if not isinstance(data, Mapping):
