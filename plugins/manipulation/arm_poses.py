@@ -137,6 +137,7 @@ class ArmPoses(ProcessingPlugin):
         self.solutions = {name: self.model.solve(target) for name, target in self.file.arm.items()}
 
     def stop(self) -> None:
+        """Close the private arm model."""
         if self.model is not None:
             self.model.close()
             self.model = None
@@ -154,6 +155,12 @@ class ArmPoses(ProcessingPlugin):
     # ------------------------------------------------------------------ frames
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
+        """The trajectory of a new goal, the arm's status and its ``active`` measure (Table 7.1).
+
+        Raises:
+            RuntimeError: ``setup()`` was not called.
+            ValueError: ``data`` is not a mapping of the inputs.
+        """
         if self.model is None or self.file is None:
             raise RuntimeError(f"{self.owner} is not set up")
         if not isinstance(data, Mapping):

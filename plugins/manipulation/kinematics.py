@@ -173,6 +173,7 @@ class ArmModel:
         return np.asarray(state[4], dtype=float)
 
     def reset(self, angles: Sequence[float]) -> None:
+        """Put the arm's joints at ``angles`` in the private client."""
         for joint, angle in zip(self.arm, angles, strict=False):
             p.resetJointState(self.body, joint, float(angle), physicsClientId=self.client)
 
