@@ -84,7 +84,9 @@ class Routes:
             for exit_point in self._free_near(here, self.escape):
                 try:
                     return [here, *self.planner.plan(exit_point, goal).waypoints]
-                except Unreachable:
+                except Unreachable as again:
+                    if "the goal collides" in again.reason:  # for plan()'s goal escape: both ends move
+                        raise again from None
                     continue
             raise
 

@@ -57,6 +57,15 @@ class LiveFactory:
         self.handles: dict[str, NetworkServiceHandle] = {}
         self._inputs: dict[str, Any] = {}
         self._publishers: dict[str, Any] = {}
+        # Every behavior's topics are joined now, not when its state is first entered: a state's
+        # one-shot output (SPOT's target) must reach the next state's input, subscribed before it.
+        for record in system.behaviors:
+            for port in record.inputs:
+                if port.topic is not None:
+                    self._topic_reader(port.topic)
+            for out in record.outputs:
+                if out.topic is not None:
+                    self._publisher(out.topic)
 
     def _handle(self, ref: str) -> NetworkServiceHandle | None:
         if ref not in self.handles:
