@@ -34,6 +34,7 @@ class WaitAbove(Behavior):
             raise ParamError(f"{self.owner}: input {self.input!r} is not one of its inputs ({names})")
 
     def step(self) -> BehaviorStatus:
+        """One tick of the behavior (ckm.xsd ``Behavior``, §5.1): progress toward the threshold, done above it."""
         value = self.read(self.input)
         if value is None:
             return BehaviorStatus(progress=0.0, detail="no value yet")

@@ -37,6 +37,11 @@ class Hysteresis(Controller):
         self.output: float = self.low
 
     def step(self, inputs: Mapping[str, float], dt: float) -> float:
+        """The action for this period (kernel.xsd ``Controller``, §3.1.2.2): ``high``, ``low`` or the last output.
+
+        Raises:
+            KeyError: there is no ``measure`` input.
+        """
         if "measure" not in inputs:
             raise KeyError(f"{self.owner}: no input with role 'measure'")
         error = float(inputs.get("setpoint", 0.0)) - float(inputs["measure"])
@@ -47,10 +52,13 @@ class Hysteresis(Controller):
         return self.output
 
     def future(self) -> list[float]:
+        """``horizon`` copies of the current output, played if the inputs are lost."""
         return [self.output] * self.record.horizon
 
     def state(self) -> dict[str, Any]:
+        """The current output: all the state code delegation (§3.1.2.6) must carry."""
         return {"output": self.output}
 
     def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a ``state()`` taken on another node."""
         self.output = float(state["output"])

@@ -35,9 +35,15 @@ class SineBackend(Backend):
         self.last = 0.0
 
     def setup(self) -> None:
+        """Start the wave's clock (the first I/O of a backend belongs here, not in ``__init__``)."""
         self.start = time.monotonic()
 
     def read(self) -> Value:
+        """The wave's value now (kernel.xsd ``HWChannel``), or the last value written on an output channel.
+
+        Raises:
+            RuntimeError: an input channel is read before ``setup()``.
+        """
         if self.channel.direction == "out":
             return self.last
         if self.start is None:
@@ -46,4 +52,5 @@ class SineBackend(Backend):
         return self.offset + self.amplitude * math.sin(2.0 * math.pi * self.frequency * elapsed)
 
     def write(self, value: Value) -> None:
+        """Keep ``value`` (its first element, for a tuple) as the last value written."""
         self.last = float(value[0]) if isinstance(value, tuple) else float(value)

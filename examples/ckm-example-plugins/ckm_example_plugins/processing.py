@@ -29,6 +29,11 @@ class Threshold(ProcessingPlugin):
         super().__init__(record)  # converts and checks the Params into self.params
 
     def process(self, data: Any, context: Context) -> Any:
+        """The binary mask of the grey image ``data`` (a Smart Plugin Topology step, §3.2.2); ``data`` is not modified.
+
+        Raises:
+            ValueError: ``data`` is not a 2-D array.
+        """
         image = np.asarray(data)
         if image.ndim != 2:
             raise ValueError(f"{self.owner} expects a grey (H, W) image, got shape {image.shape}")
