@@ -175,7 +175,7 @@ class MainWindow(QMainWindow):
             self.canvas.show_mission(mission)
 
     def open_mission(self, name: str) -> None:
-        """Show mission ``name`` (missions.xsd ``Mission``) on the canvas and select it in the tree."""
+        """Show mission ``name`` (ckm.xsd ``Mission``) on the canvas and select it in the tree."""
         element = self.document.mission(name)
         if element is not None:
             self.tree.select(element)

@@ -195,7 +195,7 @@ class MissionCanvas(QGraphicsView):
         return self.mission is not None and (element is self.mission or element.getparent() is self.mission)
 
     def show_mission(self, mission: Element | None) -> None:
-        """Show ``mission`` (missions.xsd ``Mission``, a hierarchical FSM, §5.2)."""
+        """Show ``mission`` (ckm.xsd ``Mission``, a hierarchical FSM, §5.2)."""
         self.mission = mission
         self.mission_name = mission.get("name", "") if mission is not None else ""
         self.redraw()
