@@ -162,6 +162,15 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None, registry: Registry | None = None) -> int:
+    """Run ``ckm-plugins`` (list, show or markdown) on the kinds the ``kind=`` attributes name.
+
+    Args:
+        argv: the command line without the program name (None: ``sys.argv[1:]``).
+        registry: the kinds to describe (None: the installed entry points).
+
+    Returns:
+        The exit code: 0, or 1 when a kind is unknown or cannot be imported.
+    """
     args = _parser().parse_args(argv)
     registry = registry or default_registry()
     try:

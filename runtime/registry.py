@@ -62,6 +62,7 @@ class Registry:
         self._targets[key] = target
 
     def kinds(self, category: str) -> list[str]:
+        """The kind names registered in ``category`` (values a ``kind=`` attribute may take), sorted."""
         return sorted(kind for cat, kind in self._targets if cat == category)
 
     def missing(self, category: str, kind: str) -> str:

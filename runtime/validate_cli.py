@@ -20,6 +20,11 @@ from .verification.verify import verify_safely
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``ckm-validate`` on the configuration files of ``argv`` (schemas/ckm.xsd ``System``, §3.1.5.2).
+
+    Returns:
+        The exit code: 0 when no file has a problem, 1 otherwise.
+    """
     parser = cli.parser()
     parser.description = (
         "Validate CKM configuration files against the XSD model, check their cross-references, "
