@@ -77,13 +77,20 @@ class RecordedSample(Protocol):
     """What a received CKM sample offers (``runtime.network.api.Sample``)."""
 
     @property
-    def topic(self) -> str: ...
+    def topic(self) -> str:
+        """The name of the ``<Topic>`` (kernel.xsd ``TopicType``) the value was published on."""
+
     @property
-    def value(self) -> Any: ...
+    def value(self) -> Any:
+        """The CKM payload, as :mod:`runtime.ros.convert` turns it into a ROS message."""
+
     @property
-    def stamp(self) -> float: ...
+    def stamp(self) -> float:
+        """The publication time in seconds, on the publisher's clock (§3.1.2.10)."""
+
     @property
-    def offset(self) -> float: ...
+    def offset(self) -> float:
+        """The publisher's clock minus ours (from SYNCTIME), subtracted to record on one clock."""
 
 
 class BagRecorder:
