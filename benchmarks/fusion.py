@@ -37,6 +37,7 @@ import numpy as np
 
 from benchmarks.fusion_report import describe, plot_approach, plot_reliability, summarise
 from benchmarks.fusion_scene import LINK, Lab, Target, View
+from plugins.processing.cameras import XTION
 from plugins.processing.mounts import model_path, read_mount
 
 __all__ = ["describe", "run"]
@@ -143,7 +144,7 @@ def sample_views(lab: Lab, per_object: int, seed: int) -> tuple[dict[str, list[d
             continue
         view = lab.observe(pose)
         renders += 1
-        scale = (640 * 480) / (lab.size[0] * lab.size[1])
+        scale = (XTION.width * XTION.height) / (lab.size[0] * lab.size[1])
         for target in lab.targets.values():
             if len(scored[target.name]) < per_object and view.pixels[target.name] * scale >= MIN_PIXELS:
                 scored[target.name].append(score(lab, view, target))

@@ -53,10 +53,10 @@ from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
+from .cameras import XTION, Camera
 from .fusion_model import Observation, entries, fused_object, number, numbers, reinforce, share_at_bound
 from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
 from .placement import Placement
-from .shapes import Camera
 
 __all__ = ["FeatureFusion", "Observation", "reinforce", "share_at_bound"]
 
@@ -97,12 +97,12 @@ class FeatureFusion(ProcessingPlugin):
         P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind: 'name: line|point; …'."),
         P("poses", "", "Sensor frames in the common frame: 'name: x y z roll pitch yaw; …' (default identity)."),
         P("cameras", "", "Intrinsics of line inputs: 'name: fx fy cx cy width height; …'."),
-        P("fx", 525.0, "Default focal length x of line inputs.", unit="px"),
-        P("fy", 525.0, "Default focal length y of line inputs.", unit="px"),
-        P("cx", 319.5, "Default principal point x.", unit="px"),
-        P("cy", 239.5, "Default principal point y.", unit="px"),
-        P("calibrationWidth", 640, "Image width the default intrinsics are given for.", unit="px"),
-        P("calibrationHeight", 480, "Image height the default intrinsics are given for.", unit="px"),
+        P("fx", XTION.fx, "Default focal length x of line inputs.", unit="px"),
+        P("fy", XTION.fy, "Default focal length y of line inputs.", unit="px"),
+        P("cx", XTION.cx, "Default principal point x.", unit="px"),
+        P("cy", XTION.cy, "Default principal point y.", unit="px"),
+        P("calibrationWidth", XTION.width, "Image width the default intrinsics are given for.", unit="px"),
+        P("calibrationHeight", XTION.height, "Image height the default intrinsics are given for.", unit="px"),
         P("lineSigma", 0.01, "Angular uncertainty of a line (2D) observation.", unit="rad"),
         P("pointSigma", 0.03, "Positional uncertainty of a point (3D) observation.", unit="m"),
         P("sigmas", "", "Per-input uncertainties: 'name: σ; …'."),

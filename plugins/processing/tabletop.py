@@ -26,8 +26,10 @@ from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context
 from runtime.verification.manifest import P, Params, as_params
 
-from .depth import Cluster, Depth, EuclideanClustering, backproject, euclidean_clusters, find_support_plane
-from .shapes import Camera, Plane
+from .cameras import Camera
+from .clusters import Cluster, Depth, backproject, euclidean_clusters, find_support_plane
+from .depth import EuclideanClustering
+from .descriptor import Plane
 
 MIN_SHARE = 0.05
 """Share of the image's points a further support plane must hold (the workbench top holds ~20 %)."""
