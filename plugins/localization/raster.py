@@ -123,6 +123,7 @@ class GridMap:
 
     @property
     def shape(self) -> tuple[int, int]:
+        """The grid's (rows, columns): the ``<Map>`` bounds plus the wall, in cells (§6.1.2 global map)."""
         rows, cols = self.occupied.shape
         return rows, cols
 

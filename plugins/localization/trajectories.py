@@ -160,6 +160,7 @@ class Run:
 
     @property
     def times(self) -> Array:
+        """The time (s) of each step from the start, ``dt`` apart: one per true pose (§6.2 test runs)."""
         result: Array = np.arange(len(self.truth), dtype=np.float64) * self.dt
         return result
 
