@@ -20,13 +20,13 @@ directory per episode, so ``ckm-mission report`` draws Fig. 7.21 from them.
 
 from __future__ import annotations
 
-import collections
 import math
-import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import networkx as nx  # type: ignore[import-untyped]
 
 from ckmconf.model import System
 from ckmconf.model.missions import Behavior as BehaviorRecord
@@ -37,7 +37,6 @@ from .behaviors import Behavior, BehaviorContext, BehaviorStatus
 from .hfsm import MissionEngine, MissionRun, Recorder
 from .solver import Key, environment, solve
 
-_SIGNAL = re.compile(r"signal\(\s*['\"]([^'\"]+)['\"]\s*\)")
 TKey = tuple[str, int]  # (mission, index of the transition in the mission)
 
 
@@ -179,10 +178,10 @@ class FakeInteraction(MissionEngine):
     def _fixed(self, run: MissionRun) -> dict[Key, Any]:
         fixed: dict[Key, Any] = {}
         if self.assumable is not None:  # a signal no agent of a plan can send is never received
-            for transition in run.mission.transitions:
-                for name in _SIGNAL.findall(transition.when):
-                    if name not in self.assumable:
-                        fixed[("call", "signal", name)] = False
+            for _, condition in run.transitions:  # the conditions parsed at load
+                for function, args in condition.calls:
+                    if function == "signal" and args[0] not in self.assumable:
+                        fixed[("call", "signal", args[0])] = False
         if run.child is not None:
             fixed[("call", "done")] = run.child.outcome is not None
             for name in run.child.finals:
@@ -225,22 +224,21 @@ class FakeInteraction(MissionEngine):
     def _gain(self, mission: Mission, start: str, seen: set[str]) -> float:
         """Fewest transitions from ``start`` to something uncovered in ``mission`` (nested included)."""
         seen = seen | {mission.name}
-        queue, distance = collections.deque([start]), {start: 0}
-        while queue:
-            state = queue.popleft()
+        graph = nx.DiGraph()
+        graph.add_node(start)
+        graph.add_edges_from((t.from_, t.to) for t in mission.transitions)
+        uncovered = {
+            t.from_ for i, t in enumerate(mission.transitions) if not self.coverage.transitions[(mission.name, i)]
+        }
+        # Breadth-first: the states by increasing distance, so the first one that leads on is the nearest.
+        for state, distance in nx.single_source_shortest_path_length(graph, start).items():
+            if state in uncovered:
+                return float(distance)
             record = mission.state(state)
             if record is not None and record.mission and record.mission not in seen:
                 nested = self.system.mission(record.mission)
                 if nested is not None and self._gain(nested, nested.initial, seen) < math.inf:
-                    return distance[state]
-            for index, t in enumerate(mission.transitions):
-                if t.from_ != state:
-                    continue
-                if not self.coverage.transitions[(mission.name, index)]:
-                    return distance[state]
-                if t.to not in distance:
-                    distance[t.to] = distance[state] + 1
-                    queue.append(t.to)
+                    return float(distance)
         return math.inf
 
     def _wanted_outcomes(self, run: MissionRun) -> set[str]:

@@ -25,22 +25,18 @@ sender's graph, the emitting state can no longer be reached (``on="entry"``) or 
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import networkx as nx  # type: ignore[import-untyped]
 
 from ckmconf.binding import Record
-from ckmconf.expressions import TRANSITION, parse
+from ckmconf.expressions import Condition
 from ckmconf.model import System
-from ckmconf.model.missions import Behavior, Mission, Plan, Signal
+from ckmconf.model.missions import Behavior, Mission, Plan, Signal, Transition
 
 from ..solver import solve
 from .findings import Finding, finding, ordered
-
-_SIGNAL = re.compile(r"signal\(\s*['\"]([^'\"]+)['\"]\s*\)")
-_OUTCOME = re.compile(r"outcome\(\s*['\"]([^'\"]+)['\"]\s*\)")
 
 
 @dataclass
@@ -79,15 +75,20 @@ class AgentGraph:
         return bool(kept) or any(self.reachable(n, removed) for n in inner)
 
 
-def _requires(condition_text: str, signal: str) -> bool:
+def _requires(condition: Condition, signal: str) -> bool:
     """Whether the condition cannot hold while ``signal('signal')`` is false."""
-    if f"'{signal}'" not in condition_text and f'"{signal}"' not in condition_text:
-        return False
-    try:
-        condition = parse(condition_text, TRANSITION)
-    except ValueError:
-        return False
     return solve([condition], 0, {("call", "signal", signal): False}) is None
+
+
+def _calls(transition: Transition) -> tuple[Condition | None, dict[str, list[str]]]:
+    """The transition's condition as parsed at load (None if it does not parse: the static checks
+    report it) and the string arguments of its calls by function (``outcome``, ``signal``), in order."""
+    if transition.condition_error is not None:
+        return None, {}
+    calls: dict[str, list[str]] = {}
+    for function, args in transition.condition.calls:
+        calls.setdefault(function, []).extend(a for a in args if isinstance(a, str))
+    return transition.condition, calls
 
 
 def flatten(system: System, agent: str, mission: Mission) -> AgentGraph:
@@ -122,19 +123,20 @@ def _add(system: System, flat: AgentGraph, mission: Mission, prefix: str, seen: 
         target = final_nodes.get(transition.to, prefix + transition.to)
         child = children.get(transition.from_)
         edges: list[tuple[str, str]] = []
+        condition, calls = _calls(transition)
         if child is None:
             edges.append((source, target))
         else:
-            named = _OUTCOME.findall(transition.when)
+            named = calls.get("outcome", [])
             if named:
                 edges += [(child[o], target) for o in named if o in child]
-            elif "done()" in transition.when:
+            elif "done" in calls:
                 edges += [(final, target) for final in child.values()]
             else:  # an outer condition (a timeout) pre-empts the nested mission anywhere
                 edges += [(source, target), *((final, target) for final in child.values())]
         graph.add_edges_from(edges)
-        for signal in set(_SIGNAL.findall(transition.when)):
-            if _requires(transition.when, signal):
+        for signal in set(calls.get("signal", [])):
+            if condition is not None and _requires(condition, signal):
                 flat.waits.setdefault((source, signal), []).extend(edges)
                 flat.why.setdefault((source, signal), transition)
     return final_nodes
