@@ -111,10 +111,12 @@ class Footprint:
 
     @classmethod
     def round(cls, radius: float, height: float = math.inf) -> Footprint:
+        """A round robot of ``radius`` m, ``height`` m tall (unbounded: every object part obstructs it)."""
         return cls(radius=radius, height=height)
 
     @classmethod
     def rectangle(cls, width: float, depth: float, height: float = math.inf) -> Footprint:
+        """A rectangular robot of ``width`` × ``depth`` m, ``height`` m tall (unbounded by default)."""
         return cls(width=width, depth=depth, height=height)
 
     @property

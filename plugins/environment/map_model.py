@@ -97,6 +97,7 @@ class MapModel:
         return name in self.objects
 
     def get(self, name: str) -> MapObject:
+        """The object of ``<Object>`` ``name`` (§6.1.1); a KeyError if the map has none of that name."""
         return self.objects[name]
 
     def add(self, obj: MapObject) -> None:

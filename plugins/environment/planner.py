@@ -54,6 +54,7 @@ class Plan:
 
     @property
     def length(self) -> float:
+        """The length (m) of the smoothed path: the sum of its straight segments."""
         return float(sum(math.dist(a, b) for a, b in zip(self.waypoints, self.waypoints[1:], strict=False)))
 
 
@@ -102,6 +103,7 @@ class Planner:
         return graph
 
     def point(self, cell: tuple[int, int]) -> Waypoint:
+        """The map coordinates (m) of the centre of grid cell ``cell`` (its index along x, then along y)."""
         return float(self.xs[cell[0]]), float(self.ys[cell[1]])
 
     def clear(self, a: Waypoint, b: Waypoint) -> bool:

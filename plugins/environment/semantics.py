@@ -44,6 +44,7 @@ class SemanticDictionary:
 
     @property
     def tags(self) -> list[str]:
+        """The tags of the ``<Semantic>`` entries (environment.xsd), in document order."""
         return list(self._entries)
 
     def __contains__(self, tag: object) -> bool:

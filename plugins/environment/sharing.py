@@ -157,15 +157,18 @@ class MapShare:
         }
 
     def setup(self) -> None:
+        """Create the ``objects`` output, the service-directory announcer and the directory of other maps (§4.3)."""
         self._publisher = self.transport.publisher(TopicQoS(self.topic, MESSAGE_TYPE, history=8))
         self._announcer = self.transport.publisher(TopicQoS(DIRECTORY_TOPIC, "ckm/service", history=64))
         self._directory = ServiceDirectory(self.transport)
 
     def start(self) -> None:
+        """Start announcing, publishing every ``period`` s and subscribing to the maps discovered (after setup)."""
         self._thread = threading.Thread(target=self._loop, name=f"map-share-{self.robot}", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop the thread (waiting at most 5 s) and close the subscriptions to the other maps and the directory."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)

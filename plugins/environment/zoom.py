@@ -51,6 +51,7 @@ class ZoomSettings:
 
     @classmethod
     def from_record(cls, record: ZoomRecord, map_height: float) -> ZoomSettings:
+        """The settings of a ``<ZoomMap>`` record (environment.xsd ``ZoomMapType``); ``map_height``: the ``<Map>``'s."""
         height = record.height if record.height is not None else map_height
         return cls(record.mode, record.width, record.depth, height, record.border, record.timeout, record.max_objects)
 
@@ -69,6 +70,7 @@ class Recentring:
 
     @property
     def area(self) -> BaseGeometry:
+        """The floor rectangle the area covered after this move (map frame)."""
         return box(self.x - self.width / 2, self.y - self.depth / 2, self.x + self.width / 2, self.y + self.depth / 2)
 
 
@@ -91,6 +93,7 @@ class ZoomMap:
 
     @property
     def current(self) -> Recentring | None:
+        """The area's last move (Fig. 7.16), or None before the first update."""
         return self.history[-1] if self.history else None
 
     @property
