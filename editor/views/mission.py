@@ -39,19 +39,15 @@ STATE_FILL, NESTED_FILL, FINAL_FILL = QColor("#e3f2fd"), QColor("#fff3e0"), QCol
 
 def layout(mission: Element) -> dict[str, QPointF]:
     """Columns by BFS distance from the initial state, rows in document order within a column."""
+    import networkx as nx  # type: ignore[import-untyped]  # here: opening the editor does not need it
+
     names = [e.get("name", "") for e in mission if isinstance(e.tag, str) and local(e) in ("State", "Final")]
-    edges = collections.defaultdict(list)
-    for t in mission:
-        if isinstance(t.tag, str) and local(t) == "Transition":
-            edges[t.get("from", "")].append(t.get("to", ""))
-    depth = {mission.get("initial", ""): 0}
-    queue = collections.deque(depth)
-    while queue:
-        node = queue.popleft()
-        for target in edges[node]:
-            if target not in depth:
-                depth[target] = depth[node] + 1
-                queue.append(target)
+    graph = nx.DiGraph()
+    graph.add_node(mission.get("initial", ""))
+    graph.add_edges_from(
+        (t.get("from", ""), t.get("to", "")) for t in mission if isinstance(t.tag, str) and local(t) == "Transition"
+    )
+    depth: dict[str, int] = nx.single_source_shortest_path_length(graph, mission.get("initial", ""))
     last = max(depth.values(), default=0) + 1
     rows: dict[int, int] = collections.defaultdict(int)
     places = {}
