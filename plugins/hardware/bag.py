@@ -203,6 +203,11 @@ class BagBackend(Backend):
         return max(bisect.bisect_right(self.times, offset + 0.5e-9) - 1, 0)
 
     def read(self) -> Value:
+        """The value of the message playing now: one number, or ``size`` numbers flattened row-major.
+
+        Raises:
+            ValueError: the message gives another number of values than the ``<HWChannel>``'s ``size``.
+        """
         if not self.data:
             raise RuntimeError(f"{self.owner} is used before setup() or after stop()")
         index = self.position()
@@ -217,9 +222,11 @@ class BagBackend(Backend):
         return self._cached[1]
 
     def write(self, value: Value) -> None:
+        """Always a RuntimeError: a bag only plays back, so a ``direction="in"`` ``<HWChannel>`` is served."""
         raise RuntimeError(f"{self.owner} is an input channel")
 
     def stop(self) -> None:
+        """Drop the messages read at setup; the channel can no longer be read."""
         self.data, self.times, self._cached = [], [], None
 
     # ------------------------------------------------------------------ internals

@@ -120,11 +120,13 @@ class LoopbackPlant(SimulationHook):
             self._givers.update(dict.fromkeys(set(given) - set(self._givers), channel))
 
     def start(self, now: float) -> None:
+        """Build the plant model from its channels' Params and start it at rest, at equilibrium for u = 0."""
         self.model = _check(self.params, f"loopback plant {self.name!r}")
         self._x = self.model.equilibrium(0.0)
         self._rng = random.Random(self.params.get("seed", 0))
 
     def advance(self, start: float, end: float) -> None:
+        """Integrate the plant exactly from ``start`` to ``end``, each delayed input acting from its time."""
         t = start
         while self._pending and self._pending[0][0] <= end:
             at, u = self._pending.popleft()
@@ -179,6 +181,7 @@ class LoopbackBackend(Backend):
         self.plant: LoopbackPlant | None = None
 
     def setup(self) -> None:
+        """Join the plant the ``<HWChannel>`` names in its scope (creating it) and give it the channel's Params."""
         key = (self.scope, self.plant_name)
         with _table_lock:
             plant = _plants.get(key)
@@ -193,10 +196,12 @@ class LoopbackBackend(Backend):
         return self.plant
 
     def read(self) -> Value:
+        """The plant output y now (an input channel), or the plant's last input u (an output channel)."""
         plant = self._require()
         return plant.input if self.channel.direction == "out" else plant.output()
 
     def write(self, value: Value) -> None:
+        """Drive the plant input u (a ``direction="out"`` channel only; one value)."""
         plant = self._require()
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel; drive its plant with find_plant(…).set_input()")
@@ -207,4 +212,5 @@ class LoopbackBackend(Backend):
         plant.set_input(float(value))
 
     def stop(self) -> None:
+        """Let go of the plant (it goes away with the last channel holding it)."""
         self.plant = None

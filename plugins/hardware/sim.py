@@ -145,6 +145,8 @@ class SimBackend(Backend):
         return str((self.base_dir / text).resolve()) if text else ""
 
     def setup(self) -> None:
+        """Attach the channel's device: in the run's world server, else in the scope's world (built from
+        the ``<Environment>`` of the ``world`` file by the first channel of the scope)."""
         v = self.values
         address = server_address()
         if address is not None:  # client mode (D100): the run's world server holds the world
@@ -178,6 +180,7 @@ class SimBackend(Backend):
         return self.sim, self._device
 
     def read(self) -> Value:
+        """The device's raw value once the world is advanced to the clock's time (an output: the last written)."""
         if self.channel.direction == "out":
             return self.last
         if self.remote is not None:
@@ -188,6 +191,7 @@ class SimBackend(Backend):
             return to_value(device.read())
 
     def write(self, value: Value) -> None:
+        """Drive the device (joint target, wheel duty…) with one raw value, at the clock's time."""
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel")
         raw = float(value[0] if isinstance(value, tuple) else value)
@@ -212,6 +216,7 @@ class SimBackend(Backend):
         return world_session(system, config, run_dir, nodes, failed)
 
     def stop(self) -> None:
+        """Detach from the device (closing the connection to the world server in client mode)."""
         if self.remote is not None:
             self.remote.close()
         self.sim, self._device, self.device, self.remote = None, None, None, None

@@ -34,6 +34,7 @@ class ManualClock:
         self.now = start
 
     def __call__(self) -> float:
+        """The current time in seconds (what a clock is called for)."""
         return self.now
 
     def advance(self, seconds: float) -> float:
