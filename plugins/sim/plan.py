@@ -36,16 +36,19 @@ class WorldPlan:
             try:
                 backends.append((channel, SimBackend(channel)))
             except ParamError as exc:
-                raise _located(channel, str(exc)) from None
+                raise ConfigError.of(channel, str(exc)) from None
         if not backends:
             return None
         named = [(ch, b) for ch, b in backends if b.values["world"]]
         first_channel, first = named[0] if named else backends[0]
         for channel, backend in named[1:]:
             if backend.world_file != first.world_file:
-                raise _located(channel, f"sim channel {channel.name!r}: Param 'world' names {backend.world_file}, "
-                                        f"but channel {first_channel.name!r} already chose {first.world_file}: "
-                                        "a run has one simulated world")
+                raise ConfigError.of(
+                    channel,
+                    f"sim channel {channel.name!r}: Param 'world' names {backend.world_file}, "
+                    f"but channel {first_channel.name!r} already chose {first.world_file}: "
+                    "a run has one simulated world",
+                )
         plan = cls(first.world_file, int(first.values["seed"]), first._path(first.values["textures"]))
         for _, backend in backends:
             spec = backend.spec().values
@@ -60,10 +63,3 @@ class WorldPlan:
         for name, (model, pose) in self.bodies.items():
             sim.robot(name, model, pose)
         return sim
-
-
-def _located(channel: HWChannel, message: str) -> ConfigError:
-    loc = channel.loc
-    if loc is None:
-        return ConfigError("<memory>", 1, 1, "/", message)
-    return ConfigError(loc.file, loc.line, loc.column, loc.xpath, message)

@@ -466,9 +466,7 @@ def verify_safely(system: System, registry: Registry | None = None) -> list[Conf
     try:
         return verify(system, registry)
     except Exception as exc:  # the contract: never a traceback for any input
-        loc = system.loc
-        where = (loc.file, loc.line, loc.column, loc.xpath) if loc else ("<memory>", 1, 1, "/")
-        return [ConfigError(*where, f"verification failed: {type(exc).__name__}: {exc}")]
+        return [ConfigError.of(system, f"verification failed: {type(exc).__name__}: {exc}")]
 
 
 def verify_or_report(system: System, path: str, registry: Registry | None = None) -> int | None:
