@@ -218,6 +218,15 @@ def judged_alarms(run: dict[str, Any], resource: SmartResource, window: int = 10
 
 
 def run(argv: Sequence[str] = ()) -> dict[str, Any]:
+    """Run the §7.2 quality adaptation test: calibrate, the TCM runs, then the threshold baseline.
+
+    Args:
+        argv: ``--phase``, ``--schedule``, ``--runs`` and ``--out`` (figures directory).
+
+    Returns:
+        The figures of Table 7.3/7.4 (see :func:`benchmarks.adaptation_report.summarize`), the
+        calibration, the judged alarms and the paths of Fig. 7.8–7.10.
+    """
     parser = argparse.ArgumentParser(prog="ckm-bench adaptation")
     parser.add_argument("--phase", type=float, default=12.0, help="seconds per schedule step (default 12)")
     parser.add_argument("--schedule", default=",".join(map(str, SCHEDULE)), help="client counts, e.g. 1,2,3,4,3,2,1")

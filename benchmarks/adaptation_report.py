@@ -75,6 +75,7 @@ def series(run: dict[str, Any], period: float) -> list[dict[str, float]]:
 def summarize(
     runs: Sequence[dict[str, Any]], baseline: dict[str, Any], resource: SmartResource, schedule: Sequence[int]
 ) -> dict[str, Any]:
+    """Table 7.3 per client count and Table 7.4's moments, from the TCM ``runs`` and the ``baseline`` run."""
     service = resource.services[0]
     names = [s.name for s in service.scenarios]
     period = service.tcm.period if service.tcm else 0.5
@@ -122,6 +123,7 @@ def summarize(
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench adaptation``'s table (Table 7.3 per client count, then Table 7.4)."""
     lines = []
     for row in result["clients"]:
         shares = " ".join(f"{name} {share:.0%}" for name, share in row["activation"].items())

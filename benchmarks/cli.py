@@ -47,6 +47,11 @@ def resolve(name: str) -> tuple[Runner, Describer]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``ckm-bench NAME``: the benchmark, its table, and with ``--json`` one JSON line last.
+
+    Returns:
+        The exit code (0; bad arguments exit through argparse).
+    """
     parser = argparse.ArgumentParser(prog="ckm-bench", description="Run a CKM benchmark.")
     parser.add_argument("name", choices=sorted(BENCHMARKS), help="which benchmark")
     parser.add_argument("--json", action="store_true", help="end with one line of JSON")

@@ -254,6 +254,7 @@ class Lab:
         return found
 
     def close(self) -> None:
+        """Close the pybullet world."""
         self.world.close()
 
     def place(self, x: float, y: float, yaw: float) -> None:
@@ -262,6 +263,7 @@ class Lab:
         p.resetBasePositionAndOrientation(self.robot.body, [x, y, 0.0], orientation, physicsClientId=self.world.client)
 
     def camera_pose(self) -> tuple[np.ndarray[Any, Any], np.ndarray[Any, Any]]:
+        """The Xtion's optical frame in the map: its rotation matrix (3×3) and position (m)."""
         position, orientation = self.robot.link_pose(self.robot.link(LINK))
         return np.array(p.getMatrixFromQuaternion(orientation)).reshape(3, 3), np.asarray(position)
 

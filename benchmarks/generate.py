@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 def node_xml(i: int) -> str:
+    """The ``<Node>`` ``n{i}`` (kernel.xsd ``NodeType``): partitions, channels, topics, a sensor, a PID, an actuator."""
     return f"""  <Node name="n{i}" kind="{"light" if i % 4 else "service"}" host="127.0.0.1">
     <Partition name="control" criticality="safety"/>
     <Partition name="extras" criticality="best-effort"/>
@@ -34,6 +35,7 @@ def node_xml(i: int) -> str:
 
 
 def resource_xml(i: int) -> str:
+    """The ``<SmartResource>`` ``R{i}`` (resources.xsd ``SmartResourceType``) of node ``n{i}``, with a TCM."""
     return f"""  <SmartResource name="R{i}" node="n{i}">
     <Plugin name="grab" kind="camera"/>
     <Plugin name="big" kind="resize"><Param name="width" value="640"/></Plugin>

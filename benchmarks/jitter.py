@@ -48,6 +48,7 @@ def reference_loop(duration: float) -> dict[str, Any]:
 
 
 def kernel_task(duration: float) -> dict[str, Any]:
+    """Run one kernel task (§3.1.2.8) at ``PERIOD`` for ``duration`` s; its |lateness| percentiles (µs) and misses."""
     scheduler = Scheduler("bench-jitter")
     counter = [0]
 
@@ -63,6 +64,7 @@ def kernel_task(duration: float) -> dict[str, Any]:
 
 
 def run(duration: float = 10.0) -> dict[str, Any]:
+    """Measure the kernel task's release jitter for ``duration`` s, and the bare loop's before and after it."""
     before = reference_loop(duration / 4)
     kernel = kernel_task(duration)
     after = reference_loop(duration / 4)
@@ -82,6 +84,7 @@ def run(duration: float = 10.0) -> dict[str, Any]:
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench jitter``'s table."""
     return [
         ("period", f"{result['period_us']} µs for {result['duration_s']} s ({result['releases']} releases)"),
         (

@@ -20,6 +20,7 @@ PERIOD = 0.001
 
 
 def private_settings(transport: str) -> dict[str, Any]:
+    """``<Network>`` settings (kernel.xsd ``NetworkType``) of a private loopback network (random group, ports)."""
     rng = random.Random()
     base = private_base(rng)  # below the ephemeral port range: no EADDRINUSE from other sockets
     settings: dict[str, Any] = {
@@ -103,6 +104,7 @@ def pubsub_one(kind: str, paced: int = 3000, total: int = 50000) -> dict[str, An
 
 
 def run_pubsub() -> dict[str, Any]:
+    """One-way latency and saturated throughput between two processes (§3.1.4), CKMultiPeer then Zenoh."""
     report: dict[str, Any] = {"message_bytes": len(PAYLOAD), "rate_hz": round(1 / PERIOD)}
     for kind, prefix in (("multipeer", "ckm"), ("zenoh", "zenoh")):
         try:
@@ -115,6 +117,7 @@ def run_pubsub() -> dict[str, Any]:
 
 
 def describe_pubsub(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench pubsub``'s table."""
     rows = []
     for prefix, label in (("ckm", "CKMultiPeer"), ("zenoh", "Zenoh")):
         if result.get(f"{prefix}_error"):
@@ -160,6 +163,7 @@ def run_discovery(peers: int = 10) -> dict[str, Any]:
 
 
 def describe_discovery(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench discovery``'s table."""
     return [
         ("peers", str(result["peers"])),
         ("all pairs linked after the start signal", f"{result['all_connected_s']} s"),

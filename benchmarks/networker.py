@@ -21,6 +21,7 @@ TOPIC = TopicQoS("/bench", "bytes", reliability="reliable", history=1)
 
 
 def network_from(settings: dict[str, Any]) -> Network:
+    """The ``<Network>`` record of ``settings`` (its ``zenoh`` entry becomes the ``<Zenoh>`` child)."""
     zenoh = settings.pop("zenoh", None)
     if zenoh is None:
         return Network(**settings)
@@ -30,6 +31,7 @@ def network_from(settings: dict[str, Any]) -> Network:
 
 
 def subscriber(settings: dict[str, Any]) -> dict[str, Any]:
+    """The ``sub`` role: subscribe to /bench; the paced phase's one-way latencies and the saturated throughput."""
     paced, total, limit = settings.pop("paced"), settings.pop("total"), settings.pop("limit")
     latencies: list[float] = []
     arrivals: list[float] = []
@@ -53,6 +55,7 @@ def subscriber(settings: dict[str, Any]) -> dict[str, Any]:
 
 
 def peer(settings: dict[str, Any]) -> dict[str, Any]:
+    """The ``peer`` role: join, wait for "go" on stdin, start; when it started and was linked to all the others."""
     count, limit = settings.pop("count"), settings.pop("limit")
     with joined(network_from(settings), "bench-peer", start=False) as transport:
         print(json.dumps({"ready": True}), flush=True)
@@ -72,6 +75,7 @@ def peer(settings: dict[str, Any]) -> dict[str, Any]:
 
 
 def main() -> None:
+    """Run the role of ``argv[1]`` with the JSON settings of ``argv[2]``; print its result as one JSON line."""
     role, settings = sys.argv[1], json.loads(sys.argv[2])
     result = subscriber(settings) if role == "sub" else peer(settings)
     print(json.dumps(result), flush=True)

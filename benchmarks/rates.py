@@ -164,6 +164,7 @@ def _s(value: float | None) -> str:
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench rates``'s table: each service's figures next to the thesis' (Table 7.8)."""
     rows: list[tuple[str, str]] = [
         ("remote device", f"1 process, 3 kernel tasks, CKMultiPeer on loopback, {result['duration_s']} s"),
         ("columns", "ours | thesis (Table 7.8)"),

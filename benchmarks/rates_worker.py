@@ -88,10 +88,12 @@ SERVICES: dict[str, tuple[str, Payload]] = {
 
 
 def qos(name: str) -> TopicQoS:
+    """The topic (reliable, history 1) service ``name`` publishes on."""
     return TopicQoS(SERVICES[name][0], "dict", reliability="reliable", history=1)
 
 
 def payload_bytes(name: str) -> int:
+    """The size (bytes, msgpack) of one message of service ``name``."""
     packed: bytes = msgpack.packb(SERVICES[name][1](1))
     return len(packed)
 
@@ -128,6 +130,7 @@ def device(settings: dict[str, Any]) -> dict[str, Any]:
 
 
 def main() -> None:
+    """Run the remote device with the JSON settings of ``argv[1]``; print its statistics as one JSON line."""
     print(json.dumps(device(json.loads(sys.argv[1]))), flush=True)
 
 

@@ -141,6 +141,7 @@ def _blocking(server: ServerProcess, specs: dict[str, Spec], seconds: float) -> 
 
 
 def run(argv: list[str] | None = None) -> dict[str, Any]:
+    """Measure the world server's round trips and blocking (``--seconds``, ``--quick``), see the module docstring."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.sim_server", description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of each blocking measurement")
     parser.add_argument("--quick", action="store_true", help="one round of one read per device (a smoke test)")
@@ -159,6 +160,7 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of the world server benchmark's table."""
     rows = [
         (f"{name} read", f"{row['server_ms']:.3f} ms via server, {row['in_process_ms']:.3f} ms in process")
         for name, row in result["round_trip_ms"].items()

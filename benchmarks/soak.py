@@ -153,6 +153,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench soak``'s table."""
     return [
         ("minutes", f"{result['minutes']:g}"),
         ("nodes (one process each)", ", ".join(result["nodes"])),

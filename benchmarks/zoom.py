@@ -167,6 +167,7 @@ def fit(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
+    """Time full and zoom map management per object count (eq. 6.1/6.2, §6.1.3), fit them, draw the figures."""
     parser = argparse.ArgumentParser(prog="ckm-bench zoom", description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=list(DEFAULT_SIZES), help="object counts")
     parser.add_argument("--updates", type=int, default=400, help="perception updates per size (10 per second)")
@@ -191,6 +192,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
 
 
 def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
+    """The rows of ``ckm-bench zoom``'s table."""
     rows = []
     for row in result["sizes"]:
         label = f"{row['objects']:>7} objects: full / zoom (managed)"
