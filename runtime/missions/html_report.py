@@ -32,6 +32,7 @@ from .report_bag import BagData, ReportTopics, find_bags, read_bags
 from .report_problems import Problems, collect
 from .report_thesis import TABLE_SOURCE, compare
 from .report_views import map_section, note, png_tag, reliability_section, snapshots_section
+from .validation.online import replay
 
 SNAPSHOT_STATES = ("SPOT", "PICK", "PLACE", "OBJ_FIX")
 """States whose entries are the moments of Fig. 7.22 (Turtlebot) and Fig. 7.24 (Nao and Turtlebot)."""
@@ -136,6 +137,20 @@ def _validation(run_dir: Path) -> str:
     return head + (f" ({missions})" if missions else "")
 
 
+def _replays(run: Run, report: Report, system: System | None) -> str:
+    """Whether each agent's recorded states follow an off-line episode of its mission (§7.5)."""
+    if system is None:
+        return "no configuration: the off-line episodes cannot be explored"
+    lines = []
+    for agent in report.agents:
+        if agent.mission is None or system.mission(agent.mission) is None:
+            continue
+        verdict = replay(system, agent.mission, agent.agent, run.of(agent.agent))
+        css = "ok" if verdict.reproduced else "bad" if verdict.divergence else ""
+        lines.append(f'<span class="{css}">{escape(verdict.describe())}</span>' if css else escape(verdict.describe()))
+    return "<br>".join(lines) or "no agent with a mission of the configuration"
+
+
 def _origin(run: Run) -> float | None:
     """The epoch time of the recordings' run time 0 (``start.wall − t``), None without a wall clock."""
     walls = [e.get("wall") - e.t for e in run.events if e.kind == "start" and isinstance(e.get("wall"), int | float)]
@@ -161,6 +176,7 @@ def _header(
         ["Run date", date],
         ["Mission time", f"{finish - begin:.1f} s"],
         ["Off-line validation", _validation(run.run_dir)],
+        ["Off-line vs on-line", _replays(run, report, system)],
         ["Problems", f'<a href="#problems">{problems.total} in {len(problems.problems)} kind(s)</a>'],
     ]
     agents = [

@@ -1,0 +1,63 @@
+"""Off-line, then on-line (§7.5; runtime/missions/validation/online.py): a live run's recorded states
+reproduce the off-line validation's success episode; a run that takes a step no episode took is
+reported at that step; the HTML report says which."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+from ckmconf.loader import load
+from runtime.missions.agent import AgentRunner
+from runtime.missions.html_report import Options, build_html
+from runtime.missions.recording import Event, read_run
+from runtime.missions.validation.online import replay
+from runtime.network import open_transport
+from tests.runtime.missions.test_behavior_topics import SYSTEM
+from tests.runtime.network.conftest import private_network
+
+
+def run_handover(tmp_path: Path) -> Path:
+    path = tmp_path / "system.xml"
+    path.write_text(SYSTEM)
+    transport = open_transport(private_network(), name="agent")
+    transport.setup()
+    transport.start()
+    try:
+        runner = AgentRunner(load(path), "solo", "robot", transport, tmp_path / "run")
+        thread = threading.Thread(target=lambda: runner.run(20))
+        thread.start()
+        thread.join(30)
+        assert not thread.is_alive()
+    finally:
+        transport.stop()
+    return path
+
+
+def test_a_live_run_reproduces_the_off_line_success_episode(tmp_path: Path) -> None:
+    system = load(run_handover(tmp_path))
+    run = read_run(tmp_path / "run")
+    verdict = replay(system, "Handover", "robot", run.of("robot"))
+    assert verdict.online == ("Handover/GIVE", "Handover/TAKE") and verdict.outcome == "taken"
+    assert verdict.reproduced and verdict.divergence is None
+    assert verdict.describe().startswith("robot: reproduces off-line episode ")
+
+
+def _enter(path: str, t: float) -> Event:
+    return Event(t, "robot", "enter", {"path": path, "nested": None}, t, "test:1")
+
+
+def test_a_step_no_episode_took_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "system.xml"
+    path.write_text(SYSTEM)
+    system = load(path)
+    events = [_enter("Handover/TAKE", 0.0), _enter("Handover/GIVE", 1.0)]
+    verdict = replay(system, "Handover", "robot", events)
+    assert not verdict.reproduced and verdict.divergence == "the start, Handover/TAKE"
+    assert "diverges from every off-line episode at the start, Handover/TAKE" in verdict.describe()
+
+
+def test_the_html_report_says_whether_the_run_followed_the_validation(tmp_path: Path) -> None:
+    config = run_handover(tmp_path)
+    html, _ = build_html(tmp_path / "run", Options(config=config))
+    assert "Off-line vs on-line" in html and "robot: reproduces off-line episode" in html
