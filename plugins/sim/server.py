@@ -385,7 +385,11 @@ def main(argv: list[str] | None = None) -> int:
         server.serve(stop)
     finally:
         server.close()
-        LOG.info("stopped after %d requests (%d refused)", server.requests, server.errors)
+        final = {"time": sim.world.time, "positions": sim.world.movable_positions()}
+        if args.ready is not None:  # the run's evidence of what the robots did to the world (the report reads it)
+            args.ready.with_name(args.ready.name.replace("sim-server", "sim-final")).write_text(json.dumps(final))
+        LOG.info("stopped after %d requests (%d refused); at %.1f s: %s", server.requests, server.errors,
+                 final["time"], final["positions"])
     return 0
 
 

@@ -266,6 +266,12 @@ class World:
         position, orientation = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
         return tuple(position), tuple(orientation)
 
+    def movable_positions(self) -> dict[str, list[float]]:
+        """Where every body that can move stands now (objects with mass, robots' bases): name → x, y, z."""
+        bodies = {**{n: b for n, b in self.objects.items()
+                     if p.getDynamicsInfo(b, -1, physicsClientId=self.client)[0] > 0.0}, **self.robots}  # fmt: skip
+        return {name: [round(v, 4) for v in self.pose(body)[0]] for name, body in bodies.items()}
+
     def close(self) -> None:
         """Disconnect from the physics server (idempotent)."""
         if self.client >= 0:

@@ -333,3 +333,6 @@ def test_a_node_run_session_names_its_files_and_cleans_up(
     assert not psutil.pid_exists(ready["pid"])  # stopped and reaped
     assert not failures  # a server stopped at the end is no failure
     assert not (run_dir / READY).exists()
+    final = json.loads((run_dir / "sim-final-rover.json").read_text())  # where the robots left the world
+    assert set(final["positions"]) >= {"rover", "turtlebot"} and final["time"] >= 0.0
+    assert all(len(xyz) == 3 for xyz in final["positions"].values())
