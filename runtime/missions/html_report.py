@@ -151,6 +151,20 @@ def _replays(run: Run, report: Report, system: System | None) -> str:
     return "<br>".join(lines) or "no agent with a mission of the configuration"
 
 
+def _final_world(run_dir: Path) -> str:
+    """Where the simulated world's movable bodies stood when the run ended (the world server's sim-final*.json)."""
+    cells = []
+    for path in sorted(run_dir.glob("sim-final*.json")):
+        try:
+            final = json.loads(path.read_text(encoding="utf-8"))
+            positions = final["positions"]
+            for name, xyz in positions.items():
+                cells.append(f"{escape(str(name))} ({', '.join(f'{float(v):.2f}' for v in xyz)})")
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            cells.append(f'<span class="bad">{escape(path.name)}: unreadable: {escape(str(error))}</span>')
+    return ", ".join(cells) or "no simulated world (no sim-final.json)"
+
+
 def _origin(run: Run) -> float | None:
     """The epoch time of the recordings' run time 0 (``start.wall − t``), None without a wall clock."""
     walls = [e.get("wall") - e.t for e in run.events if e.kind == "start" and isinstance(e.get("wall"), int | float)]
@@ -177,6 +191,7 @@ def _header(
         ["Mission time", f"{finish - begin:.1f} s"],
         ["Off-line validation", _validation(run.run_dir)],
         ["Off-line vs on-line", _replays(run, report, system)],
+        ["World at the end", _final_world(run.run_dir)],
         ["Problems", f'<a href="#problems">{problems.total} in {len(problems.problems)} kind(s)</a>'],
     ]
     agents = [

@@ -61,3 +61,11 @@ def test_the_html_report_says_whether_the_run_followed_the_validation(tmp_path: 
     config = run_handover(tmp_path)
     html, _ = build_html(tmp_path / "run", Options(config=config))
     assert "Off-line vs on-line" in html and "robot: reproduces off-line episode" in html
+
+
+def test_the_html_report_shows_where_the_world_was_left(tmp_path: Path) -> None:
+    config = run_handover(tmp_path)
+    final = '{"time": 85.5, "positions": {"cylinder_red_stripes": [1.2, 1.9, 0.36]}}'
+    (tmp_path / "run" / "sim-final.json").write_text(final)
+    html, _ = build_html(tmp_path / "run", Options(config=config))
+    assert "World at the end" in html and "cylinder_red_stripes (1.20, 1.90, 0.36)" in html
