@@ -28,13 +28,14 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "fusion": ("benchmarks.fusion", "run", "describe"),
     "jitter": ("benchmarks.jitter", "run", "describe"),
     "localization": ("benchmarks.localization", "run", "describe"),
+    "mission": ("benchmarks.mission", "run", "describe"),
     "rates": ("benchmarks.rates", "run", "describe"),
     "soak": ("benchmarks.soak", "run", "describe"),
     "sim": ("benchmarks.sim", "run", "describe"),
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
 # These take their own options: ckm-bench NAME --help lists them.
-TAKES_OPTIONS = {"adaptation", "fusion", "localization", "soak", "zoom"}
+TAKES_OPTIONS = {"adaptation", "fusion", "localization", "mission", "soak", "zoom"}
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:

@@ -1,0 +1,185 @@
+"""ckm-bench mission: the use case's missions over N seeds, individual vs cooperative (thesis §7.5, Table 7.9).
+
+Per seed ``k`` a randomised copy of the configuration (:mod:`benchmarks.mission_random`: object
+poses on the workbench, the Turtlebot's start pose, sensor noise and the world's seed) runs once
+per plan — the same copy for every plan, so the plans are compared on the same draws — with
+``ckm-run COPY --plan PLAN --duration D [--time-scale S] --log-dir OUT/runs/PLAN-seedK`` in its own
+process group, bounded by a wall timeout (``D / S`` plus a margin: SIGINT, then SIGKILL). Its
+output goes to ``OUT/runs/PLAN-seedK.log``.
+
+A run succeeds when ``ckm-run`` exits 0 and every agent of the plan recorded the first
+``<Final>`` of its mission as its outcome (the missions list the success final first). Its mission
+time and per-state figures come from the recording (:mod:`benchmarks.mission_report`). The
+summary (``OUT/summary.json``, the ``--json`` line) and a box plot of each state's time per plan
+(``OUT/mission-states.png``) follow. ``--no-randomise`` runs the configuration as it is (any
+configuration with plans: the tests use ``configs/examples/plan_two_agents.xml``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import ckmconf
+from benchmarks.mission_random import Jitter, randomise
+from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
+from runtime.missions.recording import RunError, read_run
+from runtime.missions.report import build_report
+
+__all__ = ["collect", "describe", "run", "run_once"]
+DEFAULT_CONFIG = Path("configs/usecase/lab.xml")
+MARGIN_S = 120.0  # wall seconds beyond duration / scale: start-up (verification, the world server) and stop
+STOP_GRACE_S = 30.0  # after SIGINT, before SIGKILL
+
+
+def success_finals(config: Path, plan: str) -> dict[str, str]:
+    """Each agent of ``plan`` → the first ``<Final>`` of its mission (its success outcome)."""
+    system = ckmconf.load(config)
+    found = system.plan(plan)
+    if found is None:
+        names = ", ".join(p.name for p in system.plans) or "none"
+        raise ValueError(f"{config}: no plan {plan!r} (plans: {names})")
+    finals = {}
+    for agent in found.agents:
+        mission = system.mission(agent.mission)
+        if mission is None or not mission.finals:
+            raise ValueError(f"{config}: plan {plan}: agent {agent.name}'s mission {agent.mission!r} has no <Final>")
+        finals[agent.name] = mission.finals[0].name
+    return finals
+
+
+def collect(run_dir: Path, exit_code: int | None, finals: dict[str, str]) -> dict[str, Any]:
+    """One run's record from its directory: success, outcomes, mission time, states, Table 7.9 rows."""
+    record: dict[str, Any] = {
+        "run_dir": str(run_dir),
+        "exit_code": exit_code,
+        "success": False,
+        "outcomes": dict.fromkeys(finals),
+        "mission_s": None,
+        "states": {},
+        "thesis": {},
+        "error": None,
+    }
+    try:
+        recorded = read_run(run_dir)
+    except RunError as error:
+        record["error"] = str(error)
+        return record
+    report = build_report(recorded, "leaf")
+    for name, agent in recorded.agents.items():
+        record["outcomes"][name] = agent.outcome
+    begin = min(a.begin for a in recorded.agents.values())
+    record["mission_s"] = round(max(a.finish for a in recorded.agents.values()) - begin, 6)
+    record["states"] = state_figures(report)
+    record["thesis"] = {k: round(v, 6) for k, v in thesis_figures(report).items()}
+    record["success"] = exit_code == 0 and all(record["outcomes"].get(a) == f for a, f in finals.items())
+    return record
+
+
+def run_once(
+    config: Path, plan: str, run_dir: Path, *, duration: float, time_scale: float | None, log: Path
+) -> tuple[int | None, float]:
+    """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s)."""
+    command = [sys.executable, "-m", "runtime.cli", str(config), "--plan", plan, "--duration", f"{duration:g}"]
+    command += ["--log-dir", str(run_dir)]
+    if time_scale is not None:
+        command += ["--time-scale", f"{time_scale:g}"]
+    timeout = duration / (time_scale or 1.0) + MARGIN_S
+    log.parent.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    with log.open("w") as out:
+        out.write("$ " + " ".join(command) + "\n")
+        out.flush()
+        process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            code: int | None = process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            code = None
+            os.killpg(process.pid, signal.SIGINT)  # a clean stop first: actuators safe, recordings closed
+            try:
+                process.wait(timeout=STOP_GRACE_S)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+            out.write(f"\nckm-bench mission: timed out after {timeout:.0f} s wall\n")
+    return code, time.monotonic() - started
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ckm-bench mission", description=__doc__.splitlines()[0])
+    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="System file (default: the lab)")
+    parser.add_argument("--plans", nargs="+", default=["individual", "cooperative"], help="plans to run")
+    parser.add_argument("--runs", type=int, default=20, help="seeds (runs per plan)")
+    parser.add_argument("--first-seed", type=int, default=1, help="seed of the first run")
+    parser.add_argument("--duration", type=float, default=400.0, help="ckm-run --duration (simulated s)")
+    parser.add_argument("--time-scale", type=float, default=0.2, help="ckm-run --time-scale (0 for none)")
+    parser.add_argument("--out", type=Path, default=Path("runs/bench-mission"), help="copies, runs, summary, plot")
+    parser.add_argument("--no-randomise", action="store_true", help="run the configuration as it is")
+    parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the sensor noise (0: none)")
+    return parser
+
+
+def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
+    """Run the benchmark; the result dict (also ``OUT/summary.json``; the plot in ``OUT``)."""
+    parser = _parser()
+    args = parser.parse_args(list(argv or []))
+    if args.runs < 1:
+        parser.error(f"--runs must be at least 1, not {args.runs}")
+    if args.duration <= 0:
+        parser.error(f"--duration must be positive, not {args.duration}")
+    if not 0 <= args.time_scale <= 1:
+        parser.error(f"--time-scale must be in (0, 1] (0: none), not {args.time_scale}")
+    if args.noise_scale < 0:
+        parser.error(f"--noise-scale must not be negative, not {args.noise_scale}")
+    try:
+        finals = {plan: success_finals(args.config, plan) for plan in args.plans}
+    except (ckmconf.ConfigError, ValueError, OSError) as error:
+        parser.error(str(error))
+    scale = args.time_scale or None
+    out: Path = args.out
+    results: dict[str, list[dict[str, Any]]] = {plan: [] for plan in args.plans}
+    for seed in range(args.first_seed, args.first_seed + args.runs):
+        config, changed = args.config, None
+        if not args.no_randomise:
+            randomised = randomise(
+                args.config, seed, out / "configs" / f"seed{seed}", Jitter(noise_scale=args.noise_scale)
+            )
+            config, changed = randomised.config, randomised.to_json()
+        for plan in args.plans:
+            name = f"{plan}-seed{seed}"
+            code, wall = run_once(
+                config,
+                plan,
+                out / "runs" / name,
+                duration=args.duration,
+                time_scale=scale,
+                log=out / "runs" / f"{name}.log",
+            )
+            record = collect(out / "runs" / name, code, finals[plan])
+            record.update(plan=plan, seed=seed, wall_s=round(wall, 3), randomised=changed)
+            results[plan].append(record)
+            print(
+                f"{name}: exit {code}, {'success' if record['success'] else 'failure'}, "
+                f"mission {record['mission_s']} s, wall {wall:.0f} s",
+                file=sys.stderr,
+            )
+    plans = [summarise(plan, results[plan]) for plan in args.plans]
+    result: dict[str, Any] = {
+        "config": str(args.config),
+        "time_scale": scale,
+        "duration_s": args.duration,
+        "randomised": not args.no_randomise,
+        "plans": plans,
+        "results": [r for plan in args.plans for r in results[plan]],
+        "plot": str(plot(plans, out / "mission-states.png")),
+    }
+    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    return result
