@@ -85,14 +85,25 @@ def collect(run_dir: Path, exit_code: int | None, finals: dict[str, str]) -> dic
 
 
 def run_once(
-    config: Path, plan: str, run_dir: Path, *, duration: float, time_scale: float | None, log: Path
+    config: Path,
+    plan: str,
+    run_dir: Path,
+    *,
+    duration: float,
+    time_scale: float | None,
+    log: Path,
+    timeout: float | None = None,
 ) -> tuple[int | None, float]:
-    """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s)."""
+    """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s).
+
+    ``timeout`` (wall seconds) defaults to ``duration / time_scale`` plus :data:`MARGIN_S`.
+    """
     command = [sys.executable, "-m", "runtime.cli", str(config), "--plan", plan, "--duration", f"{duration:g}"]
     command += ["--log-dir", str(run_dir)]
     if time_scale is not None:
         command += ["--time-scale", f"{time_scale:g}"]
-    timeout = duration / (time_scale or 1.0) + MARGIN_S
+    if timeout is None:
+        timeout = duration / (time_scale or 1.0) + MARGIN_S
     log.parent.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     with log.open("w") as out:

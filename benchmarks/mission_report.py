@@ -201,7 +201,7 @@ def plot(plans: Sequence[dict[str, Any]], path: Path) -> Path:
             [d for _, d in data],
             positions=positions,
             widths=width * 0.9,
-            vert=False,
+            orientation="horizontal",
             patch_artist=True,
             manage_ticks=False,
         )

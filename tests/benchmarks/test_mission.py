@@ -1,0 +1,197 @@
+"""``ckm-bench mission`` (issue K point 4): the randomised copies of the lab, and the runner and collector on a
+tiny real plan (``configs/examples/plan_two_agents.xml``: seconds, not the lab's minutes)."""
+
+from __future__ import annotations
+
+import json
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+import ckmconf
+from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
+from benchmarks.mission import collect, run_once, success_finals
+from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
+from benchmarks.mission_report import summarise, wilson
+from plugins.sim.plan import WorldPlan
+from runtime.missions.recording import read_run
+from runtime.missions.report import build_report
+from runtime.verification.verify import verify_safely
+
+LAB = Path("configs/usecase/lab.xml")
+PLAN = Path("configs/examples/plan_two_agents.xml")
+Q = "{urn:ckm:1}"
+
+
+def _sim_params(copy: Path) -> list[dict[str, str]]:
+    root = ET.parse(copy.parent / "nodes.xml").getroot()
+    return [
+        {p.get("name", ""): p.get("value", "") for p in ch.findall(Q + "Param")} | {"_kind": ch.get("kind", "")}
+        for ch in root.iter(Q + "HWChannel")
+        if ch.get("backend") == "sim"
+    ]
+
+
+def _initial_pose(copy: Path) -> str:
+    root = ET.parse(copy.parent / "resources.xml").getroot()
+    return next(p.get("value", "") for p in root.iter(Q + "Param") if p.get("name") == "initialPose")
+
+
+def test_a_randomised_copy_is_valid_and_moves_what_it_should_by_bounded_amounts(tmp_path: Path) -> None:
+    original = ckmconf.load(LAB)
+    assert original.environment is not None
+    before = {o.name: o for o in original.environment.objects}
+    bench = before["workbench"]
+    for seed in (1, 2, 3):
+        done = randomise(LAB, seed, tmp_path / f"seed{seed}")
+        copy = ckmconf.load(done.config)  # valid, and verified as ckm-run verifies it
+        assert verify_safely(copy) == []
+        assert copy.environment is not None
+        after = {o.name: o for o in copy.environment.objects}
+        for name, obj in after.items():
+            old = before[name].pose
+            if name in OBJECTS:
+                assert (obj.pose.x, obj.pose.y, obj.pose.yaw) == pytest.approx(done.objects[name], abs=1e-4)
+                assert abs(obj.pose.x - old.x) <= 0.03 + 1e-4 and abs(obj.pose.y - old.y) <= 0.03 + 1e-4
+                assert abs(obj.pose.yaw - old.yaw) <= 0.3 + 1e-4 and obj.pose.z == old.z
+                assert footprint_distance(bench, obj.pose.x, obj.pose.y) < -0.035  # on the workbench, inside its edge
+                assert (obj.pose.x, obj.pose.y) != (old.x, old.y)
+            else:
+                assert obj.pose == old
+        # the start pose: the same in every channel of the Turtlebot and in Navigation's initialPose
+        assert done.start is not None
+        x, y, yaw = done.start
+        assert abs(x - 1.5) <= 0.15 and abs(y - 1.5) <= 0.15 and abs(yaw - 0.785) <= 0.2
+        assert 0.3 + ROBOT_RADIUS <= x <= 2.6 - ROBOT_RADIUS and 0.3 + ROBOT_RADIUS <= y <= 2.6 - ROBOT_RADIUS
+        assert all(footprint_distance(o, x, y) >= ROBOT_RADIUS for o in copy.environment.objects)
+        channels = _sim_params(done.config)
+        poses = {c["pose"] for c in channels if c.get("body") == "turtlebot" and "pose" in c}
+        assert len(poses) == 1 and [float(v) for v in poses.pop().split()] == pytest.approx(done.start, abs=1e-4)
+        assert [float(v) for v in _initial_pose(done.config).split()] == pytest.approx(done.start, abs=1e-4)
+        nao = [c["pose"] for c in channels if c.get("body") == "nao" and "pose" in c]
+        assert nao == ["7.6 6.78 -1.5708"]  # the Nao is not moved
+        # noise: the lidar's and the encoders' s.d. scaled by the seed's factor; the world's seed is the seed
+        assert 0.5 <= done.noise_factor <= 1.5
+        for c in channels:
+            base = DEFAULT_NOISE.get(c.get("sensor") or c["_kind"])
+            if base is not None:
+                assert float(c["noise"]) == pytest.approx(base * done.noise_factor)
+            assert "seed" in c and (c["seed"] == str(seed)) == bool(c.get("world"))
+        assert set(done.noise) == {"kobuki/left_encoder", "kobuki/right_encoder", "turtlebot/hokuyo"}
+        plan = WorldPlan.of(list(copy.nodes))
+        assert plan is not None and plan.seed == seed
+        assert [float(v) for v in plan.bodies["turtlebot"][1].split()] == pytest.approx(done.start, abs=1e-4)
+
+
+def test_the_same_seed_gives_the_same_copy_and_another_seed_another(tmp_path: Path) -> None:
+    first = randomise(LAB, 7, tmp_path / "a")
+    again = randomise(LAB, 7, tmp_path / "b")
+    other = randomise(LAB, 8, tmp_path / "c")
+    assert first.to_json() == again.to_json() != other.to_json()
+    for name in ("nodes.xml", "resources.xml", "environment.xml"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    quiet = randomise(LAB, 7, tmp_path / "d", Jitter(noise_scale=0.0))
+    assert quiet.noise_factor == 0.0 and all(v == 0.0 for v in quiet.noise.values())
+    assert quiet.objects == first.objects and quiet.start == first.start  # the same draws, the noise aside
+
+
+def test_the_randomised_world_holds_the_objects_on_the_table_and_the_robot_clear(tmp_path: Path) -> None:
+    done = randomise(LAB, 5, tmp_path / "seed5")
+    plan = WorldPlan.of(list(ckmconf.load(done.config).nodes))
+    assert plan is not None
+    sim = plan.build()
+    try:
+        sim.world.run_until(1.0)  # one simulated second of physics: nothing falls, nothing is pushed
+        where = sim.world.movable_positions()
+        for name in OBJECTS:
+            x, y, z = where[name]
+            assert math.hypot(x - done.objects[name][0], y - done.objects[name][1]) < 0.005
+            assert z > 0.30
+        assert done.start is not None
+        assert math.hypot(where["turtlebot"][0] - done.start[0], where["turtlebot"][1] - done.start[1]) < 0.02
+    finally:
+        sim.world.close()
+
+
+def test_a_configuration_without_the_objects_is_refused_by_name(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="cylinder_red_stripes"):
+        randomise(Path("configs/examples/environment_objects.xml"), 1, tmp_path / "copy")
+
+
+def test_wilson_interval_matches_its_formula_at_known_points() -> None:
+    assert wilson(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
+    assert wilson(10, 10) == pytest.approx((0.7225, 1.0), abs=1e-4)
+    assert wilson(5, 10) == pytest.approx((0.2366, 0.7634), abs=1e-4)
+    assert wilson(0, 0) == (0.0, 1.0)
+
+
+def test_bench_runs_a_plan_and_its_summary_is_what_the_recordings_say(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert "mission" in BENCHMARKS and "mission" in TAKES_OPTIONS
+    out = tmp_path / "bench"
+    argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "2"]
+    argv += ["--duration", "30", "--time-scale", "0", "--no-randomise", "--out", str(out)]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert json.loads((out / "summary.json").read_text()) == result
+    (plan,) = result["plans"]
+    assert set(plan) >= {"plan", "runs", "success_rate", "mean_mission_s", "realtime_factor", "states"}
+    assert plan["plan"] == "fetch-together" and plan["runs"] == 2 and plan["success_rate"] == 1.0
+    assert plan["success_ci95"] == pytest.approx(wilson(2, 2), abs=1e-4)
+    assert [r["seed"] for r in result["results"]] == [1, 2]
+    missions: list[float] = []
+    times: dict[str, list[float]] = {}
+    for record in result["results"]:
+        assert record["exit_code"] == 0 and record["success"]
+        assert record["outcomes"] == {"walker": "over", "carrier": "done"}
+        recorded = read_run(Path(record["run_dir"]))
+        begin = min(a.begin for a in recorded.agents.values())
+        missions.append(max(a.finish for a in recorded.agents.values()) - begin)
+        assert record["mission_s"] == pytest.approx(missions[-1], abs=1e-5)
+        for agent in build_report(recorded).agents:
+            for row in agent.rows:
+                times.setdefault(f"{agent.agent}: {row.label}", []).append(row.time)
+        assert (out / "runs" / f"fetch-together-seed{record['seed']}.log").read_text().startswith("$ ")
+    assert plan["mean_mission_s"] == pytest.approx(sum(missions) / 2, abs=1e-5)
+    assert 2.5 < plan["mean_mission_s"] < 30  # LOOK 1 s + TRACK 1.5 s, then APPR 2 s
+    assert [s["name"] for s in plan["states"]] == list(times)
+    walker = {"walker: SEARCH/LOOK", "walker: SEARCH/TRACK", "walker: SEARCH/REPORT"}
+    assert set(times) == walker | {"carrier: WAIT", "carrier: APPR"}
+    for state in plan["states"]:
+        assert state["runs"] == 2 and state["times_s"] == pytest.approx(times[state["name"]], abs=1e-5)
+        assert state["mean_s"] == pytest.approx(sum(times[state["name"]]) / 2, abs=1e-5)
+        assert set(state) >= {"name", "mean_s", "contribution", "avg_performance"} and 0 < state["contribution"] <= 1
+    look = next(s for s in plan["states"] if s["name"] == "walker: SEARCH/LOOK")
+    assert look["mean_s"] == pytest.approx(1.0, abs=0.3)  # the timer behavior's duration
+    assert 0 < plan["realtime_factor"] <= 1.0
+    assert (out / "mission-states.png").stat().st_size > 5_000
+
+
+def test_a_run_stopped_at_its_timeout_or_failing_is_no_success(tmp_path: Path) -> None:
+    finals = success_finals(PLAN, "fetch-together")
+    assert finals == {"walker": "over", "carrier": "done"}
+    run_dir = tmp_path / "run"
+    code, wall = run_once(PLAN, "fetch-together", run_dir, duration=30, time_scale=None, log=tmp_path / "run.log",
+                          timeout=0.5)  # fmt: skip
+    assert code is None and wall < 60
+    assert "timed out" in (tmp_path / "run.log").read_text()
+    record = collect(run_dir, code, finals)
+    assert not record["success"]
+    code, _ = run_once(PLAN, "fetch-together", tmp_path / "ok", duration=30, time_scale=None, log=tmp_path / "ok.log")
+    assert code == 0 and collect(tmp_path / "ok", code, finals)["success"]
+    assert not collect(tmp_path / "ok", 1, finals)["success"]  # every agent ended well, but ckm-run did not exit 0
+    assert not collect(tmp_path / "ok", 0, {**finals, "walker": "gave-up"})["success"]
+    summary = summarise("p", [collect(tmp_path / "ok", 1, finals) | {"wall_s": 5.0}])
+    assert summary["success_rate"] == 0.0 and summary["mean_mission_s"] is None and summary["states_from"] == "all"
+    empty = collect(tmp_path / "nowhere", None, finals)
+    assert empty["mission_s"] is None and "no such run directory" in empty["error"]
+
+
+def test_an_unknown_plan_is_refused_before_anything_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as refused:
+        main(["mission", "--config", str(PLAN), "--plans", "nope", "--out", str(tmp_path)])
+    assert refused.value.code == 2 and "no plan 'nope' (plans: fetch-together)" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
