@@ -81,13 +81,13 @@ def lab() -> System:
 def test_nav_configures_amcl_and_ends_when_the_path_exists(lab: System) -> None:
     rig = Rig(lab, "NAV")
     ((parameters, requirements),) = rig.services["nav"].configured
-    assert parameters == {"goal": "7.6 5.35 1.5708"} and requirements[0].measure == "localization_dispersion"
+    assert parameters == {"goal": "7.6 5.5 1.5708"} and requirements[0].measure == "localization_dispersion"
     assert not rig.behavior.step().done
     rig.services["nav"].outputs["status"] = {"goal": "HomeArea", "state": "active"}  # someone else's goal
     assert not rig.behavior.step().done
-    rig.services["nav"].outputs["status"] = {"goal": "7.6 5.35 1.5708", "state": "active"}
+    rig.services["nav"].outputs["status"] = {"goal": "7.6 5.5 1.5708", "state": "active"}
     assert rig.behavior.step().done
-    rig.services["nav"].outputs["status"] = {"goal": "7.6 5.35 1.5708", "state": "failed"}
+    rig.services["nav"].outputs["status"] = {"goal": "7.6 5.5 1.5708", "state": "failed"}
     assert rig.behavior.step().failed
 
 
