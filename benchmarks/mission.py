@@ -114,14 +114,25 @@ def run_once(
             code: int | None = process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             code = None
-            os.killpg(process.pid, signal.SIGINT)  # a clean stop first: actuators safe, recordings closed
-            try:
-                process.wait(timeout=STOP_GRACE_S)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
+            _stop(process)
             out.write(f"\nckm-bench mission: timed out after {timeout:.0f} s wall\n")
+        except KeyboardInterrupt:  # its own session does not get the terminal's SIGINT: pass it on
+            _stop(process)
+            raise
     return code, time.monotonic() - started
+
+
+def _stop(process: subprocess.Popen[bytes]) -> None:
+    """Stop the run's process group: SIGINT (a clean stop: actuators safe, recordings closed), then SIGKILL."""
+    try:
+        os.killpg(process.pid, signal.SIGINT)
+        try:
+            process.wait(timeout=STOP_GRACE_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:  # it ended in between
+        pass
+    process.wait()
 
 
 def _parser() -> argparse.ArgumentParser:

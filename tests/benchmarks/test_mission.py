@@ -16,7 +16,7 @@ from benchmarks.mission import collect, run_once, success_finals
 from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
 from benchmarks.mission_report import summarise, wilson
 from plugins.sim.plan import WorldPlan
-from runtime.missions.recording import read_run
+from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import build_report
 from runtime.verification.verify import verify_safely
 
@@ -195,3 +195,50 @@ def test_an_unknown_plan_is_refused_before_anything_runs(tmp_path: Path, capsys:
         main(["mission", "--config", str(PLAN), "--plans", "nope", "--out", str(tmp_path)])
     assert refused.value.code == 2 and "no plan 'nope' (plans: fetch-together)" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
+
+
+def _record_lab_like_run(run_dir: Path, nav: float, spot: float) -> None:
+    """A recording of the individual mission's shape (Fig. 7.12), written as the engine writes it."""
+    now = [0.0]
+    with RunRecorder(run_dir, "turtlebot", clock=lambda: now[0], wall_clock=lambda: 1e9 + now[0]) as rec:
+        rec.write("start", mission="Agent1Fetch", plan="individual")
+        steps = [
+            ("Agent1Fetch/INIT", None, 1.0),
+            ("Agent1Fetch/Navigation/NAV", "Navigation", nav),
+            ("Agent1Fetch/ObjectInteraction/SPOT", "ObjectInteraction", spot),
+            ("Agent1Fetch/ObjectInteraction/APPR", "ObjectInteraction", 4.0),
+            ("Agent1Fetch/ObjectInteraction/PICK", "ObjectInteraction", 6.0),
+            ("Agent1Fetch/ObjectPlace/NAV", "ObjectPlace", nav / 2),
+        ]
+        for path, nested, seconds in steps:
+            if nested is not None and path.count("/") == 2:
+                rec.write("enter", path=f"Agent1Fetch/{nested}", state=nested, nested=nested)
+            rec.write("enter", path=path, state=path.rsplit("/", 1)[-1], nested=None)
+            rec.write("progress", path=path, progress=0.5, performance=0.8, mission_progress=0.5)
+            now[0] += seconds
+            rec.write("exit", path=path, state=path.rsplit("/", 1)[-1], to="next", reason="transition")
+            if nested is not None:
+                rec.write("exit", path=f"Agent1Fetch/{nested}", state=nested, to="next", reason="transition")
+        rec.write("end", outcome="succeeded")
+
+
+def test_the_lab_missions_rows_are_set_next_to_table_7_9(tmp_path: Path) -> None:
+    finals = success_finals(LAB, "individual")
+    assert finals == {"turtlebot": "succeeded"}
+    assert success_finals(LAB, "cooperative") == {"turtlebot": "succeeded", "nao": "spotted"}
+    records = []
+    for k, (nav, spot) in enumerate(((20.0, 3.0), (30.0, 5.0))):
+        _record_lab_like_run(tmp_path / f"r{k}", nav, spot)
+        records.append(collect(tmp_path / f"r{k}", 0, finals) | {"wall_s": 100.0})
+    assert all(r["success"] for r in records)
+    assert records[0]["thesis"] == pytest.approx({"NAVIGATION": 30.0, "SPOT": 3.0, "APPR-PICK": 10.0})
+    assert records[0]["mission_s"] == pytest.approx(1 + 20 + 3 + 4 + 6 + 10)
+    summary = summarise("individual", records)
+    thesis = {t["state"]: t for t in summary["thesis"]}
+    assert thesis["NAVIGATION"]["mean_s"] == pytest.approx((30 + 45) / 2) and thesis["NAVIGATION"]["runs"] == 2
+    assert thesis["NAVIGATION"]["thesis_s"] == pytest.approx(56.676 + 52.856, abs=1e-3)
+    assert thesis["SPOT"]["mean_s"] == pytest.approx(4.0) and thesis["SPOT"]["thesis_s"] == pytest.approx(18.651)
+    spot = next(s for s in summary["states"] if s["name"] == "turtlebot: ObjectInteraction/SPOT")
+    assert spot["times_s"] == pytest.approx([3.0, 5.0]) and spot["avg_performance"] == pytest.approx(0.8)
+    assert spot["contribution"] == pytest.approx((3 / 44 + 5 / 61) / 2, abs=1e-5)
+    assert summary["realtime_factor"] == pytest.approx((44 + 61) / 200)
