@@ -204,6 +204,7 @@ def plot(plans: Sequence[dict[str, Any]], path: Path) -> Path:
             orientation="horizontal",
             patch_artist=True,
             manage_ticks=False,
+            medianprops={"color": "black"},
         )
         for patch in boxes["boxes"]:
             patch.set_facecolor(f"C{k}")
