@@ -56,7 +56,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ckm-bench", description="Run a CKM benchmark.")
     parser.add_argument("name", choices=sorted(BENCHMARKS), help="which benchmark")
     parser.add_argument("--json", action="store_true", help="end with one line of JSON")
-    args, extra = parser.parse_known_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    named = [w for w in words if w in BENCHMARKS]
+    if named and named[0] in TAKES_OPTIONS and {"-h", "--help"} & set(words):
+        resolve(named[0])[0](["--help"])  # the benchmark's own options (its parser exits)
+        return 0
+    args, extra = parser.parse_known_args(words)
     if extra and args.name not in TAKES_OPTIONS:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
     run, describe = resolve(args.name)

@@ -32,3 +32,9 @@ def test_cli_json_is_the_last_line(capsys: pytest.CaptureFixture[str]) -> None:
     report = json.loads(last)
     assert report["nodes"] == 1000
     assert report["load_s"] > 0
+
+
+def test_a_benchmark_with_options_lists_them_under_help(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stopped:  # the benchmark's own parser prints its options and exits
+        main(["mission", "--help"])
+    assert stopped.value.code == 0 and "usage: ckm-bench mission" in capsys.readouterr().out
