@@ -41,8 +41,8 @@ import msgpack
 import shapely
 from shapely.prepared import prep
 
-from ckmconf import ConfigError, ConfigErrors, read_document
 from ckmconf.model.resources import Plugin
+from plugins.environment_file import environment_of
 from runtime.resources import codec
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import MAPPING, P, Params, Ports
@@ -105,15 +105,7 @@ class EnvironmentMap(ProcessingPlugin):
         """Read the Environment and keep the objects of the chosen areas."""
         if self.model is not None:
             return
-        try:
-            document = read_document(self.environment_file)
-        except ConfigError as exc:
-            raise ValueError(f"{self.owner}: cannot use environment file: {exc}") from None
-        except ConfigErrors as exc:
-            raise ValueError(f"{self.owner}: cannot use environment file: {exc.errors[0]}") from None
-        if document.environment is None:
-            raise ValueError(f"{self.owner}: environment file {self.environment_file} has no Environment")
-        model = MapModel.from_environment(document.environment)
+        model = MapModel.from_environment(environment_of(self.environment_file, self.owner))
         unknown = [name for name in self.area_names if name not in model.areas]
         if unknown:
             known = ", ".join(sorted(model.areas)) or "none"

@@ -39,9 +39,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ckmconf import ConfigError, ConfigErrors, read_document
 from ckmconf.model.environment import Geometry2D, Geometry3D
 from ckmconf.model.resources import Plugin
+from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbers
@@ -121,16 +121,9 @@ class PanTiltTrack(ProcessingPlugin):
         if not self.model_path.is_file():
             raise FileNotFoundError(f"{self.owner}: robot model {self.model_path} does not exist")
         if self.environment is not None:
-            try:
-                document = read_document(self.environment)
-            except ConfigError as exc:
-                raise ValueError(f"{self.owner}: cannot use environment file: {exc}") from None
-            except ConfigErrors as exc:
-                raise ValueError(f"{self.owner}: cannot use environment file: {exc.errors[0]}") from None
-            if document.environment is None:
-                raise ValueError(f"{self.owner}: environment file {self.environment} has no Environment")
+            environment = environment_of(self.environment, self.owner)
             known = {}
-            for obj in document.environment.objects:
+            for obj in environment.objects:
                 geometry = obj.geometry
                 if isinstance(geometry, Geometry2D):
                     low, high = 0.0, FOOTPRINT_HEIGHT

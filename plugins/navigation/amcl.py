@@ -38,11 +38,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ckmconf import ConfigError, ConfigErrors, read_document
 from ckmconf.model.environment import Environment
 from ckmconf.model.resources import Plugin
 from plugins.environment.geometry import Footprint
 from plugins.environment.planner import Unreachable
+from plugins.environment_file import environment_of
 from plugins.localization.estimate import Estimate
 from plugins.localization.raster import GridMap
 from plugins.localization.trajectories import LAB
@@ -154,15 +154,7 @@ class AmclNavigation(ProcessingPlugin):
         """Read the Environment, rasterise it for the filter, build the planner, place the prior."""
         if self.env is not None:
             return
-        try:
-            document = read_document(self.environment_file)
-        except ConfigError as exc:
-            raise ValueError(f"{self.owner}: cannot use environment file: {exc}") from None
-        except ConfigErrors as exc:
-            raise ValueError(f"{self.owner}: cannot use environment file: {exc.errors[0]}") from None
-        if document.environment is None:
-            raise ValueError(f"{self.owner}: environment file {self.environment_file} has no Environment")
-        self.env = env = document.environment
+        self.env = env = environment_of(self.environment_file, self.owner)
         p = self.params
         footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
         self.routes = Routes(env, footprint, p["planResolution"], p["escape"], p["goalEscape"],

@@ -47,8 +47,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ckmconf import ConfigError, ConfigErrors, read_document
 from ckmconf.model.resources import Plugin
+from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import MAPPING, P, Params, Ports
@@ -199,15 +199,7 @@ class FeatureFusion(ProcessingPlugin):
         """Read the environment's Objects (name → semantic tag as the shape, texture); Params win."""
         if self.environment is None:
             return
-        try:  # ckmconf reads safely, and reports a missing or unreadable file as a ConfigError too
-            document = read_document(self.environment)
-        except ConfigError as exc:
-            raise ValueError(f"{self.owner}: cannot use environment file: {exc}") from None
-        except ConfigErrors as exc:
-            raise ValueError(f"{self.owner}: cannot use environment file: {exc.errors[0]}") from None
-        if document.environment is None:
-            raise ValueError(f"{self.owner}: environment file {self.environment} has no Environment")
-        known = {o.name: (o.tag, o.texture) for o in document.environment.objects}
+        known = {o.name: (o.tag, o.texture) for o in environment_of(self.environment, self.owner).objects}
         self.catalog = known | self.catalog
         self._loaded = True
 
