@@ -6,7 +6,7 @@ command out, each service's measure recorded; a bad goal is refused to the clien
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from ckmconf.loader import load
-from runtime.network import TopicQoS, Transport, open_transport
+from runtime.network import TopicQoS, Transport
 from runtime.resources import codec
 from runtime.resources.client import ServiceClient, ServiceDirectory, ServiceError
 from runtime.resources.resource import SmartResourceRuntime
-from tests.runtime.network.conftest import private_network
+from tests.runtime.resources.conftest import pair  # noqa: F401 (fixture: two started loopback transports)
 
 from .loop import room
 from .test_amcl import ANGLES, LASER, grid
@@ -97,21 +97,9 @@ def collect(received: list[Any]) -> Callable[[Any], None]:
     return lambda sample: received.append(codec.decode(sample.value))
 
 
-@pytest.fixture
-def pair() -> Iterator[tuple[Transport, Transport]]:
-    network = private_network()
-    made = [open_transport(network, name="robot"), open_transport(network, name="client")]
-    try:
-        for transport in made:
-            transport.setup()
-            transport.start()
-        yield made[0], made[1]
-    finally:
-        for transport in made:
-            transport.stop()
-
-
-def test_the_services_run_wired_in_smart_resource_runtimes(tmp_path: Path, pair: tuple[Transport, Transport]) -> None:
+def test_the_services_run_wired_in_smart_resource_runtimes(
+    tmp_path: Path, pair: tuple[Transport, Transport]  # noqa: F811 (the imported fixture)
+) -> None:
     server, remote = pair
     (tmp_path / "system.xml").write_text(SYSTEM)
     world = grid(room(tmp_path))
