@@ -21,7 +21,10 @@ Outputs (only the keys naming a service Output are published):
 - ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose",
   "state": "moving" | "reached" | "failed", "active", "error"}`` (and ``holding`` for the gripper);
 - the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
-  readable), else 0.
+  readable), else 0;
+- the measure ``holding`` (the gripper's measure, issue K): 1 from a closing gripper goal that
+  stopped on an object until a gripper goal opens or the fingers reach their closed target (the
+  object slipped out), else 0 — what a mission checks to know the object is really picked.
 
 Reached: every joint of the group within ``tolerance`` (rad) of its target (the gripper within
 ``gripperTolerance`` of its range); a gripper *closing* whose fingers have stopped short — an
@@ -114,6 +117,7 @@ class ArmPoses(ProcessingPlugin):
         self.goal: _Goal | None = None
         self._message: Any = None
         self._gripper: deque[tuple[float, float]] = deque()
+        self.held: float | None = None  # the closing target of the gripper goal now holding an object
 
     # ------------------------------------------------------------------ set-up
 
@@ -182,8 +186,11 @@ class ArmPoses(ProcessingPlugin):
             if goal.started is None:
                 result["trajectory"] = self._plan(goal, positions, now)
             self._judge(goal, positions, now)
+        if positions is not None:
+            self._hold(goal, positions[4])
         active = not reading and (goal is None or goal.state != "failed")
         result["active"] = 1 if active else 0
+        result["holding"] = 0 if self.held is None else 1
         if goal is not None:
             error = goal.error or reading
             result["status"] = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose,
@@ -286,6 +293,20 @@ class ArmPoses(ProcessingPlugin):
             self._fail(goal, f"goal {goal.id}: {goal.group} pose {goal.pose!r} not reached in "
                              f"{goal.duration + self.params['timeout']:.1f} s ({self.joints[goal.indices[worst]]} "
                              f"still {errors[worst]:.3f} from its target)")
+
+    def _hold(self, goal: _Goal | None, position: float) -> None:
+        """Keep the ``holding`` measure: set when a closing gripper goal stops on an object, cleared
+        when a gripper goal opens, or when the fingers reach their closed target (the object slipped out)."""
+        assert self.model is not None
+        if goal is not None and goal.group == "gripper":
+            if goal.holding:
+                self.held = goal.target[0]
+            elif goal.state != "failed" and (self.held is None or goal.target[0] > self.held):
+                self.held = None  # an opening goal lets the object go (or nothing was held)
+        if self.held is not None:
+            span = self.model.upper[4] - self.model.lower[4]
+            if abs(position - self.held) <= self.params["gripperTolerance"] * span:
+                self.held = None
 
     def _holding(self, goal: _Goal, position: float, now: float, span: float) -> bool:
         """Whether closing fingers have stood still short of their target for ``settle`` s (an object)."""

@@ -87,8 +87,36 @@ def test_closing_fingers_stopped_by_an_object_count_as_holding_it(arm: ArmPoses)
     while t < stopped + 0.45:  # stopped short of closed (an object), not yet for settle = 0.5 s
         t += 0.05
         assert frame(arm, goal, [*REST[:4], opening], t)["status"]["state"] == "moving"
-    status = frame(arm, goal, [*REST[:4], opening], t + 0.1)["status"]
-    assert status["state"] == "reached" and status["holding"] is True
+    held = frame(arm, goal, [*REST[:4], opening], t + 0.1)
+    assert held["status"]["state"] == "reached" and held["status"]["holding"] is True
+    assert held["holding"] == 1  # the gripper's measure: the object is in the hand
+
+
+def hold_an_object(arm: ArmPoses, goal_id: int, start: float = 0.0) -> tuple[dict[str, Any], float, float]:
+    """A closing gripper goal that stops on an object; returns the goal, the time and the opening."""
+    goal = {"id": goal_id, "group": "gripper", "pose": "closed"}
+    duration = frame(arm, goal, [*REST[:4], 0.045], start)["trajectory"]["points"][1]["time_from_start"]
+    t = start + duration + 0.05
+    while frame(arm, goal, [*REST[:4], 0.02], t)["holding"] != 1:
+        t += 0.05
+        assert t < start + duration + 2.0, "never counted as holding"
+    return goal, t, 0.02
+
+
+def test_the_holding_measure_drops_when_the_object_slips_out_or_the_gripper_opens(arm: ArmPoses) -> None:
+    goal, t, opening = hold_an_object(arm, 4)
+    assert frame(arm, goal, [*REST[:4], opening], t + 1.0)["holding"] == 1  # carried: still held
+    assert frame(arm, goal, [*REST[:4], 0.0], t + 1.1)["holding"] == 0  # the fingers closed on nothing: dropped
+    goal, t, opening = hold_an_object(arm, 5, t + 2.0)
+    released = frame(arm, {"id": 6, "group": "gripper", "pose": "open"}, [*REST[:4], opening], t + 0.1)
+    assert released["holding"] == 0  # opening lets it go
+
+
+def test_fingers_closing_on_nothing_never_count_as_holding(arm: ArmPoses) -> None:
+    goal = {"id": 7, "group": "gripper", "pose": "closed"}
+    duration = frame(arm, goal, [*REST[:4], 0.045], 0.0)["trajectory"]["points"][1]["time_from_start"]
+    result = frame(arm, goal, [*REST[:4], 0.0], duration + 0.1)
+    assert result["status"]["state"] == "reached" and result["holding"] == 0
 
 
 def test_a_new_goal_preempts_the_old_one(arm: ArmPoses) -> None:
