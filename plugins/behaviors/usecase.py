@@ -245,8 +245,9 @@ class _Goals(Behavior):
 
 
 class Approach(_Goals):
-    """APPR: the arm to ``armPose`` and the base to ``standoff`` metres from the target (a ``map``
-    target is placed relative to the robot with the ``pose`` input)."""
+    """APPR: the arm to ``armPose``, then the base to ``standoff`` metres from the target (a ``map``
+    target is placed relative to the robot with the ``pose`` input); the base waits for the arm, so
+    the arm never rises through the table's edge."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("standoff", 0.2, "Distance kept from the target.", unit="m"),
@@ -260,6 +261,11 @@ class Approach(_Goals):
         self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]})
 
     def step(self) -> BehaviorStatus:
+        arm_state = _state(self.service("arm").output("status"), self.arm_id)
+        if self.move_id is None and arm_state != "reached":  # the arm up first: it must not sweep the table
+            if arm_state == "failed":
+                return BehaviorStatus(progress=0.0, failed=True, detail="the arm did not reach its pose")
+            return BehaviorStatus(progress=0.0, detail="raising the arm")
         if self.move_id is None:
             target = self.read("target")
             if not isinstance(target, Mapping) or not isinstance(target.get("x"), int | float):
@@ -274,8 +280,7 @@ class Approach(_Goals):
             goal = {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)}
             self.move_id = self._send("move", goal)
         move = self.service("base").output("move_status")
-        arm = self.service("arm").output("status")
-        move_state, arm_state = _state(move, self.move_id), _state(arm, self.arm_id)
+        move_state = _state(move, self.move_id)
         progress = 0.8 * (_share_done(move) if move_state else 0.0) + 0.2 * (arm_state == "reached")
         if "failed" in (move_state, arm_state):
             return BehaviorStatus(progress=progress, failed=True)

@@ -125,9 +125,13 @@ def test_spot_needs_the_target_from_enough_sources(lab: System) -> None:
 
 def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -> None:
     rig = Rig(lab, "APPR", {"target": {"x": 1.0, "y": 0.0}})
+    assert rig.behavior.step().detail == "raising the arm"  # the base waits for the arm (not through the table)
+    arm = rig.last("arm_goal")
+    assert arm["pose"] == "pre_grasp" and all(n != "move" for n, _ in rig.written)
+    rig.services["arm"].outputs["status"] = {"id": arm["id"], "state": "reached"}
     rig.behavior.step()
-    arm, move = rig.last("arm_goal"), rig.last("move")
-    assert arm["pose"] == "pre_grasp" and move["x"] == pytest.approx(1.0 - 0.28)
+    move = rig.last("move")
+    assert move["x"] == pytest.approx(1.0 - 0.28)
     rig.services["base"].outputs["move_status"] = {"id": move["id"] + 100, "state": "done"}
     assert not rig.behavior.step().done  # a stale status of another goal
     rig.services["base"].outputs["move_status"] = {
@@ -136,10 +140,16 @@ def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -
         "total": 0.72,
         "remaining": 0.36,
     }
-    assert rig.behavior.step().progress == pytest.approx(0.4)
+    assert rig.behavior.step().progress == pytest.approx(0.6)  # 0.8 × half the way + 0.2 for the arm
     rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "done"}
-    rig.services["arm"].outputs["status"] = {"id": arm["id"], "state": "reached"}
     assert rig.behavior.step().done
+
+
+def test_approach_fails_when_the_arm_cannot_rise(lab: System) -> None:
+    rig = Rig(lab, "APPR", {"target": {"x": 1.0, "y": 0.0}})
+    rig.behavior.step()
+    rig.services["arm"].outputs["status"] = {"id": rig.last("arm_goal")["id"], "state": "failed"}
+    assert rig.behavior.step().failed and all(n != "move" for n, _ in rig.written)
 
 
 def test_pick_runs_its_arm_sequence_step_by_step(lab: System) -> None:
@@ -188,6 +198,8 @@ def test_nav_coop_aims_short_of_a_map_position_from_where_the_robot_is(lab: Syst
 def test_approach_places_a_map_target_relative_to_the_robot(lab: System) -> None:
     target = {"frame": "map", "x": 2.0, "y": 3.0, "z": 0.8}
     rig = Rig(lab, "APPR", {"target": target})
+    rig.behavior.step()
+    rig.services["arm"].outputs["status"] = {"id": rig.last("arm_goal")["id"], "state": "reached"}
     assert rig.behavior.step().detail == "waiting for the pose estimate"
     rig.inputs["pose"] = {"pose": {"x": 2.0, "y": 2.0, "yaw": math.pi / 2}}  # facing +y, 1 m short of it
     rig.behavior.step()
