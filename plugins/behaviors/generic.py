@@ -27,6 +27,7 @@ class Timer(Behavior):
             raise ParamError(f"{self.owner}: parameter 'duration' = {self.params['duration']} must be greater than 0")
 
     def step(self) -> BehaviorStatus:
+        """Progress is the share of ``duration`` elapsed; done when it has all passed."""
         share = self.context.now() / self.params["duration"]
         return BehaviorStatus(progress=min(1.0, share), done=share >= 1.0)
 
@@ -38,11 +39,13 @@ class Emit(Behavior):
     PORTS = Ports(outputs={"*": "string"})
 
     def start(self) -> None:
+        """Publish ``value`` on every output, once, as the state is entered."""
         super().start()
         for port in self.record.outputs:
             self.write(port.name, self.params["value"])
 
     def step(self) -> BehaviorStatus:
+        """Done at once: the outputs were written at start."""
         return BehaviorStatus(progress=1.0, done=True)
 
 
@@ -61,6 +64,7 @@ class WaitInput(Behavior):
         self.value: Any = None
 
     def step(self) -> BehaviorStatus:
+        """Done as soon as every awaited input has a value; untraceable progress until then."""
         values = [self.read(name) for name in self.names]
         if all(v is not None for v in values):
             self.value = values[0]

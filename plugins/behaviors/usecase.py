@@ -133,6 +133,7 @@ class Init(Behavior):
     PARAMS: ClassVar[Mapping[str, Any]] = Params(*_TARGET, P("home", "", "Name of the home area."))
 
     def step(self) -> BehaviorStatus:
+        """Done at once (INIT only records the mission's target and home, Table 7.5)."""
         return BehaviorStatus(progress=1.0, done=True, detail=f"target {self.params['target']}")
 
 
@@ -140,6 +141,7 @@ class End(Behavior):
     """END: closes the execution; its services were released by the previous states."""
 
     def step(self) -> BehaviorStatus:
+        """Done at once: the previous states released their services."""
         return BehaviorStatus(progress=1.0, done=True)
 
 
@@ -159,6 +161,7 @@ class SetNavGoal(Behavior):
     PORTS = Ports(inputs={"*": MAPPING})
 
     def start(self) -> None:
+        """Take the configured goal; with an input (NAV_COOP) the goal comes later, from the signal."""
         super().start()
         self.goal: str | None = None
         if not self.record.inputs:
@@ -183,6 +186,7 @@ class SetNavGoal(Behavior):
         return f"{ox + dx * keep:.3f} {oy + dy * keep:.3f} {math.atan2(dy, dx):.3f}"
 
     def step(self) -> BehaviorStatus:
+        """Done once Navigation echoes this goal and is planning or driving to it; failed if it failed."""
         if self.goal is None and self.record.inputs:
             self.goal = self._goal_from_input()
             if self.goal is None:
@@ -207,6 +211,7 @@ class WaitGoal(Behavior):
     """WAIT: drives along AMCL's path; progress is the share of the path covered."""
 
     def step(self) -> BehaviorStatus:
+        """Done when Navigation reports the goal reached (its progress is the share of the path done)."""
         status = self.service("nav").output("status")
         state = _state(status)
         if state == "arrived":
@@ -226,6 +231,7 @@ class SpotObjects(Behavior):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
     def step(self) -> BehaviorStatus:
+        """Done when the fused recognition holds the target; its position is then written on ``target``."""
         result = self.read("objects") if "objects" in self.context.inputs else self.service("fusion").output("objects")
         p = self.params
         found = find_target(result, p["target"], p["targetTexture"], p["minSources"])
@@ -256,11 +262,13 @@ class Approach(_Goals):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
     def start(self) -> None:
+        """Send the arm goal; the base goal follows once the arm has reached it."""
         super().start()
         self.move_id: int | None = None
         self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]})
 
     def step(self) -> BehaviorStatus:
+        """Raise the arm, then drive to ``standoff`` from the target; done when both are reached."""
         arm_state = _state(self.service("arm").output("status"), self.arm_id)
         if self.move_id is None and arm_state != "reached":  # the arm up first: it must not sweep the table
             if arm_state == "failed":
@@ -308,11 +316,13 @@ class ArmSequence(_Goals):
             raise ParamError(f"{self.owner}: parameter 'sequence' is empty")
 
     def start(self) -> None:
+        """Send the sequence's first goal."""
         super().start()
         self.index = 0
         self.goal_id = self._send("arm_goal", self.steps[0])
 
     def step(self) -> BehaviorStatus:
+        """Send each goal of the sequence once the previous one is reached; failed if one fails."""
         state = _state(self.service("arm").output("status"), self.goal_id)
         if state == "failed":
             return BehaviorStatus(progress=self.index / len(self.steps), failed=True)
@@ -331,10 +341,12 @@ class BackOff(_Goals):
     PORTS = Ports(outputs={"*": MAPPING})
 
     def start(self) -> None:
+        """Send the backwards move."""
         super().start()
         self.move_id = self._send("move", {"frame": "robot", "x": -abs(self.params["distance"]), "y": 0.0, "yaw": 0.0})
 
     def step(self) -> BehaviorStatus:
+        """Done when the Displacement service reports the move done."""
         status = self.service("base").output("move_status")
         state = _state(status, self.move_id)
         return BehaviorStatus(progress=1.0 if state == "done" else _share_done(status) if state else 0.0,
@@ -347,6 +359,7 @@ class TrackObject(Behavior):
     PARAMS: ClassVar[Mapping[str, Any]] = Params(*_TARGET)
 
     def step(self) -> BehaviorStatus:
+        """Done once the pan-tilt recognition sees the target and the head is following it."""
         found = find_target(
             self.service("recog").output("objects"), self.params["target"], self.params["targetTexture"]
         )
@@ -370,10 +383,12 @@ class FixObject(Behavior):
     PORTS = Ports(outputs={"*": MAPPING})
 
     def start(self) -> None:
+        """Forget the previous holding time."""
         super().start()
         self.since: float | None = None
 
     def step(self) -> BehaviorStatus:
+        """Done once the recognition kept ``minReliability`` for ``holdTime`` s; the position goes on the outputs."""
         p = self.params
         found = find_target(self.service("recog").output("objects"), p["target"], p["targetTexture"])
         now = self.context.now()

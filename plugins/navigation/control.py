@@ -71,6 +71,7 @@ class Limiter:
         self.last: Command = STOP
 
     def __call__(self, wanted: Command, dt: float) -> Command:
+        """The command nearest ``wanted`` reachable from the last one in ``dt`` seconds."""
         dv, dw = self.gains.accel * dt, self.gains.angular_accel * dt
         v = min(max(wanted[0], self.last[0] - dv), self.last[0] + dv)
         w = min(max(wanted[1], self.last[1] - dw), self.last[1] + dw)
@@ -78,6 +79,7 @@ class Limiter:
         return self.last
 
     def reset(self) -> None:
+        """Start again from rest (the base was stopped by something else)."""
         self.last = STOP
 
 
@@ -104,12 +106,14 @@ class PathFollower:
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], gains: Gains) -> PathFollower:
+        """A follower where :meth:`state` left one (a partition restarted, §3.1.2.3)."""
         made = cls([(float(x), float(y)) for x, y in state["points"]], state["yaw"], float(state["speed"]), gains)
         made.segment, made.remaining = int(state["segment"]), float(state["remaining"])
         made.done, made.aligning = bool(state["done"]), bool(state["aligning"])
         return made
 
     def command(self, pose: Pose) -> Command:
+        """The velocity command for the robot at ``pose`` (odometry frame): pure pursuit, then the final yaw."""
         g = self.gains
         if self.done:
             return STOP
@@ -159,6 +163,7 @@ class RelativeMove:
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], gains: Gains) -> RelativeMove:
+        """A move where :meth:`state` left one (a partition restarted, §3.1.2.3)."""
         x, y, yaw = (float(v) for v in state["goal"])
         made = cls((x, y, yaw), (x, y, yaw), float(state["speed"]), gains)
         made.total, made.backwards = float(state["total"]), bool(state["backwards"])
@@ -173,6 +178,7 @@ class RelativeMove:
         return local[0], math.atan2(local[1], local[0])
 
     def command(self, pose: Pose) -> Command:
+        """The velocity command for the robot at ``pose`` (odometry frame): face, drive, then align."""
         g = self.gains
         self.remaining = math.dist(pose[:2], self.goal[:2])
         if self.phase == "face":
@@ -195,4 +201,5 @@ class RelativeMove:
 
     @property
     def done(self) -> bool:
+        """Whether the move has reached its goal pose."""
         return self.phase == "done"

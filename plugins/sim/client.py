@@ -129,6 +129,7 @@ class Link:
         return late
 
     def close(self) -> None:
+        """Close the connection to the world server (idempotent)."""
         with self._lock:
             if self._conn is not None:
                 self._conn.close()
@@ -147,14 +148,17 @@ class RemoteDevice:
             raise
 
     def read(self) -> Sample:
+        """The device's value now, read in the world server."""
         value: Sample = self.link.request({"op": "read", "handle": self.handle})["value"]
         return value
 
     def write(self, raw: float) -> None:
+        """Write ``raw`` to the device in the world server (no reply unless it fails)."""
         # silent: an actuator's write waits for no round trip (its error comes with the next one)
         self.link.request({"op": "write", "handle": self.handle, "value": raw, "reply": False}, answer=False)
 
     def close(self) -> None:
+        """Release the channel in the world server and drop the link."""
         # closing: a server already gone has nothing to release
         with contextlib.suppress(ConnectionError, TimeoutError, ServerError, ValueError):
             self.link.request({"op": "close", "handle": self.handle})

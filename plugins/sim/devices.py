@@ -46,6 +46,7 @@ class Spec:
     values: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The spec as plain data (what a client sends the world server)."""
         return asdict(self)
 
     @classmethod
@@ -109,9 +110,11 @@ class SimWorld(SimulationHook):
         return self.robots[name]
 
     def start(self, now: float) -> None:
+        """Start the world's clock at ``now`` (the scope's time)."""
         self.origin = now
 
     def advance(self, start: float, end: float) -> None:
+        """Step the physics from ``start`` to ``end`` (simulated seconds)."""
         self.world.run_until(end - self.origin)
 
     def __del__(self) -> None:

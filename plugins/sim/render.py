@@ -103,6 +103,7 @@ class RenderWorker:
         return False
 
     def submit(self, world: World, job: Job) -> None:
+        """Send the worker ``world``'s movable state and the render ``job`` (the answer comes with :meth:`result`)."""
         self.conn.send((snapshot(world), job))
         self.busy = True
 
@@ -116,6 +117,7 @@ class RenderWorker:
         return value if kind == "frame" else str(value)
 
     def alive(self) -> bool:
+        """Whether the worker process still runs."""
         return self.process.is_alive()
 
     def hang_up(self) -> None:
@@ -123,6 +125,7 @@ class RenderWorker:
         self.conn.close()
 
     def close(self) -> None:
+        """Stop the worker process and close its pipe (bounded wait)."""
         self.hang_up()
         self.process.join(2.0)
         if self.process.is_alive():

@@ -310,6 +310,7 @@ class WorldServer:
         return {"time": world.time, "steps": world.steps, "robots": robots, "requests": self.requests}
 
     def close(self) -> None:
+        """Stop listening, end the render workers and drop every client."""
         self.listener.close()
         for worker in self.renderers:
             worker.hang_up()  # all end together
@@ -331,6 +332,7 @@ def _watch_parent(parent: int, stop: threading.Event) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m plugins.sim.server``: build the world of a configuration and serve its channels (D100)."""
     parser = argparse.ArgumentParser(prog="python -m plugins.sim.server", description=__doc__.split("\n")[0])
     parser.add_argument("config", type=Path, help="the System file whose sim channels shape the world")
     parser.add_argument("--node", action="append", help="only these nodes' channels (default: every node)")

@@ -43,12 +43,14 @@ class Client:
                 return
 
     def close(self) -> None:
+        """Stop the client's sender thread and close its connection."""
         if self.outbox is not None:
             self.outbox.put(None)
         self.conn.close()
 
 
 def frame_reply(device: ChannelDevice, frame: Frame, time: float) -> Reply:
+    """The reply to a camera read from a rendered ``frame`` at simulated ``time``."""
     try:
         return {"value": device.from_frame(frame), "time": time}
     except Exception as exc:  # never the server's end

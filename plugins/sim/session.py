@@ -81,9 +81,11 @@ class ServerProcess:
 
     @property
     def pid(self) -> int:
+        """The world server process's id."""
         return self.process.pid
 
     def client_address(self) -> Address:
+        """The address clients connect to (``CKM_SIM_SERVER``)."""
         host, _, port = self.address.rpartition(":")
         return host, int(port), self.key
 

@@ -57,6 +57,7 @@ class Mesh:
     normals: list[list[float]]
 
     def extend(self, other: Mesh) -> None:
+        """Append ``other``'s triangles to this mesh."""
         base = len(self.vertices)
         self.vertices += other.vertices
         self.uvs += other.uvs
