@@ -49,6 +49,42 @@ class Cluster:
         return float(x), float(y), float(z)
 
 
+def solid_centre(cluster: Cluster) -> tuple[float, float, float]:
+    """The centre of the upright round solid (cylinder, sphere) whose visible side ``cluster`` holds.
+
+    A depth camera sees only the near side, so the points' centroid lies about 2r/π in front of the
+    axis (2–4 cm for the lab's cans: a grasp aimed there closes short). Seen along the support
+    plane's normal the visible side (its middle half in height: a top seen from above is no arc)
+    is an arc: the centre of the circle fitted to it (algebraic, least squares) is the axis, at
+    the centroid's height. The centroid is kept without a plane, with
+    too few points, or when the fit is no plausible arc (radius outside 0.5–30 cm, a centre nearer
+    the camera than the surface).
+    """
+    centroid = np.asarray(cluster.centroid)
+    if cluster.plane is None or cluster.count < 10:
+        return cluster.centroid
+    normal = np.asarray(cluster.plane[:3], np.float64)
+    normal /= np.linalg.norm(normal)
+    across = np.array([1.0, 0.0, 0.0]) - normal[0] * normal  # the camera's x, made horizontal
+    across /= np.linalg.norm(across)
+    depthwise = np.cross(normal, across)
+    points = cluster.points.astype(np.float64)
+    height = points @ normal
+    low, high = np.quantile(height, (0.25, 0.75))
+    band = points[(height >= low) & (height <= high)]  # the side only: a top seen from above is no arc
+    if len(band) < 10:
+        return cluster.centroid
+    relative = band - centroid
+    u, v = relative @ across, relative @ depthwise
+    design = np.column_stack([2.0 * u, 2.0 * v, np.ones_like(u)])
+    (cu, cv, c), *_ = np.linalg.lstsq(design, u * u + v * v, rcond=None)
+    radius = math.sqrt(max(0.0, c + cu * cu + cv * cv))
+    centre = centroid + cu * across + cv * depthwise
+    if not 0.005 < radius < 0.3 or np.linalg.norm(centre) <= np.linalg.norm(centroid):
+        return cluster.centroid
+    return float(centre[0]), float(centre[1]), float(centre[2])
+
+
 def to_metres(image: npt.NDArray[Any], scale: float, owner: str) -> Depth:
     """A new read-only float32 image in metres: integers times ``scale``, floats as they are; no return → NaN."""
     if image.ndim == 3 and image.shape[2] == 1:

@@ -44,6 +44,7 @@ from plugins.processing.clusters import (
     euclidean_clusters,
     find_support_plane,
     segment,
+    solid_centre,
     to_metres,
 )
 from plugins.processing.descriptor import describe
@@ -212,6 +213,10 @@ class EuclideanClustering(ProcessingPlugin):
         )
 
 
+ROUND = ("cylinder", "sphere")
+"""Recognised shapes placed at their axis rather than at their visible surface's centroid."""
+
+
 class KdTreeShapeClassifier(ProcessingPlugin):
     """``plugin.kdtree-shape-classifier``: clusters → recognized shapes with their reliability.
 
@@ -220,10 +225,12 @@ class KdTreeShapeClassifier(ProcessingPlugin):
     descriptors vote for their label with weight exp(−(d/``spread``)²), so reliability = the
     winner's weight sum / k: 1 only when all k neighbours agree and sit on the descriptor, low
     for shapes unlike any learned one (``spread`` is in descriptor units, see DESCRIPTOR_FIELDS).
-    Below ``threshold`` the object is kept, named "unknown". Each object carries its cluster's
-    centroid ``x y z`` (camera optical frame, metres; the visible surface's, so a few cm in front
-    of the solid's centre) and ``points``. The top-level ``reliability`` (the service's quality
-    measure) is the mean over recognized objects, 0 when none: furniture in view does not drag it.
+    Below ``threshold`` the object is kept, named "unknown". Each object carries ``x y z`` (camera
+    optical frame, metres): a round solid's (cylinder, sphere) axis fitted to its visible arc
+    (:func:`~plugins.processing.clusters.solid_centre`), else the cluster's centroid (the visible
+    surface's, a few cm in front of the solid's centre); and ``points``. The top-level
+    ``reliability`` (the service's quality measure) is the mean over recognized objects, 0 when
+    none: furniture in view does not drag it.
     """
 
     PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability
@@ -280,8 +287,8 @@ class KdTreeShapeClassifier(ProcessingPlugin):
             scores = np.bincount(votes, weights=weight, minlength=max(names) + 1) / k
             best = int(np.argmax(scores))
             reliability = float(scores[best])
-            x, y, z = cluster.centroid
             name = names[best] if reliability >= self.params["threshold"] else "unknown"
+            x, y, z = solid_centre(cluster) if name in ROUND else cluster.centroid
             objects.append({"name": name, "reliability": reliability, "x": x, "y": y, "z": z, "points": cluster.count})
         known = [o["reliability"] for o in objects if o["name"] != "unknown"]
         return {"objects": objects, "reliability": float(np.mean(known)) if known else 0.0}

@@ -475,3 +475,25 @@ def test_a_use_case_depth_image_message_is_read_as_raw_depths() -> None:
     assert metres.shape == (2, 2) and metres[0, 1] == pytest.approx(1.0) and metres[1, 0] == pytest.approx(2.5)
     with pytest.raises(ValueError, match=r"data \(uint16, 3 values\) is not 2 x 2 depths"):
         DepthAcquisition(plugin("depth-acquisition")).process({**message, "data": raw[:3]}, CTX)
+
+
+def test_a_recognised_cylinder_is_placed_at_its_axis_not_its_visible_surface(lab_vga: np.ndarray[Any, Any]) -> None:
+    clusters = clustering(tolerance=0.02, minPoints=400).process(lab_vga, CTX)
+    result = classifier(k=5, threshold=0.8).process(clusters, CTX)
+    truth = render_depth_scene(seed=0).truth
+    cylinders = [(o, seen, c) for o, seen, c in zip(result["objects"], truth, clusters, strict=True)
+                 if o["name"] == "cylinder"]
+    assert cylinders
+
+    def across_the_table(a: Any, b: Any, normal: np.ndarray[Any, Any]) -> float:
+        """How far apart ``a`` and ``b`` are seen from above the support plane (what a grasp needs)."""
+        d = np.subtract(a, b)
+        return float(np.linalg.norm(d - (d @ normal) * normal))
+
+    for found, seen, cluster in cylinders:
+        assert cluster.plane is not None
+        normal = np.asarray(cluster.plane[:3]) / np.linalg.norm(cluster.plane[:3])
+        where = (seen.x, seen.y, seen.z)
+        surface = across_the_table(cluster.centroid, where, normal)
+        axis = across_the_table((found["x"], found["y"], found["z"]), where, normal)
+        assert surface > 0.02 and axis < 0.01  # the fitted axis, not the near side's centroid
