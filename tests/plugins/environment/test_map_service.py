@@ -197,8 +197,11 @@ def test_two_robots_map_services_converge_in_smart_resource_runtimes(tmp_path: P
         assert until(converged), [sorted(o.name for o in m.objects()) for m in maps]
         for m in maps:
             assert m.model is not None and (m.model.get("chair").x, m.model.get("chair").source) == (4.5, "NaoMap")
-        measures = {name: v for runtime in runtimes for i in runtime.instances() for name, v in i.measures.last.items()}
-        assert measures["map_objects"] == 12
+        def measured() -> float | None:  # a frame's measures are observed after its map update: poll them too
+            last = {name: v for runtime in runtimes for i in runtime.instances() for name, v in i.measures.last.items()}
+            return last.get("map_objects")
+
+        assert until(lambda: measured() == 12), measured()
     finally:
         for runtime in runtimes:
             runtime.stop()
