@@ -150,7 +150,10 @@ class WorldServer:
     def _receive(self, client: Client) -> bytes | None:
         try:
             return client.conn.recv_bytes(MAX_REQUEST)
-        except (EOFError, OSError) as exc:  # gone, or a request over MAX_REQUEST (unreadable after it)
+        except EOFError:  # the client closed its end: the normal way a process of the run leaves
+            self._drop(client, "hung up")
+            return None
+        except OSError as exc:  # a broken connection, or a request over MAX_REQUEST (unreadable after it)
             self._drop(client, f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__)
             return None
 
