@@ -3,17 +3,17 @@ what a run writes survives a SIGKILL; processes sharing a run directory keep the
 
 from __future__ import annotations
 
+import functools
 import json
 import random
 import signal
 import subprocess
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 from runtime.cli import EXIT_AGENTS, EXIT_CONFIG, EXIT_FAILED
 from runtime.network.ports import private_base
+from tests import waiting
 from tests.conftest import REPO
 
 DATA = REPO / "tests" / "data" / "run"
@@ -39,13 +39,7 @@ def ckm_run(*args: str | Path, timeout: float = 90) -> subprocess.CompletedProce
     return subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=timeout)
 
 
-def until(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.1)
-    return condition()
+until = functools.partial(waiting.until, interval=0.1)  # this file's polling period
 
 
 def test_an_unknown_controller_kind_in_a_partition_is_refused_before_anything_starts(tmp_path: Path) -> None:

@@ -27,6 +27,7 @@ from runtime.registry import Registry
 from runtime.runrecord import EXIT_FAILED
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
+from tests.waiting import until
 
 CLOSED_LOOP = REPO / "configs" / "examples" / "closed_loop.xml"
 SERIOUS_ALARM = REPO / "tests" / "data" / "run" / "serious_alarm.xml"
@@ -37,13 +38,6 @@ def private(config: Path) -> System:
     return dataclasses.replace(ckmconf.load(config), network=private_network())
 
 
-def until(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return condition()
 
 
 @pytest.fixture

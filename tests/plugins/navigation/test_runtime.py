@@ -5,6 +5,7 @@ command out, each service's measure recorded; a bad goal is refused to the clien
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,6 +19,7 @@ from runtime.network import TopicQoS, Transport
 from runtime.resources import codec
 from runtime.resources.client import ServiceClient, ServiceDirectory, ServiceError
 from runtime.resources.resource import SmartResourceRuntime
+from tests import waiting
 from tests.runtime.resources.conftest import pair  # noqa: F401 (fixture: two started loopback transports)
 
 from .loop import room
@@ -83,13 +85,7 @@ SYSTEM = f"""<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def until(predicate: Callable[[], bool], timeout: float = 15.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
+until = functools.partial(waiting.until, timeout=15.0, interval=0.02)  # this file's polling and bound
 
 
 def collect(received: list[Any]) -> Callable[[Any], None]:

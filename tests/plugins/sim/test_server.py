@@ -18,8 +18,7 @@ import signal
 import socket
 import subprocess
 import sys
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from multiprocessing.connection import Client
 from pathlib import Path
 
@@ -36,6 +35,7 @@ from plugins.sim.plan import WorldPlan
 from plugins.sim.session import READY, ServerProcess, world_session
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
+from tests.waiting import until
 
 CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
 <System xmlns="urn:ckm:1" version="1.0" name="shared-world">
@@ -100,13 +100,6 @@ AHEAD = 45  # the lidar beam straight ahead (91 beams over 1.5 rad)
 STARTUP = 90.0  # s: bound on a run's processes coming up (seconds when quiet; the 2 cores are shared)
 
 
-def until(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return condition()
 
 
 @pytest.fixture

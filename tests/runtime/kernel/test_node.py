@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -15,6 +16,7 @@ from ckmconf.model import System
 from runtime.kernel.node import NodeRuntime
 from runtime.kernel.scheduler import Task
 from runtime.network import Sample, Transport, open_transport
+from tests import waiting
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
 
@@ -45,13 +47,7 @@ def nodes(transport: Transport) -> Iterator[Callable[[System, str], NodeRuntime]
         runtime.stop()
 
 
-def until(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return False
+until = functools.partial(waiting.until, interval=0.01)  # this file's polling period
 
 
 def example(name: str) -> System:

@@ -30,6 +30,7 @@ from runtime.kernel.partitions import MEMORY_EXIT, MemoryWatch, PartitionSupervi
 from runtime.network import Sample, TopicQoS, Transport, open_transport
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
+from tests.waiting import until
 
 CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
 <System xmlns="urn:ckm:1" version="1.0" name="partition-test">
@@ -73,13 +74,6 @@ CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def until(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return condition()
 
 
 def gone(process: psutil.Process) -> bool:

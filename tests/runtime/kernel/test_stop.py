@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 import threading
-import time
 from collections import deque
 from collections.abc import Callable, Iterator
 
@@ -17,6 +16,7 @@ from runtime.kernel import node as node_module
 from runtime.kernel.node import NodeRuntime
 from runtime.kernel.scheduler import BUSY_LIMIT, IDLE_WINDOW, SAMPLES_KEPT, Ring, Scheduler, Task
 from runtime.network import Transport, open_transport
+from tests import waiting
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
 
@@ -36,13 +36,7 @@ def ran(task: Task, times: int) -> bool:
     return task.stats.releases > times
 
 
-def until(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return condition()
+until = functools.partial(waiting.until, interval=0.01)  # this file's polling period
 
 
 def test_a_stop_during_heavy_statistics_traffic_leaves_every_actuator_safe(transport: Transport) -> None:

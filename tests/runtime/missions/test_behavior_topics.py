@@ -37,20 +37,26 @@ SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def test_a_one_shot_output_reaches_the_next_states_input(tmp_path: Path) -> None:
+def run_handover(tmp_path: Path) -> tuple[Path, str | None]:
+    """Run SYSTEM's plan live on a private loopback network (recorded in ``tmp_path/run``): the
+    configuration file and the agent's outcome."""
     path = tmp_path / "system.xml"
     path.write_text(SYSTEM)
-    system = load(path)
     transport = open_transport(private_network(), name="agent")
     transport.setup()
     transport.start()
     outcome: list[str | None] = []
     try:
-        runner = AgentRunner(system, "solo", "robot", transport, tmp_path / "run")
+        runner = AgentRunner(load(path), "solo", "robot", transport, tmp_path / "run")
         thread = threading.Thread(target=lambda: outcome.append(runner.run(20)))
         thread.start()
         thread.join(30)
         assert not thread.is_alive()
     finally:
         transport.stop()
-    assert outcome == ["taken"]
+    return path, outcome[0] if outcome else None
+
+
+def test_a_one_shot_output_reaches_the_next_states_input(tmp_path: Path) -> None:
+    _, outcome = run_handover(tmp_path)
+    assert outcome == "taken"

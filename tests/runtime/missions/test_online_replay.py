@@ -4,38 +4,17 @@ reported at that step; the HTML report says which."""
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 from ckmconf.loader import load
-from runtime.missions.agent import AgentRunner
 from runtime.missions.html_report import Options, build_html
 from runtime.missions.recording import Event, read_run
 from runtime.missions.validation.online import replay
-from runtime.network import open_transport
-from tests.runtime.missions.test_behavior_topics import SYSTEM
-from tests.runtime.network.conftest import private_network
-
-
-def run_handover(tmp_path: Path) -> Path:
-    path = tmp_path / "system.xml"
-    path.write_text(SYSTEM)
-    transport = open_transport(private_network(), name="agent")
-    transport.setup()
-    transport.start()
-    try:
-        runner = AgentRunner(load(path), "solo", "robot", transport, tmp_path / "run")
-        thread = threading.Thread(target=lambda: runner.run(20))
-        thread.start()
-        thread.join(30)
-        assert not thread.is_alive()
-    finally:
-        transport.stop()
-    return path
+from tests.runtime.missions.test_behavior_topics import SYSTEM, run_handover
 
 
 def test_a_live_run_reproduces_the_off_line_success_episode(tmp_path: Path) -> None:
-    system = load(run_handover(tmp_path))
+    system = load(run_handover(tmp_path)[0])
     run = read_run(tmp_path / "run")
     verdict = replay(system, "Handover", "robot", run.of("robot"))
     assert verdict.online == ("Handover/GIVE", "Handover/TAKE") and verdict.outcome == "taken"
@@ -58,13 +37,13 @@ def test_a_step_no_episode_took_is_named(tmp_path: Path) -> None:
 
 
 def test_the_html_report_says_whether_the_run_followed_the_validation(tmp_path: Path) -> None:
-    config = run_handover(tmp_path)
+    config, _ = run_handover(tmp_path)
     html, _ = build_html(tmp_path / "run", Options(config=config))
     assert "Off-line vs on-line" in html and "robot: reproduces off-line episode" in html
 
 
 def test_the_html_report_shows_where_the_world_was_left(tmp_path: Path) -> None:
-    config = run_handover(tmp_path)
+    config, _ = run_handover(tmp_path)
     final = '{"time": 85.5, "positions": {"cylinder_red_stripes": [1.2, 1.9, 0.36]}}'
     (tmp_path / "run" / "sim-final.json").write_text(final)
     html, _ = build_html(tmp_path / "run", Options(config=config))

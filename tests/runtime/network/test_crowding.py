@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import socket
-import time
 from collections.abc import Callable
 
 import pytest
@@ -15,15 +14,7 @@ from runtime.network import link as link_module
 from runtime.network.multipeer import MAX_PENDING_LINKS
 from runtime.network.pubsub import MultiPeerTransport
 from tests.runtime.network.conftest import private_network
-
-
-def until(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return condition()
+from tests.waiting import until
 
 
 def test_idle_connections_do_not_block_a_real_peer(

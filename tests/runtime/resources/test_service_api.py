@@ -21,6 +21,7 @@ from runtime.resources.api import Bounds, parse_request
 from runtime.resources.client import ServiceClient, ServiceDirectory, ServiceError
 from runtime.resources.resource import SmartResourceRuntime
 from runtime.resources.spt import Context, ProcessingPlugin
+from tests import waiting
 
 SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
 <System xmlns="urn:ckm:1" version="1.0" name="service-api-test">
@@ -104,13 +105,7 @@ def frames() -> Callable[[], int]:
     return lambda: next(counter)
 
 
-def until(predicate: Callable[[], bool], timeout: float = 10.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
+until = functools.partial(waiting.until, interval=0.01)  # this file's polling period
 
 
 def test_a_client_discovers_configures_and_sees_the_scenario_change(
