@@ -9,11 +9,9 @@ with ``rosbags``' own store (not CKM code).
 
 from __future__ import annotations
 
-import json
 import queue
-import socket
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -37,36 +35,11 @@ from runtime.ros.rmw_zenoh import (
 from runtime.ros.types import RosTypes
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network, transports  # noqa: F401 (fixture)
+from tests.runtime.ros.test_rmw_zenoh_live import sessions  # noqa: F401 (fixture: two connected sessions)
 
 TIMEOUT = 20.0
 ROS_DATA = REPO / "tests" / "data" / "ros"
 SCAN_KEY = "0/scan/sensor_msgs::msg::dds_::LaserScan_/"
-
-
-def _port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-        return port
-
-
-def _config(listen: list[str], connect: list[str]) -> zenoh.Config:
-    config = zenoh.Config()
-    settings = {"mode": "peer", "scouting/multicast/enabled": False, "listen/endpoints": listen}
-    for key, value in {**settings, "connect/endpoints": connect}.items():
-        config.insert_json5(key, json.dumps(value))
-    return config
-
-
-@pytest.fixture
-def sessions() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    """The bridge's session and, connected to it, the ROS 2 node's."""
-    endpoint = f"tcp/127.0.0.1:{_port()}"
-    bridge = zenoh.open(_config([endpoint], []))
-    ros_node = zenoh.open(_config(["tcp/127.0.0.1:0"], [endpoint]))
-    yield bridge, ros_node
-    ros_node.close()  # type: ignore[no-untyped-call]
-    bridge.close()  # type: ignore[no-untyped-call]
 
 
 def _store() -> Any:
@@ -90,7 +63,7 @@ def _graph(session: zenoh.Session, count: int) -> list[str]:
 
 @pytest.mark.timeout(90)
 def test_ckm_topics_are_seen_and_heard_by_an_rmw_zenoh_node_and_back(
-    sessions: tuple[zenoh.Session, zenoh.Session],
+    sessions: tuple[zenoh.Session, zenoh.Session],  # noqa: F811
     transports: Callable[..., Transport],  # noqa: F811
 ) -> None:
     bridge_session, ros_node = sessions
