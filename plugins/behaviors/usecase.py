@@ -116,7 +116,7 @@ def object_position(found: Mapping[str, Any], stamp: float) -> dict[str, Any]:
         value = found.get(key)
         return float(value) if isinstance(value, int | float) else 0.0
 
-    return {
+    position = {
         "stamp": float(stamp),
         "label": str(found.get("name", "")),
         "frame": str(found.get("frame", "camera")),
@@ -125,6 +125,15 @@ def object_position(found: Mapping[str, Any], stamp: float) -> dict[str, Any]:
         "z": number("z"),
         "reliability": number("reliability"),
     }
+    observer = observer_pose(found)
+    position["observer"] = [dict(zip(("x", "y", "yaw"), observer, strict=True))] if observer else []
+    return position
+
+
+def observer_pose(position: Mapping[str, Any]) -> tuple[float, float, float] | None:
+    """The robot pose a ``map`` position was placed with (its ``observer`` list, D172), else None."""
+    observer = position.get("observer")
+    return robot_pose(observer[0]) if isinstance(observer, list) and len(observer) == 1 else None
 
 
 class Init(Behavior):
@@ -252,8 +261,9 @@ class _Goals(Behavior):
 
 class Approach(_Goals):
     """APPR: the arm to ``armPose``, then the base to ``standoff`` metres from the target (a ``map``
-    target is placed relative to the robot with the ``pose`` input); the base waits for the arm, so
-    the arm never rises through the table's edge."""
+    target is placed relative to the robot with the pose it was placed with, its ``observer``, or
+    else the ``pose`` input); the base waits for the arm, so the arm never rises through the
+    table's edge."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("standoff", 0.2, "Distance kept from the target.", unit="m"),
@@ -278,7 +288,11 @@ class Approach(_Goals):
             target = self.read("target")
             if not isinstance(target, Mapping) or not isinstance(target.get("x"), int | float):
                 return BehaviorStatus(progress=0.0, detail="no target")
-            pose = robot_pose(self.read("pose")) if "pose" in self.context.inputs else None
+            # The pose the fusion placed the target with, when it says: the robot has stood still
+            # since, and the estimate's bias cancels (D172). Else the latest estimate.
+            pose = observer_pose(target)
+            if pose is None and "pose" in self.context.inputs:
+                pose = robot_pose(self.read("pose"))
             relative = in_robot_frame(target, pose)
             if relative is None:
                 return BehaviorStatus(progress=0.0, detail="waiting for the pose estimate")

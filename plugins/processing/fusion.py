@@ -86,8 +86,9 @@ class FeatureFusion(ProcessingPlugin):
     Output (msgpack-able): ``{"objects": [{"name", "shape", "texture", "x", "y", "z", "sigma",
     "origin", "direction", "frame", "reliability", "reinforcement", "sources", "observations"}],
     "reliability"}`` (plus ``"unplaced"``, the observations left out for want of a sensor pose,
-    when inputs are mounted). ``frame`` is ``"map"`` with mounted inputs, else ``"sensor"``. A
-    lone 2D observation has no position (``x y z sigma`` None) but its ray's ``origin`` and
+    when inputs are mounted; an object seen by a sensor on the moving robot also carries
+    ``observer``, a list holding the robot pose ``{"x", "y", "yaw"}`` it was placed with, D172).
+    ``frame`` is ``"map"`` with mounted inputs, else ``"sensor"``. A lone 2D observation has no position (``x y z sigma`` None) but its ray's ``origin`` and
     ``direction``; a positioned object has ``sigma`` (RMS per axis, m) and no ray.
     ``reliability`` is the mean fused reliability, 0 with no object.
     """
@@ -235,6 +236,11 @@ class FeatureFusion(ProcessingPlugin):
                 observations.setdefault(obs.model, []).append(obs)
         fused = [obj for model in sorted(observations) for obj in self._fuse(model, observations[model])]
         fused.sort(key=lambda o: (-o["reliability"], o["name"]))
+        observer = self.placement.observer
+        if observer is not None:  # the robot pose the map positions were placed with (D172)
+            for obj in fused:
+                if any(s in self.placement.mounts and s not in self.placement.bases for s in obj["sources"]):
+                    obj["observer"] = [dict(observer)]
         mean = sum(o["reliability"] for o in fused) / len(fused) if fused else 0.0
         out: dict[str, Any] = {"objects": fused, "reliability": mean}
         if self.placement.active:  # observations left out for want of a sensor pose (a quality measure)

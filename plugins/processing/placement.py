@@ -61,6 +61,8 @@ class Placement:
             self.bases[name] = planar(*numbers(values, 3, "bases", name, owner))
         self.robot: Pose | None = None
         """The moving robot's latest base pose in the map (from the pose input)."""
+        self.observer: dict[str, float] | None = None
+        """That pose as ``{"x", "y", "yaw"}`` (a Pose2D): carried with the fused objects (D172)."""
         self.angles: dict[str, float] | None = None
         """The head joints' latest angles (from the head input)."""
 
@@ -79,20 +81,20 @@ class Placement:
     def update(self, data: Mapping[str, Any]) -> None:
         """Take the newest pose estimate and head state in ``data`` (None: keep the last ones)."""
         if data.get(self.pose_input) is not None:
-            self.robot = self._pose(data[self.pose_input])
+            self.observer = self._pose(data[self.pose_input])
+            self.robot = planar(**self.observer)
         if data.get(self.head_input) is not None:
             self.angles = self._head(data[self.head_input])
 
     def _bad(self, source: str) -> Callable[[str, str], ValueError]:
         return lambda where, why: ValueError(f"{self.owner}: input {source!r} {where} {why}")
 
-    def _pose(self, message: Any) -> Pose:
+    def _pose(self, message: Any) -> dict[str, float]:
         bad = self._bad(self.pose_input)
         pose = message.get("pose") if isinstance(message, Mapping) else None
         if not isinstance(pose, Mapping):
             raise bad("field 'pose'", "is missing or not a mapping of x, y, yaw")
-        x, y, yaw = (number(pose.get(k), bad, f"field 'pose.{k}'") for k in ("x", "y", "yaw"))
-        return planar(x, y, yaw)
+        return {k: number(pose.get(k), bad, f"field 'pose.{k}'") for k in ("x", "y", "yaw")}
 
     def _head(self, message: Any) -> dict[str, float]:
         bad = self._bad(self.head_input)

@@ -178,7 +178,7 @@ def test_fix_holds_a_reliable_recognition_then_signals_the_position(lab: System)
     assert rig.behavior.step().done
     spotted = rig.last("spotted")
     assert spotted == {"stamp": 2.0, "label": "cylinder_red_stripes", "frame": "map", "x": 2.5, "y": 1.5,
-                       "z": 0.8, "reliability": 0.85}  # fmt: skip
+                       "z": 0.8, "reliability": 0.85, "observer": []}  # fmt: skip
     types = {t.name: t for t in lab.message_types}
     assert check_payload(spotted, "ObjectPosition", types) is None  # what the signal's type asks for
 
@@ -206,6 +206,30 @@ def test_approach_places_a_map_target_relative_to_the_robot(lab: System) -> None
     move = rig.last("move")
     assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.28, 0.0), abs=1e-6)
     assert move["yaw"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_approach_uses_the_pose_the_fusion_placed_the_target_with(lab: System) -> None:
+    """A biased pose estimate placed the target; the later estimate differs: the move is the camera's own
+    measurement, the observer pose's bias cancels (D172)."""
+    observer = [{"x": 2.03, "y": 2.0, "yaw": math.pi / 2}]  # 3 cm off in x: the target is too, by as much
+    target = {"frame": "map", "x": 2.03, "y": 3.0, "z": 0.8, "observer": observer}
+    rig = Rig(lab, "APPR", {"target": target, "pose": {"pose": {"x": 2.0, "y": 2.0, "yaw": math.pi / 2}}})
+    rig.behavior.step()
+    rig.services["arm"].outputs["status"] = {"id": rig.last("arm_goal")["id"], "state": "reached"}
+    rig.behavior.step()
+    move = rig.last("move")
+    assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.28, 0.0), abs=1e-6)  # straight ahead, as seen
+
+
+def test_spot_passes_the_observer_pose_on_with_the_target(lab: System) -> None:
+    observer = [{"x": 1.0, "y": 2.0, "yaw": 0.5}]
+    found = {"name": "cylinder_red_stripes", "shape": "cylinder", "texture": "red_stripes", "frame": "map",
+             "x": 1.5, "y": 2.2, "z": 0.8, "reliability": 0.9, "sources": ["rgb", "depth"], "observer": observer}
+    rig = Rig(lab, "SPOT", {"objects": {"objects": [found], "reliability": 0.9}})
+    assert rig.behavior.step().done
+    assert rig.last("target")["observer"] == observer
+    types = {t.name: t for t in lab.message_types}
+    assert check_payload(rig.last("target"), "ObjectPosition", types) is None
 
 
 def test_bad_params_are_refused_naming_the_behavior(lab: System) -> None:

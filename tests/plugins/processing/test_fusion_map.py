@@ -169,6 +169,7 @@ def test_observations_wait_for_the_robot_pose_and_head_state() -> None:
     (obj,) = out["objects"]
     assert out["unplaced"] == 0 and obj["frame"] == "map" and obj["sources"] == ["depth"]
     assert obj["y"] > 5.4 and abs(obj["x"] - 7.0) < 0.05  # 0.6 m ahead of a robot facing +y
+    assert obj["observer"] == [{"x": 7.0, "y": 5.0, "yaw": math.pi / 2}]  # the pose that placed it (D172)
     again = plugin.process({"depth": depth}, CTX)  # the last pose estimate holds until a new one comes
     assert again["objects"][0]["y"] == obj["y"]
     assert plugin.process({"pantilt": rgb, "head": {"pan": 0.0, "tilt": 0.2}}, CTX)["unplaced"] == 0

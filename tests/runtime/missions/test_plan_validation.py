@@ -120,7 +120,7 @@ def test_a_payload_written_where_the_signal_is_not_sent_is_a_warning(tmp_path: P
     other = '<Agent name="other" node="fetcher-pc" mission="Spot"/>'  # runs SPOT too, sends nothing
     path.write_text(text.replace('<Agent name="fetcher"', other + '<Agent name="fetcher"'))
     found = check_plans(ckmconf.load(path))
-    assert [(f.kind, f.severity, f.line) for f in found] == [("payload-never-sent", "warning", 37)]
+    assert [(f.kind, f.severity, f.line) for f in found] == [("payload-never-sent", "warning", 43)]
     assert "behavior 'SPOT' writes the payload of 'spotted' in other's SPOT, which does not send it" in found[0].message
 
 
