@@ -88,9 +88,9 @@ class FeatureFusion(ProcessingPlugin):
     "reliability"}`` (plus ``"unplaced"``, the observations left out for want of a sensor pose,
     when inputs are mounted; an object seen by a sensor on the moving robot also carries
     ``observer``, a list holding the robot pose ``{"x", "y", "yaw"}`` it was placed with, D172).
-    ``frame`` is ``"map"`` with mounted inputs, else ``"sensor"``. A lone 2D observation has no position (``x y z sigma`` None) but its ray's ``origin`` and
-    ``direction``; a positioned object has ``sigma`` (RMS per axis, m) and no ray.
-    ``reliability`` is the mean fused reliability, 0 with no object.
+    ``frame`` is ``"map"`` with mounted inputs, else ``"sensor"``. A lone 2D observation has no
+    position (``x y z sigma`` None) but its ray's ``origin`` and ``direction``; a positioned object
+    has ``sigma`` (RMS per axis, m) and no ray. ``reliability`` is the mean fused reliability, 0 with no object.
     """
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # one recognition result per input
