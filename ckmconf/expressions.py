@@ -32,7 +32,7 @@ class Vocabulary:
 
 
 TRANSITION = Vocabulary(
-    functions={"done": 0, "failed": 0, "timeout": 0, "outcome": 1, "signal": 1},
+    functions={"done": 0, "failed": 0, "timeout": 0, "outcome": 1, "signal": 1, "lost": 1},
     names=frozenset({"progress", "elapsed", "performance"}),
     attributes=True,
 )

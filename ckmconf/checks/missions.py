@@ -131,6 +131,11 @@ def _check_mission(mission: Mission, system: System, scope: Scope, report: Repor
     _check_composition(mission, system, report)
 
 
+def _plan_agents(system: System) -> list[str]:
+    """The agents of every plan: what ``lost('agent')`` may name (§5.3)."""
+    return sorted({a.name for plan in system.plans for a in plan.agents})
+
+
 def _check_condition(transition: Transition, state: State, system: System, scope: Scope, report: Reporter) -> None:
     error = transition.condition_error  # parsed once, when the record was read
     if error is not None:
@@ -151,6 +156,8 @@ def _check_condition(transition: Transition, state: State, system: System, scope
                 )
         elif name == "signal" and system.plans and args[0] not in scope.signals:
             report.error(transition, missing("signal", str(args[0]), "any plan", scope.signals), "when")
+        elif name == "lost" and system.plans and args[0] not in (agents := _plan_agents(system)):
+            report.error(transition, missing("agent", str(args[0]), "any plan", agents), "when")
         elif name == "timeout" and state.timeout is None and (behavior is None or behavior.timeout is None):
             report.error(
                 transition,

@@ -12,8 +12,16 @@ other agents' heartbeats watched: an agent silent for the plan's ``lostAfter`` i
 (recorded, logged, ``lost`` set) and found again if it comes back. An agent whose last heartbeat
 carries its outcome has *finished*: it is recorded ``agent-finished`` and never reported lost; a
 signal this agent sends it afterwards is recorded ``signal-dropped`` (and the finished agent
-drops it without touching its closed recording). Everything is recorded in the run directory
+drops it without touching its closed recording). ``lost('a')`` in a transition of this agent's
+missions is true while agent ``a`` is lost, and for good once ``a`` has finished in a final other
+than its success final (the first its mission declares: ``crashed`` and ``stopped`` count as
+failures too). Everything is recorded in the run directory
 (:class:`~runtime.missions.recording.RunRecorder`).
+
+Silence, like every period and timeout of the mission, is measured on the run's clock
+(``time.monotonic``, read at each call): under ``ckm-run --time-scale`` :mod:`runtime.simtime`
+scales it in every process of the run, so ``lostAfter`` is simulated seconds, as the world's
+physics and the behaviors' timeouts are (D165, D177).
 
 Outcomes (issue G, fail loudly): :meth:`AgentRunner.run` returns the top mission's outcome — one
 of its finals, ``stopped`` (cut short by :meth:`stop` or ``duration``) — and :attr:`succeeded`
@@ -44,6 +52,11 @@ from .recording import RunRecorder
 from .services import NetworkServiceHandle
 
 LOG = logging.getLogger("ckm.missions")
+
+
+def _run_clock() -> float:
+    """The run's clock, looked up at each call: the scaled one once :mod:`runtime.simtime` is installed."""
+    return time.monotonic()
 
 
 class LiveFactory:
@@ -140,6 +153,7 @@ class AgentRunner:
         period: float = 0.1,
         heartbeat: float = 0.5,
         progress: Callable[[str], None] | None = None,
+        clock: Callable[[], float] | None = None,
     ) -> None:
         record = system.plan(plan)
         if record is None:
@@ -149,6 +163,9 @@ class AgentRunner:
             raise KeyError(f"plan {plan!r} has no agent {agent!r}")
         self.plan, self.agent, self.transport = record, me, transport
         self.period, self.heartbeat = period, heartbeat
+        self.clock = clock or _run_clock
+        successes = {a.name: system.mission(a.mission) for a in record.agents}
+        self._successes = {name: m.finals[0].name for name, m in successes.items() if m is not None and m.finals}
         self.progress = progress  # told each change of active state, as one line (issue K: a run shows how it goes)
         self._shown: str | None = None
         self.signals = Signals()
@@ -167,9 +184,10 @@ class AgentRunner:
         transport.subscribe(TopicQoS(f"/plan/{plan}/agents", "ckm/agent-heartbeat", history=8), self._on_beat)
         emitters: dict[tuple[str, str], str] = {(s.state, s.on): s.name for s in record.signals if s.agent == agent}
         self.engine = MissionEngine(
-            system, me.mission, factory=self.factory, clock=time.monotonic, agent=agent, recorder=self.recorder,
+            system, me.mission, factory=self.factory, clock=self.clock, agent=agent, recorder=self.recorder,
             signals=self.signals, emitters=emitters, on_signal=self._send, plan=plan,
             signal_types={s.name: s.type for s in record.signals}, related=self.factory.related,
+            lost=self.agent_lost,
         )  # fmt: skip
         finals = self.engine.record_mission.finals
         self._success = finals[0].name if finals else None
@@ -185,6 +203,12 @@ class AgentRunner:
     def succeeded(self) -> bool:
         """True once the mission has ended in its success final (the first declared)."""
         return self.outcome is not None and self.outcome == self._success
+
+    def agent_lost(self, name: str) -> bool:
+        """``lost('name')``: the agent is lost now, or finished in a final other than its success final."""
+        if name in self.lost:
+            return True
+        return name in self.finished and self.finished[name] != self._successes.get(name)
 
     def _send(self, name: str, value: Any) -> None:
         self._publishers[name].publish(codec.encode(value))
@@ -219,16 +243,19 @@ class AgentRunner:
         if not (isinstance(beat, dict) and isinstance(beat.get("agent"), str) and beat["agent"] != self.agent.name):
             return
         other = beat["agent"]
-        self.seen[other] = time.monotonic()
+        self.seen[other] = self.clock()
         if "outcome" in beat and beat.get("state") is None and other not in self.finished:
             outcome = beat["outcome"] if isinstance(beat["outcome"], str) else None
             self.finished[other] = outcome
             self.lost.discard(other)
             self.recorder.write("agent-finished", finished=other, outcome=outcome)
-            LOG.info("plan %s: agent %s finished (%s)", self.plan.name, other, outcome)
+            if outcome != self._successes.get(other):  # lost('other') holds from now on
+                LOG.warning("plan %s: agent %s finished in failure (%s)", self.plan.name, other, outcome)
+            else:
+                LOG.info("plan %s: agent %s finished (%s)", self.plan.name, other, outcome)
 
     def _watch(self) -> None:
-        now = time.monotonic()
+        now = self.clock()
         for other in self.plan.agents:
             if other.name == self.agent.name or other.name in self.finished:
                 continue
@@ -256,13 +283,13 @@ class AgentRunner:
         mission ends it as ``crashed`` (recorded with the error, kept in :attr:`error`) and is
         raised again.
         """
-        self._started = time.monotonic()
+        self._started = self.clock()
         end = None if duration is None else self._started + duration
         next_beat = 0.0
         try:
             self.engine.start()
             while not self._stop.is_set():
-                now = time.monotonic()
+                now = self.clock()
                 if now >= next_beat:
                     beat = {"agent": self.agent.name, "state": self.engine.active_path(), "t": now}
                     self._beat.publish({**beat, "progress": self.engine.top.progress()})

@@ -3,8 +3,10 @@
 A mission is built from its ``<Mission>`` record: one initial state; states run a behavior or a
 nested mission; one-way transitions fire on conditions (docs/decisions.md D9) over the state's
 behavior (``done()``, ``failed()``, ``progress``), time (``timeout()``, ``elapsed``), the nested
-mission's outcome (``outcome('x')``), plan signals (``signal('s')``) and the services the
-behavior uses (``alias.field``, ``performance``). The mission's output is its active state's.
+mission's outcome (``outcome('x')``), plan signals (``signal('s')``), the other agents of the plan
+(``lost('a')``: agent ``a`` is silent past the plan's ``lostAfter``, or has finished in a final
+other than its success final) and the services the behavior uses (``alias.field``,
+``performance``). The mission's output is its active state's.
 
 Every step, from the top down: a state's transitions are tried in document order, the first that
 holds fires (D14) — so an outer state's ``timeout()`` pre-empts whatever runs inside it — and
@@ -275,6 +277,7 @@ class MissionEngine:
         plan: str | None = None,
         signal_types: Mapping[str, str | None] | None = None,
         related: Callable[[str], ServiceHandle | None] | None = None,
+        lost: Callable[[str], bool] | None = None,
     ) -> None:
         record = system.mission(mission)
         if record is None:
@@ -290,6 +293,7 @@ class MissionEngine:
         self.signal_types = dict(signal_types or {})  # signal → its <Signal type> (None: no payload required)
         self._types = {t.name: t for t in system.message_types}
         self._related = related  # the services eq. 5.1 weighs that a behavior does not use itself
+        self._lost = lost  # lost('agent'): the plan agent's runner knows (None: no plan, never lost)
         self._stopping = False
         self._start = 0.0
         self._last_progress = -1e9
@@ -309,6 +313,10 @@ class MissionEngine:
     def related(self, ref: str) -> ServiceHandle | None:
         """A service the composition weighs though the active behavior does not use it (eq. 5.1)."""
         return self._related(ref) if self._related is not None else None
+
+    def agent_lost(self, agent: str) -> bool:
+        """``lost('agent')`` (§5.3): the plan's agent is lost or ended in failure (False without a plan)."""
+        return bool(self._lost(agent)) if self._lost is not None else False
 
     def condition(self, transition: Transition, where: str) -> Condition:
         """The transition's condition, parsed when its record was read; a MissionError if it does not parse."""
@@ -360,6 +368,7 @@ class MissionEngine:
                 "timeout": run.timed_out,
                 "outcome": lambda name: child is not None and child.outcome == name,
                 "signal": self.signals.received,
+                "lost": self.agent_lost,
             },
             names={"progress": run.own_progress(), "elapsed": run.elapsed(), "performance": run.performance()},
             attributes=attribute,

@@ -72,7 +72,7 @@ def environment(values: Mapping[Key, Any]) -> Environment:
     return Environment(
         functions={
             name: (lambda *args, n=name: bool(values.get(("call", n, *args), False)))
-            for name in ("done", "failed", "timeout", "outcome", "signal")
+            for name in ("done", "failed", "timeout", "outcome", "signal", "lost")
         },
         names={k[1]: v for k, v in values.items() if k[0] == "name"},
         attributes=lambda alias, field: values.get(("attr", alias, field)),

@@ -54,7 +54,7 @@ def test_evaluation(text: str, values: dict[str, Any], expected: bool) -> None:
         ("done(", "syntax error in condition 'done(': '(' was never closed"),
         (
             "__import__('os')",
-            "unknown function '__import__' (known: done(), failed(), outcome(), signal(), timeout(), "
+            "unknown function '__import__' (known: done(), failed(), lost(), outcome(), signal(), timeout(), "
             "elapsed, performance, progress, service.field)",
         ),
         ("().__class__", "attribute is not allowed in a condition"),
@@ -64,7 +64,7 @@ def test_evaluation(text: str, values: dict[str, Any], expected: bool) -> None:
         ("signal(x)", "arguments of signal() must be literal values"),
         (
             "speed > 1",
-            "unknown name 'speed' (known: done(), failed(), outcome(), signal(), timeout(), elapsed, "
+            "unknown name 'speed' (known: done(), failed(), lost(), outcome(), signal(), timeout(), elapsed, "
             "performance, progress, service.field)",
         ),
         ("1 in progress", "only ==, !=, <, <=, >, >= comparisons are allowed"),

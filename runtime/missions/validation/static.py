@@ -77,6 +77,7 @@ class _Checker:
         self.active: set[str] = set()
         self.behaviors: set[str] = set()
         self.signals = {s.name for plan in system.plans for s in plan.signals}
+        self.agents = {a.name for plan in system.plans for a in plan.agents}
 
     def add(self, *found: Finding) -> None:
         self.findings.extend(found)
@@ -240,6 +241,12 @@ class _Checker:
                 known = ", ".join(sorted(self.signals)) or "none"
                 message = f"transition {label} waits for signal {args[0]!r}, which no plan emits (signals: {known})"
                 self.add(finding("unknown-signal", "error", message, transition, **where))
+            elif name == "lost" and self.system.plans and args[0] not in self.agents:
+                known = ", ".join(sorted(self.agents)) or "none"
+                message = (
+                    f"transition {label} waits for agent {args[0]!r} to be lost, but no plan has it (agents: {known})"
+                )
+                self.add(finding("unknown-agent", "error", message, transition, **where))
             elif name != "outcome":
                 continue
             elif nested is None:
