@@ -7,15 +7,19 @@ import json
 import random
 import subprocess
 import sys
+import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from runtime.cli import EXIT_AGENTS
-from runtime.missions.recording import read_run
+from runtime.missions.recording import RunError, read_run
 from runtime.network.ports import private_base
+from tests.waiting import until
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "plans" / "two_agents.xml"
+LOST = DATA.parent / "lost_spotter.xml"  # the fetcher gives up on lost('spotter') (issue K point 3a)
 
 
 def _config(tmp_path: Path) -> Path:
@@ -38,8 +42,10 @@ def _config_from(text: str, tmp_path: Path) -> Path:
     return path
 
 
-def _ckm_run(config: Path, node: str, run_dir: Path, duration: float) -> subprocess.Popen[str]:
-    command = [sys.executable, "-m", "runtime.cli", str(config), "--node", node, "--plan", "together"]
+def _ckm_run(
+    config: Path, node: str, run_dir: Path, duration: float, plan: str = "together"
+) -> subprocess.Popen[str]:
+    command = [sys.executable, "-m", "runtime.cli", str(config), "--node", node, "--plan", plan]
     command += ["--duration", str(duration), "--log-dir", str(run_dir)]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
@@ -173,3 +179,72 @@ def test_a_signal_payload_crosses_two_processes_and_sets_the_receivers_goal(tmp_
     goal = next(e for e in run.events if e.kind == "log" and e.agent == "fetcher")
     assert goal.fields["message"] == "goal set" and goal.fields["source"] == "spotted"
     assert goal.fields["goal"] == "2.400 3.200 0.927"  # 1 m short of (3, 4), facing it
+
+
+def _events(run_dir: Path, agent: str, kind: str) -> list[Any]:
+    """The recorded events of one agent and kind so far (none while nothing is recorded)."""
+    try:
+        return [e for e in read_run(run_dir).events if e.agent == agent and e.kind == kind]
+    except RunError:
+        return []
+
+
+def _gave_up(run_dir: Path, fetcher: subprocess.Popen[str]) -> tuple[str, Any]:
+    """The fetcher's stderr once it has ended, and its run (asserting the failure branch was taken)."""
+    _, err = fetcher.communicate(timeout=60)
+    assert fetcher.returncode == EXIT_AGENTS, err  # the plan's agent did not end in its success final
+    assert "agent fetcher: mission ended failed" in err
+    run = read_run(run_dir)
+    left = next(e for e in run.events if e.kind == "exit" and e.agent == "fetcher" and e.fields["state"] == "NAV")
+    assert left.fields["to"] == "gave_up" and "lost('spotter')" in left.fields["condition"]
+    ends = {e.agent: e.fields["outcome"] for e in run.events if e.kind == "end"}
+    assert ends["fetcher"] == "failed"
+    return err, run
+
+
+def test_a_spotter_killed_after_start_sends_the_fetcher_down_its_failure_branch(tmp_path: Path) -> None:
+    """Fig. 7.13's failure: the Nao's process dies; the Turtlebot's mission takes its failure branch
+    (lost('spotter') once it is silent for lostAfter) instead of waiting out NAV's timeout."""
+    config = _config_from(LOST.read_text(), tmp_path)
+    run_dir = tmp_path / "run"
+    spotter = _ckm_run(config, "spotter-pc", run_dir, 60)
+    fetcher = _ckm_run(config, "fetcher-pc", run_dir, 60)
+    try:
+        assert until(lambda: bool(_events(run_dir, "spotter", "enter")) and bool(_events(run_dir, "fetcher", "enter")),
+                     timeout=60), "the two agents did not start"  # fmt: skip
+        time.sleep(1.0)  # heartbeats (every 0.5 s) cross: the fetcher has seen the spotter alive
+        assert not _events(run_dir, "fetcher", "agent-lost")
+        spotter.kill()
+        spotter.wait(10)
+        _, run = _gave_up(run_dir, fetcher)
+    finally:
+        for process in (fetcher, spotter):
+            if process.poll() is None:
+                process.kill()
+                process.wait(10)
+    lost = [e for e in run.events if e.kind == "agent-lost"]
+    assert [(e.agent, e.fields["lost"]) for e in lost] == [("fetcher", "spotter")]
+    assert not [e for e in run.events if e.kind == "end" and e.agent == "spotter"]  # killed: it wrote no end
+
+
+def test_a_spotter_ending_in_its_failure_final_sends_the_fetcher_down_its_failure_branch(tmp_path: Path) -> None:
+    """The spotter gives up (its final `lost`, not its success final): lost('spotter') holds at once,
+    though the plan's lostAfter (30 s) is far off; the recording says it finished, not that it was lost."""
+    config = _config_from(LOST.read_text(), tmp_path)
+    run_dir = tmp_path / "run"
+    fetcher = _ckm_run(config, "fetcher-pc", run_dir, 60, plan="fails")
+    spotter = _ckm_run(config, "spotter-pc", run_dir, 60, plan="fails")
+    try:
+        _, err = spotter.communicate(timeout=60)
+        assert spotter.returncode == EXIT_AGENTS and "agent spotter: mission ended lost" in err, err
+        _, run = _gave_up(run_dir, fetcher)
+    finally:
+        for process in (fetcher, spotter):
+            if process.poll() is None:
+                process.kill()
+                process.wait(10)
+    finished = [e.fields for e in run.events if e.kind == "agent-finished" and e.agent == "fetcher"]
+    assert finished == [{"finished": "spotter", "outcome": "lost"}]
+    assert not [e for e in run.events if e.kind == "agent-lost"]
+    ended = next(e for e in run.events if e.kind == "end" and e.agent == "fetcher")
+    assert ended.t < 25.0  # long before lostAfter (30 s) or NAV's timeout (60 s)
