@@ -42,9 +42,7 @@ def _config_from(text: str, tmp_path: Path) -> Path:
     return path
 
 
-def _ckm_run(
-    config: Path, node: str, run_dir: Path, duration: float, plan: str = "together"
-) -> subprocess.Popen[str]:
+def _ckm_run(config: Path, node: str, run_dir: Path, duration: float, plan: str = "together") -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "runtime.cli", str(config), "--node", node, "--plan", plan]
     command += ["--duration", str(duration), "--log-dir", str(run_dir)]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
