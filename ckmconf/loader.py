@@ -51,17 +51,24 @@ def load(path: str | os.PathLike[str], *, strict: bool = True, limits: Limits = 
 
 
 @overload
-def load_bytes(data: bytes, path: str, *, strict: Literal[True] = ..., limits: Limits = ...) -> System: ...
+def load_bytes(
+    data: bytes, path: str, *, strict: Literal[True] = ..., limits: Limits = ..., includes: bool = ...
+) -> System: ...
 @overload
-def load_bytes(data: bytes, path: str, *, strict: Literal[False], limits: Limits = ...) -> LoadResult: ...
+def load_bytes(
+    data: bytes, path: str, *, strict: Literal[False], limits: Limits = ..., includes: bool = ...
+) -> LoadResult: ...
 
 
-def load_bytes(data: bytes, path: str, *, strict: bool = True, limits: Limits = Limits()) -> System | LoadResult:
+def load_bytes(
+    data: bytes, path: str, *, strict: bool = True, limits: Limits = Limits(), includes: bool = True
+) -> System | LoadResult:
     """Like load(), for text already in memory (the editor, configurations sent over the network).
 
-    ``path`` names the text in messages and anchors relative includes.
+    ``path`` names the text in messages and anchors relative includes; ``includes=False`` refuses
+    every ``<Include>`` (text from another process must not make this one read its files).
     """
-    result = _Loader(limits).run(path, data)
+    result = _Loader(limits, includes).run(path, data)
     return _finish(result, strict)
 
 
@@ -89,8 +96,9 @@ def _bind_root(source: SourceFile) -> System | Part:
 
 
 class _Loader:
-    def __init__(self, limits: Limits) -> None:
+    def __init__(self, limits: Limits, includes: bool = True) -> None:
         self.limits = limits
+        self.includes = includes
         self.sources: dict[str, SourceFile] = {}
         self.documents: list[System | Part] = []
         self.errors: list[ConfigError] = []
@@ -123,7 +131,15 @@ class _Loader:
             return None
         document = _bind_root(source)
         if include is not None and isinstance(document, System):
-            self.errors.append(_error(include, f"{include.href} holds a System; only a Part can be included"))
+            self.errors.append(ConfigError.of(include, f"{include.href} holds a System; only a Part can be included"))
+            return None
+        if not self.includes and document.includes:
+            self.errors.extend(
+                ConfigError.of(
+                    i, f"cannot include {i.href}: text received from another process includes no file", "href"
+                )
+                for i in document.includes
+            )
             return None
         self.documents.append(document)
         base = Path(path).parent
@@ -134,28 +150,30 @@ class _Loader:
     def _include(self, base: Path, stack: list[str], via: list[Include]) -> None:
         include = via[-1]
         if os.path.isabs(include.href) or include.href.startswith("~"):
-            self.errors.append(_error(include, f"include paths are relative to the including file: {include.href}"))
+            self.errors.append(
+                ConfigError.of(include, f"include paths are relative to the including file: {include.href}")
+            )
             return
         if not include.href.endswith(".xml"):
-            self.errors.append(_error(include, f"only .xml files can be included: {include.href}"))
+            self.errors.append(ConfigError.of(include, f"only .xml files can be included: {include.href}"))
             return
         target = os.path.normpath(base / include.href)
         key = os.path.realpath(target)
         if key in stack:
             start = stack.index(key)  # reported where the cycle begins: in the file that was asked for
             chain = " → ".join(Path(p).name for p in [*stack[start:], key])
-            self.errors.append(_error(via[start], f"include cycle: {chain}"))
+            self.errors.append(ConfigError.of(via[start], f"include cycle: {chain}"))
             return
         if any(os.path.realpath(p) == key for p in self.sources):
             return  # read once, like a header guard
         if len(self.sources) >= self.limits.max_files:
-            self.errors.append(_error(include, f"more than {self.limits.max_files} files included"))
+            self.errors.append(ConfigError.of(include, f"more than {self.limits.max_files} files included"))
             return
         self._read(target, None, stack, via)
 
     def _at_include(self, include: Include, error: ConfigError) -> ConfigError:
         if error.message in ("file not found", "not a regular file") or error.message.startswith("cannot read"):
-            return _error(include, f"cannot include {include.href}: {error.message}")
+            return ConfigError.of(include, f"cannot include {include.href}: {error.message}")
         return error
 
     def _merge(self, root: System | Part) -> System:
@@ -182,13 +200,6 @@ class _Loader:
         return System(name=stem, version=root.version, description=root.description, loc=root.loc, **merged)  # type: ignore[arg-type]
 
 
-def _error(record: Record, message: str) -> ConfigError:
-    loc = record.loc
-    if loc is None:
-        return ConfigError("<memory>", 1, 1, "/", message)
-    return ConfigError.at(loc, message)
-
-
 def _duplicate(record: Record, kind: str, first: Record) -> ConfigError:
     where = f"{first.loc.file}:{first.loc.line}" if first.loc else "another file"
-    return _error(record, f"{kind} is defined twice (first at {where})")
+    return ConfigError.of(record, f"{kind} is defined twice (first at {where})")

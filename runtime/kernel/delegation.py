@@ -1,8 +1,12 @@
 """Code delegation (§3.1.2.5–6): a busy node hands a running controller to an idle node.
 
-What moves is data, never code: the controller's registered kind, its configuration (period,
-priority, params, horizon, the network names of its input and output topics) and its state
-(``Controller.state()``). The receiving node must have the kind registered, or it refuses.
+What moves is data, never code: the controller's configuration and its state
+(``Controller.state()``). The configuration travels as configuration text, written and read by
+ckmconf (:mod:`ckmconf.fragment`): a ``<Part>`` with the giver's ``<Node>`` holding the topics the
+controller uses and the ``<Controller>`` (kind, period, priority, horizon, params, inputs and
+outputs), checked on arrival by the loader's own validation, so a bad description is refused with
+the located message ``ckm-validate`` would give. The taker names the topics as the giver does
+(:mod:`.topics`). The receiving node must have the kind registered, or it refuses.
 
 The handover is atomic:
 
@@ -19,6 +23,7 @@ So no period goes without an output and no period gets two. Messages travel on
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import logging
 import threading
@@ -26,14 +31,16 @@ import time
 from collections.abc import Mapping
 from typing import Any, Protocol
 
-from ckmconf.model import Node, Param
+from ckmconf.errors import ConfigError
+from ckmconf.fragment import dumps_node, loads_node
+from ckmconf.model import BUILTIN_TYPES, Node, System
 from ckmconf.model.kernel import Controller as ControllerRecord
-from ckmconf.model.kernel import ControllerInput, ControllerOutput
 
 from ..network.api import Sample, TopicQoS, Transport
 from ..registry import Registry
 from .scheduler import Scheduler, Task
 from .services import ControlService, FutureActions
+from .topics import declared_topic, topic_qos
 
 LOG = logging.getLogger("ckm.delegation")
 _ids = itertools.count(1)
@@ -52,6 +59,11 @@ class DelegationHost(Protocol):
     @property
     def node(self) -> Node:
         """The node's configuration record (kernel.xsd ``NodeType``)."""
+        ...
+
+    @property
+    def system(self) -> System:
+        """The system the node belongs to (its external topics and message types)."""
         ...
 
     @property
@@ -112,7 +124,13 @@ class Delegation:
         request = next(_ids)
         answered = self._answers[request] = threading.Event()
         self._send(
-            to, {"op": "offer", "id": request, "from": runtime.node.name, "controller": describe(runtime, service)}
+            to,
+            {
+                "op": "offer",
+                "id": request,
+                "from": runtime.node.name,
+                "controller": describe(runtime.node, runtime.system, service.record),
+            },
         )
         if not answered.wait(self.timeout):
             self._report("delegation-timeout", controller, to)
@@ -173,17 +191,22 @@ class Delegation:
 
     def _offer(self, message: Mapping[str, Any]) -> None:
         runtime = self.runtime
-        spec = message["controller"]
         reply: dict[str, Any] = {"id": message["id"]}
         try:
-            record = controller_record(spec)
+            record, names = controller_of(message["controller"], str(message["from"]))
+        except ConfigError as exc:
+            self._send(message["from"], reply | {"op": "refuse", "reason": str(exc)})
+            return
+        try:
             cls = runtime.registry.resolve("controller", record.kind, record)
             controller = cls(record)
         except Exception as exc:
-            self._send(message["from"], reply | {"op": "refuse", "reason": f"cannot run {spec.get('kind')!r}: {exc}"})
+            self._send(message["from"], reply | {"op": "refuse", "reason": f"cannot run {record.kind!r}: {exc}"})
             return
-        inputs = {role: runtime.transport.subscribe(TopicQoS(topic, history=3)) for topic, role in spec["inputs"]}
-        outputs = [runtime.transport.publisher(TopicQoS(topic)) for topic in spec["outputs"]]
+        inputs = {
+            p.role or p.topic: runtime.transport.subscribe(TopicQoS(names[p.topic], history=3)) for p in record.inputs
+        }
+        outputs = [runtime.transport.publisher(TopicQoS(names[p.topic])) for p in record.outputs]
         service = ControlService(record, controller, inputs, outputs, extrapolation={}, futures=runtime.futures)
         service.deactivate()
         self.taken[record.name] = service
@@ -226,31 +249,37 @@ class Delegation:
         self.runtime.report(kind, {"controller": controller, "peer": peer, "reason": reason})
 
 
-def describe(runtime: DelegationHost, service: ControlService) -> dict[str, Any]:
-    """A controller as plain data: kind, timing, params and the network names of its topics."""
-    record = service.record
-    return {
-        "name": record.name,
-        "kind": record.kind,
-        "period": record.period,
-        "priority": record.priority,
-        "horizon": record.horizon,
-        "params": [[p.name, p.value] for p in record.params],
-        "inputs": [[runtime.topic(p.topic).name, p.role or p.topic] for p in record.inputs],
-        "outputs": [runtime.topic(p.topic).name for p in record.outputs],
-    }
+def describe(giver: Node, system: System, controller: ControllerRecord) -> str:
+    """A controller as configuration text (:func:`ckmconf.fragment.dumps_node`): the giver's node
+    reduced to the controller and the topics (and message types of ``system``) it uses.
+
+    Only what runs moves: the controller leaves its partition, its switches and its optional part
+    behind, and runs active and delegable on the taker.
+    """
+    record = dataclasses.replace(controller, partition=None, active=True, delegable=True, optional=None, switches=())
+    used = dict.fromkeys(p.topic for p in (*record.inputs, *record.outputs))
+    topics = [t for t in (declared_topic(giver, system, name) for name in used) if t is not None]
+    types = {t.type for t in topics} - BUILTIN_TYPES
+    node = Node(name=giver.name, kind=giver.kind, topics=tuple(topics), controllers=(record,))
+    return dumps_node(node, [m for m in system.message_types if m.name in types])
 
 
-def controller_record(spec: Mapping[str, Any]) -> ControllerRecord:
-    """The Controller record a description stands for (validated by the record's types)."""
-    return ControllerRecord(
-        name=str(spec["name"]),
-        kind=str(spec["kind"]),
-        period=float(spec["period"]),
-        priority=int(spec["priority"]),
-        horizon=int(spec["horizon"]),
-        delegable=True,
-        params=tuple(Param(name=str(n), value=str(v)) for n, v in spec["params"]),
-        inputs=tuple(ControllerInput(topic=str(t), role=str(r)) for t, r in spec["inputs"]),
-        outputs=tuple(ControllerOutput(topic=str(t)) for t in spec["outputs"]),
-    )
+def controller_of(text: Any, giver: str) -> tuple[ControllerRecord, dict[str, str]]:
+    """The Controller record a description stands for, and the network name of each topic it uses.
+
+    The text is checked as the loader checks a file (:func:`ckmconf.fragment.loads_node`).
+
+    Raises:
+        ConfigError: not text, or text the loader refuses (located in ``<delegation from GIVER>``), or
+            a node fragment that does not hold exactly one delegable controller.
+    """
+    origin = f"<delegation from {giver}>"
+    if not isinstance(text, (str, bytes)):
+        raise ConfigError(
+            origin, 1, 1, "/", f"a controller description is configuration text, not {type(text).__name__}"
+        )
+    node = loads_node(text, origin)
+    if len(node.controllers) != 1 or not node.controllers[0].delegable:
+        raise ConfigError.of(node, "a delegated node fragment holds exactly one delegable Controller")
+    names = {t.name: topic_qos(node.name, t).name for t in node.topics}
+    return node.controllers[0], names

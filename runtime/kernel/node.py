@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ckmconf.errors import ConfigError
-from ckmconf.model import Alarm, Node, System, Topic
+from ckmconf.model import Alarm, Node, System
 from ckmconf.model.kernel import Controller as ControllerRecord
 
 from ..network.api import Sample, Subscription, TopicQoS, Transport
@@ -36,6 +36,7 @@ from .reactions import react
 from .scheduler import Scheduler, Task
 from .services import ActuationService, ControlService, FutureActions, SensorService
 from .switching import ControllerSwitching
+from .topics import declared_topic, topic_qos
 from .vectors import chain_refusal, is_vector, shaper
 
 LOG = logging.getLogger("ckm.node")
@@ -109,25 +110,8 @@ class NodeRuntime:
 
     def topic(self, name: str) -> TopicQoS:
         """QoS of a topic as this node sees it: its own topics first, then the system's external ones."""
-        found: Topic | None = next((t for t in self.node.topics if t.name == name), None)
-        if found is None:
-            external = list(self.system.topics) + [
-                t for n in self.system.nodes for t in n.topics if t.scope == "external"
-            ]
-            found = next((t for t in external if t.name == name), None)
-        if found is None:
-            return TopicQoS(name)
-        qos = TopicQoS.of(found)
-        if found.scope == "internal":  # internal topics never leave the node: give them a node-local name
-            qos = TopicQoS(
-                f"/{self.node.name}/~{name.lstrip('/')}",
-                qos.type,
-                qos.reliability,
-                qos.history,
-                qos.deadline,
-                qos.lifespan,
-            )
-        return qos
+        found = declared_topic(self.node, self.system, name)
+        return TopicQoS(name) if found is None else topic_qos(self.node.name, found)
 
     # ------------------------------------------------------------------ lifecycle
 
