@@ -56,6 +56,14 @@ class Lidar:
         return np.clip(ranges, self.range_min, self.range_max)
 
 
+def pinhole(width: int, height: int, fov: float) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) in pixels of a ``width``×``height`` render of horizontal field of view ``fov``
+    (rad): square pixels, the principal point at the image's centre. A :class:`Camera` renders with
+    these, and its ``sensor_msgs/msg/CameraInfo`` (plugins.sim.ros_messages) states them."""
+    focal = (width / 2) / math.tan(fov / 2)
+    return focal, focal, (width - 1) / 2, (height - 1) / 2
+
+
 @dataclass
 class Frame:
     """One render: colour (H×W×3 uint8), depth (H×W metres) and the intrinsics it was taken with."""
@@ -87,14 +95,14 @@ class Camera:
         forward, up = rotation[:, 2], -rotation[:, 1]
         eye = np.asarray(position)
         view = p.computeViewMatrix(eye.tolist(), (eye + forward).tolist(), up.tolist())
-        focal = (width / 2) / math.tan(self.fov / 2)
+        focal = pinhole(width, height, self.fov)[0]
         fov_y = math.degrees(2 * math.atan((height / 2) / focal))
         projection = p.computeProjectionMatrixFOV(fov_y, width / height, self.near, self.far)
         return list(view), list(projection), focal
 
     def render(self, width: int = 640, height: int = 480) -> Frame:
         """Render one frame (colour and depth from the same render)."""
-        view, projection, focal = self.matrices(width, height)
+        view, projection, _ = self.matrices(width, height)
         _, _, pixels, zbuffer, _ = p.getCameraImage(
             width, height, view, projection, renderer=p.ER_TINY_RENDERER,
             flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.robot.world.client,
@@ -103,7 +111,7 @@ class Camera:
         rgba = np.asarray(pixels, dtype=np.uint8).reshape(height, width, 4)
         z = np.asarray(zbuffer, dtype=float).reshape(height, width)
         depth = self.far * self.near / (self.far - (self.far - self.near) * z)
-        return Frame(np.ascontiguousarray(rgba[:, :, :3]), depth, focal, focal, (width - 1) / 2, (height - 1) / 2)
+        return Frame(np.ascontiguousarray(rgba[:, :, :3]), depth, *pinhole(width, height, self.fov))
 
     def project(self, point: tuple[float, float, float]) -> tuple[float, float, float]:
         """Pixel (u, v) and depth (m) where a world point appears, by the pinhole model."""
