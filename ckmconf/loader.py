@@ -11,7 +11,7 @@ from typing import Literal, overload
 from .binding import Record, bind
 from .checks import check_system
 from .checks.report import Reporter
-from .errors import ConfigError, ConfigErrors
+from .errors import ConfigError, ConfigErrors, located
 from .model.system import Content, Include, Part, System
 from .schema import validate
 from .source import Limits, SourceFile, local_name, parse_bytes, read_source
@@ -134,10 +134,9 @@ class _Loader:
             self.errors.append(ConfigError.of(include, f"{include.href} holds a System; only a Part can be included"))
             return None
         if not self.includes and document.includes:
+            message = "cannot include {}: text received from another process includes no file"
             self.errors.extend(
-                ConfigError.of(
-                    i, f"cannot include {i.href}: text received from another process includes no file", "href"
-                )
+                ConfigError.at(source.attr_loc_at(located(i), "href"), message.format(i.href))
                 for i in document.includes
             )
             return None
