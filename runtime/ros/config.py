@@ -61,6 +61,17 @@ _NUMBERS = frozenset({"int8", "int16", "int32", "int64", "uint8", "uint16", "uin
 _SCALARS = _NUMBERS | {"bool", "string"}
 
 
+def plain(value: Any) -> Any:
+    """A value in :mod:`runtime.resources.codec`'s plain form (what sensors of vectors and services
+    publish: arrays as ``{"~nd": …}``) rebuilt with its arrays; any other value as it is."""
+    if isinstance(value, dict | list):
+        try:
+            return codec.decode(value)
+        except codec.CodecError:  # already holds arrays or tuples: not the plain form
+            return value
+    return value
+
+
 def all_topics(system: System) -> list[tuple[Topic, str | None]]:
     """Every configured ``<Topic>`` with the node declaring it (None at system level)."""
     return [(t, None) for t in system.topics] + [(t, n.name) for n in system.nodes for t in n.topics]

@@ -30,7 +30,7 @@ from ckmconf.model import Node, System
 
 from ..network.api import Sample, Subscription, TopicQoS, Transport
 from .bag import BagRecorder, Storage, offered_qos
-from .config import ConfigRosTypes, all_topics
+from .config import ConfigRosTypes, all_topics, plain
 from .convert import to_message
 from .types import RosTypeError
 
@@ -245,7 +245,7 @@ class RunRecorder:
         topic = self._by_transport.get(sample.topic)
         if topic is None:
             return
-        value = sample.value
+        value = plain(sample.value)
         if topic.qos.type == "bool" and isinstance(value, int | float) and not isinstance(value, bool):
             value = value != 0  # a digital channel reads 0.0 / 1.0: numbers fit bool topics (verify)
         try:

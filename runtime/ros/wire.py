@@ -22,7 +22,7 @@ from ckmconf.model import System
 from ckmconf.rostypes import is_ros_type
 
 from ..network.api import Transport
-from .config import ConfigRosTypes, all_topics
+from .config import ConfigRosTypes, all_topics, plain
 from .convert import decode_payload, to_message
 from .types import RosTypeError
 
@@ -50,7 +50,7 @@ class CdrWire:
         """``value`` as a CDR message of ``type_name``; ValueError naming the type when it does not fit."""
         ros = self.types.ros
         try:
-            return ros.encode(type_name, to_message(ros, type_name, self.types.payload(type_name, value)))
+            return ros.encode(type_name, to_message(ros, type_name, self.types.payload(type_name, plain(value))))
         except RosTypeError as error:
             raise ValueError(f"not a {type_name}: {error}") from error
 
