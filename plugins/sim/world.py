@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -134,6 +134,8 @@ class World:
         """The print each object wearing a texture skin wears, by object name (D145)."""
         self.torques: dict[tuple[int, int], float] = {}
         """Joint torques held across steps (effort-mode joints), by (body, joint)."""
+        self.hooks: list[Callable[[World], None]] = []
+        """Called after each advance (:meth:`step`): a scenario's disturbances (D178) fire there."""
         cid = self.client
         p.resetSimulation(physicsClientId=cid)
         p.setPhysicsEngineParameter(
@@ -246,7 +248,7 @@ class World:
     # ------------------------------------------------------------------ time
 
     def step(self, count: int = 1) -> None:
-        """Advance the physics by ``count`` fixed steps."""
+        """Advance the physics by ``count`` fixed steps, then call the :attr:`hooks`."""
         for _ in range(count):
             # pybullet applies a torque-control command for one step only: re-apply the held ones
             for (body, joint), torque in self.torques.items():
@@ -254,6 +256,9 @@ class World:
             p.stepSimulation(physicsClientId=self.client)
         self.steps += count
         self.time = self.steps * self.time_step
+        if count > 0:
+            for hook in self.hooks:
+                hook(self)
 
     def run_until(self, time: float) -> int:
         """Step while a whole step fits before ``time`` (simulated seconds); returns the steps taken."""
