@@ -19,16 +19,19 @@ scenario: the world server and its render workers build it alike.
 
 from __future__ import annotations
 
+import json
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import pybullet as p
 
 from .devices import SimWorld
 from .plan import WorldPlan
-from .scenario import Action, Condition, Event, Scenario, ScenarioError, Token, parse
+from .scenario import Action, Condition, Event, Scenario, ScenarioError, Token, parse, read
 from .world import World
 
 BOX_MASS = 30.0
@@ -204,3 +207,38 @@ class DisturbedPlan(WorldPlan):
     def __getstate__(self) -> dict[str, Any]:
         """What a render worker receives: the plan without the server's bound disturbances."""
         return {**self.__dict__, "installed": None}
+
+
+ENV_SCENARIO = "CKM_SIM_SCENARIO"
+"""The scenario file a run's world server applies (``ckm-bench mission --scenario`` sets it)."""
+
+
+def disturbed(plan: WorldPlan, path: str | Path) -> DisturbedPlan:
+    """``plan`` carrying the scenario file ``path``; a :class:`ScenarioError` if it is unreadable or malformed."""
+    scenario = read(path)
+    return DisturbedPlan.around(plan, scenario, Path(path).read_text())
+
+
+def fired(plan: WorldPlan) -> list[dict[str, Any]]:
+    """The events a plan's world has fired so far (none without a scenario)."""
+    if isinstance(plan, DisturbedPlan) and plan.installed is not None:
+        return [event.to_dict() for event in plan.installed.fired]
+    return []
+
+
+def record_into(ready: Path | None, log: logging.Logger) -> Callable[[Fired], None]:
+    """What a world server does when an event fires: log it and rewrite the run's
+    ``sim-disturbances.json`` beside its ``ready`` file (every event fired so far: a killed run keeps them)."""
+    path = None if ready is None else ready.with_name(ready.name.replace("sim-server", "sim-disturbances"))
+    done: list[dict[str, Any]] = []
+
+    def on_fire(event: Fired) -> None:
+        done.append(event.to_dict())
+        log.warning("disturbance at %.2f s (scenario line %d): %s; %s now at %s", event.time, event.line, event.text,
+                    event.body, [round(v, 3) for v in event.position])  # fmt: skip
+        if path is not None:
+            temporary = path.with_suffix(".tmp")
+            temporary.write_text(json.dumps(done, indent=1))
+            temporary.replace(path)
+
+    return on_fire

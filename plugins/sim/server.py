@@ -19,6 +19,9 @@ process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`S
 answered only if it fails); ``state`` (time, steps, robots' true
 planar poses); ``ping``. A bad request (malformed, unknown op, handle, body, joint, link) is
 answered ``{"error": …, "type": …}`` naming the channel; it never stops the server.
+``--scenario FILE`` (default ``$CKM_SIM_SCENARIO``) disturbs the world as the run goes
+(:mod:`plugins.sim.disturbances`, D178): each fired event is logged and kept in the run's
+``sim-disturbances.json`` and ``sim-final.json``; a bad scenario stops the server at start (exit 1).
 """
 
 from __future__ import annotations
@@ -47,8 +50,10 @@ from runtime.kernel.interfaces import ParamError
 
 from .client import ENV_KEY, no_delay
 from .devices import ChannelDevice, SimWorld, Spec
+from .disturbances import ENV_SCENARIO, DisturbedPlan, disturbed, fired, record_into
 from .plan import WorldPlan
 from .render import RenderWorker, job_of
+from .scenario import ScenarioError
 from .sensors import Frame
 from .serving import LARGE, Client, Flight, frame_reply
 
@@ -344,6 +349,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: any free one)")
     parser.add_argument("--render-workers", type=int, default=RENDER_WORKERS,
                         help=f"render worker processes (default {RENDER_WORKERS}; 0: render in the physics thread)")
+    parser.add_argument("--scenario", default=os.environ.get(ENV_SCENARIO) or None,
+                        help=f"disturb the world as this scenario file says (default: ${ENV_SCENARIO})")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
@@ -357,7 +364,9 @@ def main(argv: list[str] | None = None) -> int:
         system: System = load(args.config)
         nodes = [n for n in system.nodes if args.node is None or n.name in args.node]
         plan = WorldPlan.of(nodes)
-    except ConfigError as error:
+        if plan is not None and args.scenario:
+            plan = disturbed(plan, args.scenario)
+    except (ConfigError, ScenarioError) as error:
         print(error, file=sys.stderr)
         return 1
     if plan is None:
@@ -372,7 +381,15 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, on_signal)
     started = time.perf_counter()
     workers = [RenderWorker(plan) for _ in range(max(0, args.render_workers))]  # build their mirrors meanwhile
-    sim = plan.build()
+    try:
+        sim = plan.build()
+    except ScenarioError as error:  # a name the world does not have: said before anyone connects
+        print(error, file=sys.stderr)
+        for worker in workers:
+            worker.close()
+        return 1
+    if isinstance(plan, DisturbedPlan) and plan.installed is not None:
+        plan.installed.on_fire = record_into(args.ready, LOG)
     renderers = [worker for worker in workers if worker.await_ready()]
     if len(renderers) < len(workers):
         LOG.error("%d of %d render workers did not start", len(workers) - len(renderers), len(workers))
@@ -382,15 +399,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.parent is not None:
         threading.Thread(target=_watch_parent, args=(args.parent, stop), daemon=True).start()
     if args.ready is not None:
-        record = {"address": server.address, "pid": os.getpid(), "world": plan.world, "robots": list(plan.bodies)}
+        ready = {"address": server.address, "pid": os.getpid(), "world": plan.world, "robots": list(plan.bodies),
+                 "scenario": args.scenario}  # fmt: skip
         temporary = args.ready.with_suffix(".tmp")
-        temporary.write_text(json.dumps(record))
+        temporary.write_text(json.dumps(ready))
         temporary.replace(args.ready)  # atomic: a reader never sees half of it
     try:
         server.serve(stop)
     finally:
         server.close()
-        final = {"time": sim.world.time, "positions": sim.world.movable_positions()}
+        final = {"time": sim.world.time, "positions": sim.world.movable_positions(), "scenario": args.scenario,
+                 "disturbances": fired(plan)}  # fmt: skip
         if args.ready is not None:  # the run's evidence of what the robots did to the world (the report reads it)
             args.ready.with_name(args.ready.name.replace("sim-server", "sim-final")).write_text(json.dumps(final))
         LOG.info("stopped after %d requests (%d refused); at %.1f s: %s", server.requests, server.errors,
