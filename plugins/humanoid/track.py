@@ -44,7 +44,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbers
+from runtime.verification.manifest import MAPPING, Entries, P, Params, Ports, fixed_numbers
 
 from .head import HeadModel, map_frame, on_plane
 
@@ -82,7 +82,8 @@ class PanTiltTrack(ProcessingPlugin):
         P("targetTexture", "", "Texture of the object to track."),
         P("minReliability", 0.0, "Objects less reliable than this are ignored.", min=0.0, max=1.0),
         P("environment", "", "Environment XML file (relative to the configuration file) giving the objects' heights."),
-        P("heights", "", "Object centre heights: 'name: z; …' (win over the environment's).", unit="m"),
+        P("heights", "", "Object centre heights (win over the environment's).", unit="m",
+          entries=Entries("z", numbers=True)),
         P("planeHeight", 0.0, "Height of the plane met by the ray of an object of unknown height.", unit="m"),
     )
 
@@ -94,12 +95,7 @@ class PanTiltTrack(ProcessingPlugin):
         for axis, (low, high) in zip(("pan", "tilt"), self.limits, strict=True):
             if not low < high:
                 raise ParamError(f"{owner}: parameter '{axis}Min' = {low} must be less than '{axis}Max' = {high}")
-        self.heights: dict[str, float] = {}
-        for entry in filter(None, (e.strip() for e in v["heights"].split(";"))):
-            name, sep, value = entry.partition(":")
-            if not sep or not name.strip():
-                raise ParamError(f"{owner}: parameter 'heights': {entry!r} is not 'name: z'")
-            self.heights[name.strip()] = fixed_numbers(value, 1, f"heights ({name.strip()})", owner)[0]
+        self.heights: dict[str, float] = {name: z for name, (z,) in v["heights"].items()}
         base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
         model = str(v["model"])
         self.model_path = base / model if Path(model).suffix else MODELS / f"{model}.urdf"

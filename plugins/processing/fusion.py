@@ -51,16 +51,26 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, Entries, P, Params, Ports
 
 from .cameras import XTION, Camera
-from .fusion_model import Observation, entries, fused_object, number, numbers, reinforce, share_at_bound
+from .fusion_model import Observation, fused_object, number, reinforce, share_at_bound
 from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
-from .placement import Placement
+from .placement import BASE, MOUNT, Placement
 
 __all__ = ["FeatureFusion", "Observation", "reinforce", "share_at_bound"]
 
 KINDS = ("line", "point")
+KIND = Entries("line|point", choices=KINDS)
+"""``inputs``: each input's feature kind (eq. 6.32)."""
+POSE = Entries("x y z roll pitch yaw", 6, numbers=True, of="inputs", noun="an input")
+"""``poses``: a sensor's optical frame in the common frame (m, rad)."""
+CAMERA = Entries("fx fy cx cy width height", 6, numbers=True, of="inputs", noun="an input")
+"""``cameras``: a line input's intrinsics at its calibration size (px)."""
+SIGMA = Entries("σ", numbers=True, above=0.0, of="inputs", noun="an input")
+"""``sigmas``: an input's own uncertainty."""
+OBJECT = Entries("a shape and maybe a texture", 1, 2)
+"""``objects``: a catalog name's shape and, maybe, texture."""
 MAGNITUDE = {"line": "texture", "point": "shape"}
 """The magnitude γ each kind of input observes (eq. 6.32): 2D texture patterns, 3D shapes."""
 MAX_OBJECTS = 1000
@@ -95,9 +105,9 @@ class FeatureFusion(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # one recognition result per input
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind: 'name: line|point; …'."),
-        P("poses", "", "Sensor frames in the common frame: 'name: x y z roll pitch yaw; …' (default identity)."),
-        P("cameras", "", "Intrinsics of line inputs: 'name: fx fy cx cy width height; …'."),
+        P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind.", entries=KIND),
+        P("poses", "", "Sensor frames in the common frame (default identity).", entries=POSE),
+        P("cameras", "", "Intrinsics of line inputs.", entries=CAMERA),
         P("fx", XTION.fx, "Default focal length x of line inputs.", unit="px"),
         P("fy", XTION.fy, "Default focal length y of line inputs.", unit="px"),
         P("cx", XTION.cx, "Default principal point x.", unit="px"),
@@ -106,15 +116,15 @@ class FeatureFusion(ProcessingPlugin):
         P("calibrationHeight", XTION.height, "Image height the default intrinsics are given for.", unit="px"),
         P("lineSigma", 0.01, "Angular uncertainty of a line (2D) observation.", unit="rad"),
         P("pointSigma", 0.03, "Positional uncertainty of a point (3D) observation.", unit="m"),
-        P("sigmas", "", "Per-input uncertainties: 'name: σ; …'."),
+        P("sigmas", "", "Per-input uncertainties (rad for a line, m for a point).", entries=SIGMA),
         P("dThreshold", 3.0, "Association distance threshold of eq. 6.38."),
         P("minReliability", 0.0, "Observations below this reliability (r_th of eq. 6.31) are ignored."),
         P("minRange", 0.3, "Nearest feature along a ray.", unit="m"),
-        P("objects", "", "Known objects: 'name: shape [texture]; …' (win over the environment's)."),
+        P("objects", "", "Known objects (win over the environment's).", entries=OBJECT),
         P("environment", "", "Environment XML file, relative to the configuration file, read in setup()."),
         P("maxSensors", 8, "Most observations fused into one object (Table 7.1 Max_sensors).", min=1),
-        P("mounts", "", "Inputs on a robot: 'name: MODEL LINK; …' (URDF, sensor link): the frame is the map."),
-        P("bases", "", "Fixed map poses of mounted inputs' robots: 'name: x y yaw; …' (others follow poseInput)."),
+        P("mounts", "", "Inputs on a robot (URDF, sensor link): the frame is the map.", entries=MOUNT),
+        P("bases", "", "Fixed map poses of mounted inputs' robots (others follow poseInput).", entries=BASE),
         P("poseInput", "pose", "The input carrying the moving robot's PoseEstimate in the map."),
         P("headInput", "head", "The input carrying the head angles {pan, tilt}."),
         P("headJoints", "HeadYaw HeadPitch", "The URDF joints the head input's pan and tilt drive."),
@@ -134,34 +144,22 @@ class FeatureFusion(ProcessingPlugin):
         if not 0 <= p["minReliability"] <= 1:
             raise ParamError(f"{owner}: parameter 'minReliability' = {p['minReliability']} is not in [0, 1]")
         self.max_sensors = self._max_sensors(p["maxSensors"], "parameter 'maxSensors'")
-        self.kinds: dict[str, str] = {}
-        for name, values in entries(p["inputs"], "inputs", owner).items():
-            if len(values) != 1 or values[0] not in KINDS:
-                raise ParamError(f"{owner}: parameter 'inputs' for {name!r} must be 'line' or 'point', got {values}")
-            self.kinds[name] = values[0]
+        self.kinds: dict[str, str] = {name: values[0] for name, values in p["inputs"].items()}
         default = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
         self.cameras = {name: default for name, kind in self.kinds.items() if kind == "line"}
-        for name, values in self._declared("cameras", "line").items():
-            fx, fy, cx, cy, width, height = numbers(values, 6, "cameras", name, owner)
+        for name, (fx, fy, cx, cy, width, height) in p["cameras"].items():
+            if self.kinds[name] != "line":
+                raise ParamError(f"{owner}: parameter 'cameras' names {name!r}, not a line input of 'inputs'")
             if min(fx, fy, width, height) <= 0 or width != int(width) or height != int(height):
                 raise ParamError(f"{owner}: parameter 'cameras' for {name!r} needs fx, fy > 0 and a whole size")
             self.cameras[name] = Camera(fx, fy, cx, cy, int(width), int(height))
         self.sigmas = {name: p[f"{kind}Sigma"] for name, kind in self.kinds.items()}
-        for name, values in self._declared("sigmas").items():
-            (sigma,) = numbers(values, 1, "sigmas", name, owner)
-            if not sigma > 0:
-                raise ParamError(f"{owner}: parameter 'sigmas' for {name!r} = {sigma} must be greater than 0")
-            self.sigmas[name] = sigma
-        self.poses: dict[str, Pose] = {
-            name: Pose.from_xyzrpy(*numbers(values, 6, "poses", name, owner))
-            for name, values in self._declared("poses").items()
-        }
+        self.sigmas |= {name: sigma for name, (sigma,) in p["sigmas"].items()}
+        self.poses: dict[str, Pose] = {name: Pose.from_xyzrpy(*values) for name, values in p["poses"].items()}
         """Sensor poses by input (missing: identity); the hook for live poses, see ``sensor_pose``."""
-        self.catalog: dict[str, tuple[str, str | None]] = {}
-        for name, values in entries(p["objects"], "objects", owner).items():
-            if len(values) not in (1, 2):
-                raise ParamError(f"{owner}: parameter 'objects' for {name!r} needs a shape and maybe a texture")
-            self.catalog[name] = (values[0], values[1] if len(values) == 2 else None)
+        self.catalog: dict[str, tuple[str, str | None]] = {
+            name: (values[0], values[1] if len(values) == 2 else None) for name, values in p["objects"].items()
+        }
         base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
         self.environment = base / p["environment"] if p["environment"] else None
         self._loaded = self.environment is None
@@ -172,14 +170,6 @@ class FeatureFusion(ProcessingPlugin):
         self.frame = "map" if self.placement.active else "sensor"
         """The common frame: the map when inputs are mounted on robots, else the sensors' (``poses``)."""
         self.unplaced = 0
-
-    def _declared(self, param: str, kind: str | None = None) -> dict[str, list[str]]:
-        found = entries(self.params[param], param, self.owner)
-        for name in found:
-            if name not in self.kinds or (kind is not None and self.kinds[name] != kind):
-                wanted = f"a {kind} input" if kind else "an input"
-                raise ParamError(f"{self.owner}: parameter {param!r} names {name!r}, not {wanted} of 'inputs'")
-        return found
 
     def _max_sensors(self, value: Any, where: str) -> int:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value) or value < 1:

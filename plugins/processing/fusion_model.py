@@ -4,7 +4,10 @@
 - :func:`reinforce`: eq. 6.41's reinforcement of the reliability by one matched observation;
 - :func:`share_at_bound`: how many fused reliabilities sit at the upper bound;
 - :func:`fused_object`: f̂ and r̂ of eq. 6.39 as the service's output record;
-- the per-input Param mini-language (``"name: v1 v2; name: v…"``) of the fusion's Params.
+- :func:`number`: one finite number of an input message.
+
+The per-input Params (``"name: v1 v2; name: v…"``) are declared with
+:class:`runtime.verification.entries.Entries` and reach the plugin parsed (D184).
 """
 
 from __future__ import annotations
@@ -15,8 +18,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
-from runtime.kernel.interfaces import ParamError
 
 from .geometry import Geometry, Point
 
@@ -32,30 +33,6 @@ class Observation:
     geometry: Geometry
     magnitude: str
     knowledge: dict[str, str] = field(default_factory=dict)
-
-
-def entries(text: str, param: str, owner: str) -> dict[str, list[str]]:
-    """``"name: v1 v2; name: v…"`` as {name: [values]} (the per-input Params)."""
-    found: dict[str, list[str]] = {}
-    for entry in (e.strip() for e in text.split(";")):
-        if not entry:
-            continue
-        name, colon, values = entry.partition(":")
-        if not colon or not name.strip() or name.strip() in found:
-            raise ParamError(f"{owner}: parameter {param!r} entry {entry!r} is not 'name: values' with a new name")
-        found[name.strip()] = values.split()
-    return found
-
-
-def numbers(values: list[str], count: int, param: str, name: str, owner: str) -> list[float]:
-    """``count`` finite numbers of one Param entry, or a ParamError naming the Param and entry."""
-    try:
-        found = [float(v) for v in values]
-    except ValueError:
-        found = []
-    if len(found) != count or not all(math.isfinite(v) for v in found):
-        raise ParamError(f"{owner}: parameter {param!r} for {name!r} needs {count} finite numbers, got {values}")
-    return found
 
 
 def number(value: Any, bad: Callable[[str, str], ValueError], where: str) -> float:

@@ -9,11 +9,12 @@ composes that base pose with the mount at the head angles last reported (the ``h
 ``headJoints``). An observation whose sensor pose is not known yet (no pose estimate, no head
 state) cannot be placed: it is left out and counted (the service's ``unplaced`` measure).
 
-Params (owned by ``plugin.feature-fusion``, parsed here): ``mounts`` (``"input: MODEL LINK; …"``,
-MODEL a shipped robot model name or a URDF file relative to the configuration file), ``bases``
-(``"input: x y yaw; …"``, a fixed base pose in the map; mounted inputs without one follow the
-pose input), ``poseInput``, ``headInput`` (the names of those two inputs), ``headJoints`` (the
-URDF joints the head message's pan and tilt drive).
+Params (owned by ``plugin.feature-fusion``, declared here: :data:`MOUNT`, :data:`BASE`, read by
+``read_params``): ``mounts`` (``"input: MODEL LINK; …"``, MODEL a shipped robot model name or a
+URDF file relative to the configuration file), ``bases`` (``"input: x y yaw; …"``, a fixed base
+pose in the map; mounted inputs without one follow the pose input), ``poseInput``, ``headInput``
+(the names of those two inputs), ``headJoints`` (the URDF joints the head message's pan and tilt
+drive).
 """
 
 from __future__ import annotations
@@ -24,10 +25,16 @@ from pathlib import Path
 from typing import Any
 
 from runtime.kernel.interfaces import ParamError
+from runtime.verification.manifest import Entries
 
-from .fusion_model import entries, number, numbers
+from .fusion_model import number
 from .geometry import Pose
 from .mounts import Mount, compose, model_path, planar, read_mount
+
+MOUNT = Entries("a robot model and a link", 2, of="inputs", noun="an input")
+"""``mounts``: an input's robot (a shipped model name or a URDF file) and its sensor's link."""
+BASE = Entries("x y yaw", 3, numbers=True, of="inputs", noun="an input")
+"""``bases``: the fixed map pose (m, m, rad) of a mounted input's robot."""
 
 
 class Placement:
@@ -47,31 +54,22 @@ class Placement:
             raise ParamError(f"{owner}: parameter 'headJoints' needs the pan and the tilt joint names, got {joints}")
         self.head_joints = (joints[0], joints[1])
         self.mounts: dict[str, Mount] = {}
-        for name, values in self._declared(params, "mounts", inputs).items():
-            if len(values) != 2:
-                raise ParamError(f"{owner}: parameter 'mounts' for {name!r} needs a robot model and a link")
+        for name, (model, link) in params["mounts"].items():
             try:
-                self.mounts[name] = read_mount(model_path(values[0], base), values[1])
+                self.mounts[name] = read_mount(model_path(model, base), link)
             except ValueError as exc:
                 raise ParamError(f"{owner}: parameter 'mounts' for {name!r}: {exc}") from None
         self.bases: dict[str, Pose] = {}
-        for name, values in self._declared(params, "bases", inputs).items():
+        for name, values in params["bases"].items():
             if name not in self.mounts:
                 raise ParamError(f"{owner}: parameter 'bases' names {name!r}, which has no entry in 'mounts'")
-            self.bases[name] = planar(*numbers(values, 3, "bases", name, owner))
+            self.bases[name] = planar(*values)
         self.robot: Pose | None = None
         """The moving robot's latest base pose in the map (from the pose input)."""
         self.observer: dict[str, float] | None = None
         """That pose as ``{"x", "y", "yaw"}`` (a Pose2D): carried with the fused objects (D172)."""
         self.angles: dict[str, float] | None = None
         """The head joints' latest angles (from the head input)."""
-
-    def _declared(self, params: Mapping[str, Any], param: str, inputs: Mapping[str, str]) -> dict[str, list[str]]:
-        found = entries(params[param], param, self.owner)
-        for name in found:
-            if name not in inputs:
-                raise ParamError(f"{self.owner}: parameter {param!r} names {name!r}, not an input of 'inputs'")
-        return found
 
     @property
     def active(self) -> bool:

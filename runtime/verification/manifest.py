@@ -31,6 +31,8 @@ from typing import Any
 
 from ckmconf.model import Param, params_dict
 
+from .entries import Entries, ParamError, Parsed
+
 NUMBER = "number"
 """One number (a float): what sensors of size-1 channels and controllers write, actuators take."""
 NUMBERS = "numbers"
@@ -44,10 +46,6 @@ ANY = "any"
 
 ParamType = type[bool] | type[int] | type[float] | type[str]
 _TYPE_NAMES: dict[type, str] = {bool: "bool", int: "int", float: "float", str: "string"}
-
-
-class ParamError(ValueError):
-    """A Param a kind cannot use: unknown, missing, of the wrong type or out of range."""
 
 
 class _Required:
@@ -71,7 +69,9 @@ class P:
     the kind computes from its element (say so in ``doc``).
 
     ``min``/``max`` bound the value inclusively, ``above``/``below`` strictly; ``choices`` lists
-    the accepted values. The type is the default's unless ``type`` is given.
+    the accepted values. The type is the default's unless ``type`` is given. ``entries`` declares a
+    per-name string value (``"name: v1 v2; …"``, :class:`~runtime.verification.entries.Entries`):
+    the kind then receives it parsed, ``{name: (values…)}``.
     """
 
     name: str
@@ -84,6 +84,7 @@ class P:
     above: float | None = None
     below: float | None = None
     choices: tuple[Any, ...] = ()
+    entries: Entries | None = None
 
     def __post_init__(self) -> None:
         if self.type is None:
@@ -106,6 +107,8 @@ class P:
         """The accepted values in words ("" when any value of the type is)."""
         if self.choices:
             return "one of " + ", ".join(str(c) for c in self.choices)
+        if self.entries is not None:
+            return self.entries.syntax()
         low = high = ""
         if self.min is not None or self.above is not None:
             low = f"[{_number(self.min)}" if self.min is not None else f"({_number(self.above or 0.0)}"
@@ -128,7 +131,9 @@ class P:
         return repr(self.default) if isinstance(self.default, str) else str(self.default)
 
     def convert(self, text: str) -> Any:
-        """The typed value of ``text``; ParamError saying why it is not acceptable."""
+        """The typed value of ``text`` (a per-name value parsed); ParamError saying why it is not acceptable."""
+        if self.entries is not None:
+            return self.entries.parse(text, self.name)
         try:
             if self.type is bool:
                 if text not in ("true", "false", "1", "0"):
@@ -268,12 +273,34 @@ def read_params(
             try:
                 values[name] = entry.convert(given[name])
             except ParamError as exc:
-                raise ParamError(f"{owner}: {exc}") from None
+                raise ParamError(f"{owner}: {exc}", exc.offset) from None
         elif entry.required:
             raise ParamError(f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})")
         else:
-            values[name] = (defaults or {}).get(name, entry.default)
+            values[name] = defaulted(entry, (defaults or {}).get(name, entry.default))
+    for _, problem in strays(declared, values, given):
+        raise ParamError(f"{owner}: {problem}", problem.offset)
     return values
+
+
+def defaulted(entry: P, value: Any) -> Any:
+    """A parameter's default as the kind receives it (a per-name default parsed like a given value)."""
+    return entry.entries.parse(value, entry.name) if entry.entries is not None and isinstance(value, str) else value
+
+
+def strays(declared: Params, values: Mapping[str, Any], given: Mapping[str, str]) -> Iterator[tuple[str, ParamError]]:
+    """(Param name, problem) for each per-name entry naming what its ``of`` Param does not hold.
+
+    Args:
+        declared: the kind's parameters.
+        values: every parameter's value, parsed (given or defaulted).
+        given: the text of the given ones, to place each problem at its entry.
+    """
+    for name, entry in declared.specs.items():
+        value = values.get(name)
+        if entry.entries is not None and isinstance(value, dict):
+            for problem in entry.entries.strays(name, value, given.get(name), values):
+                yield name, problem
 
 
 __all__ = [
@@ -283,14 +310,18 @@ __all__ = [
     "NUMBER",
     "NUMBERS",
     "REQUIRED",
+    "Entries",
     "P",
     "ParamError",
     "Params",
+    "Parsed",
     "Ports",
     "as_params",
+    "defaulted",
     "params_of",
     "ports_of",
     "read_params",
+    "strays",
 ]
 
 
