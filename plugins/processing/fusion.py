@@ -69,7 +69,7 @@ CAMERA = Entries("fx fy cx cy width height", 6, numbers=True, of="inputs", noun=
 """``cameras``: a line input's intrinsics at its calibration size (px)."""
 SIGMA = Entries("σ", numbers=True, above=0.0, of="inputs", noun="an input")
 """``sigmas``: an input's own uncertainty."""
-OBJECT = Entries("a shape and maybe a texture", 1, 2)
+OBJECT = Entries("shape [texture]", 1, 2, need="a shape and maybe a texture")
 """``objects``: a catalog name's shape and, maybe, texture."""
 MAGNITUDE = {"line": "texture", "point": "shape"}
 """The magnitude γ each kind of input observes (eq. 6.32): 2D texture patterns, 3D shapes."""

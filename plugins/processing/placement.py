@@ -31,7 +31,7 @@ from .fusion_model import number
 from .geometry import Pose
 from .mounts import Mount, compose, model_path, planar, read_mount
 
-MOUNT = Entries("a robot model and a link", 2, of="inputs", noun="an input")
+MOUNT = Entries("MODEL LINK", 2, of="inputs", noun="an input", need="a robot model and a link")
 """``mounts``: an input's robot (a shipped model name or a URDF file) and its sensor's link."""
 BASE = Entries("x y yaw", 3, numbers=True, of="inputs", noun="an input")
 """``bases``: the fixed map pose (m, m, rad) of a mounted input's robot."""

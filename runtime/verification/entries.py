@@ -39,7 +39,7 @@ class Entries:
     """The syntax of a per-name Param value, ``"name: v1 v2; name: v…"``.
 
     Args:
-        form: each entry's values in words, for messages and the reference (``"x y z roll pitch yaw"``).
+        form: each entry's values as the reference shows them (``"x y z roll pitch yaw"``).
         count: how many values an entry has (at least, with ``most``).
         most: the most values an entry may have (None: exactly ``count``).
         numbers: the values are finite numbers (floats), else words.
@@ -47,6 +47,7 @@ class Entries:
         above: every number must be greater than this.
         of: the Param whose entry names this one's names must be (``"inputs"``).
         noun: what ``of``'s entries are, with its article, for messages (``"an input"``).
+        need: what an entry of words needs, for messages (default: ``form``).
     """
 
     form: str
@@ -57,6 +58,7 @@ class Entries:
     above: float | None = None
     of: str | None = None
     noun: str = "an entry"
+    need: str = ""
 
     def syntax(self) -> str:
         """The value's syntax as the reference shows it: ``'name: line|point; …'``."""
@@ -82,7 +84,7 @@ class Entries:
             return tuple(words)
         if not self.numbers:
             if not self.count <= len(words) <= most:
-                raise ParamError(f"{where} needs {self.form}", start)
+                raise ParamError(f"{where} needs {self.need or self.form}", start)
             return tuple(words)
         try:
             values = tuple(float(w) for w in words)
