@@ -25,6 +25,9 @@ analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link
 bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
                         for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it
 out, read               the last raw value written (as ``hardware.loopback``)
+out, joint + grasp      a gripper: ``joint`` and ``mirror`` are its fingers (closing towards their
+                        lower limit); an object both touch while closing is held to link ``grasp``
+                        until a command opens them or ``holdForce`` (N) is exceeded (D87, D187)
 ======================  ===========================================================================
 
 Time (decision D88): the world is a :class:`SimulationHook` of the channel's scope; each read or
@@ -67,6 +70,8 @@ _SPEC = Params(
     P("joint", "", "Joint the channel reads or drives."),
     P("joints", "", "Space-separated joints read together (bus in)."),
     P("mirror", "", "A second joint driven like 'joint' (out channels)."),
+    P("grasp", "", "Gripper channel: the link an object both fingers close on is held to (D87, D187)."),
+    P("holdForce", 30.0, "Force beyond which a held object slips out of the grasp.", unit="N", above=0.0),
     P("link", "base_link", "Link carrying the sensor."),
     P("sensor", "", "Sensor device.", choices=SENSORS),
     P("mode", "position", "Joint quantity.", choices=("position", "velocity", "effort")),
@@ -110,6 +115,9 @@ class SimBackend(Backend):
             raise ParamError(f"{self.owner}: give Param 'sensor' or 'joint'/'joints' to choose the device")
         if channel.direction == "out" and not v["joint"]:
             raise ParamError(f"{self.owner}: an out channel drives a joint: give Param 'joint'")
+        if v["grasp"] and (channel.direction != "out" or v["mode"] != "position" or not v["mirror"]):
+            raise ParamError(f"{self.owner}: Param 'grasp' makes a gripper: only for an out channel in mode "
+                             "'position' whose 'joint' and 'mirror' are its two fingers")
         if v["initial"]:
             if channel.direction != "out" or v["mode"] != "position":
                 raise ParamError(f"{self.owner}: Param 'initial' places a joint: only for an out channel in mode "

@@ -24,6 +24,7 @@ from ckmconf.model import Environment
 from plugins.hardware.simulation import Clock, SimulationHook
 from plugins.processing.textures import read_model
 
+from .grasp import ChannelGrasp
 from .robots import Robot
 from .sensors import Bumper, Camera, Frame, Imu, Lidar
 from .world import World
@@ -130,6 +131,9 @@ class ChannelDevice:
         self.robot = sim.robot(v["body"], v.get("model", ""), v.get("pose", ""))
         self.device: Any = self._make()
         self._rng = np.random.default_rng(v.get("seed", 0))
+        self.grasp: ChannelGrasp | None = None
+        if v.get("grasp"):  # a gripper channel: its fingers hold what they close on (D187)
+            self.grasp = ChannelGrasp(self.robot, v["joint"], v["mirror"], v["grasp"], v["holdForce"])
         if spec.direction == "out" and isinstance(v.get("initial"), int | float):
             self.place(float(v["initial"]))
 
@@ -219,6 +223,8 @@ class ChannelDevice:
                 self.robot.command(joint, "velocity" if velocity else "effort", target)
             else:
                 self.robot.command(joint, v["mode"], (raw - v["offset"]) * v["scale"])
+        if self.grasp is not None:
+            self.grasp.command((raw - v["offset"]) * v["scale"])
 
 
 def to_value(sample: Sample) -> float | tuple[float, ...]:

@@ -1,6 +1,9 @@
 """The gripper and its grasp (decision D87): the fingers close under a force limit, and a fixed
 constraint between the wrist and the object is created only while both fingers touch the object;
-the constraint's force limit lets a too-heavy or snagged object slip out, and opening releases it."""
+the constraint's force limit lets a too-heavy or snagged object slip out, and opening releases it.
+
+:class:`ChannelGrasp` gives a ``sim`` gripper channel (Param ``grasp``) that grasp: the channel
+drives the fingers, the grasp follows its commands and the world's steps (D187)."""
 
 from __future__ import annotations
 
@@ -76,3 +79,33 @@ class Gripper:
         if self._constraint is not None:
             p.removeConstraint(self._constraint, physicsClientId=self.robot.world.client)
         self._constraint, self.held = None, None
+
+
+class ChannelGrasp:
+    """The grasp of a ``sim`` gripper channel: its ``joint`` and ``mirror`` fingers close towards
+    their lower limit; a command below where the fingers stand is closing (an object is caught
+    when both touch it, checked after each advance of the world), one above them opens and lets the
+    object go (D87, D187)."""
+
+    def __init__(self, robot: Robot, joint: str, mirror: str, link: str, hold_force: float) -> None:
+        self.gripper = Gripper(robot, left=joint, right=mirror, wrist=link, hold_force=hold_force)
+        self.closing = False
+        robot.world.hooks.append(self._after_advance)
+
+    def command(self, target: float) -> None:
+        """The channel drove the fingers to ``target`` (joint units)."""
+        position = self.gripper.robot.joint_state(self.gripper.fingers[0])[0]
+        if target > position + 1e-4:  # opening: past where the fingers stand (on the object or not)
+            self.closing = False
+            self.gripper.release()
+        else:
+            self.closing = True
+
+    def _after_advance(self, _world: object) -> None:
+        if self.closing:
+            self.gripper.update()
+
+    @property
+    def held(self) -> int | None:
+        """The body held now, if any."""
+        return self.gripper.held

@@ -5,8 +5,9 @@ sensor publishes a JointState without names at 20 Hz, the joint-trajectory contr
 ``controller.joint-trajectory``, nodes.xml's Params) plays the plugin's trajectories at 60 Hz, and
 its commands drive the joints in position mode (the gripper's on both fingers, as the ``mirror``
 Param does, at the URDF's effort limit as ``hardware.sim`` does). The plugin sees only its input messages;
-the physics is stepped here, in simulated time, and :class:`plugins.sim.grasp.Gripper` decides
-when an object is held.
+the physics is stepped here, in simulated time, and the gripper channel's grasp
+(:class:`plugins.sim.grasp.ChannelGrasp`, as ``hardware.sim`` makes it from the ``grasp`` Param)
+decides when an object is held.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.controllers.trajectory import JointTrajectory
 from plugins.manipulation.arm_poses import JOINTS, ArmPoses
-from plugins.sim.grasp import Gripper
+from plugins.sim.grasp import ChannelGrasp
 from plugins.sim.robots import DiffDriveBase, Robot
 from plugins.sim.world import World
 from runtime.resources.spt import Context
@@ -59,7 +60,7 @@ class ArmLoop:
         self.controller = controller()
         self.joints = [robot.joint(name) for name in JOINTS.split()]
         self.mirror = robot.joint("gripper_right_joint")
-        self.gripper = Gripper(robot)
+        self.gripper = ChannelGrasp(robot, "gripper_joint", "gripper_right_joint", "arm_wrist_flex_link", 30.0)
         DiffDriveBase(robot)  # the wheels held at rest (braked), as the Kobuki's loops do when idle
         self.goal: dict[str, Any] | None = None
         self.trajectory: Any = None
@@ -89,14 +90,14 @@ class ArmLoop:
             self.robot.command(joint, "position", float(command))
         for finger in (self.joints[4], self.mirror):  # at the URDF's effort limit, as hardware.sim drives them
             self.robot.command(finger, "position", float(commands[4]))
+        self.gripper.command(float(commands[4]))
 
     def run(self, seconds: float) -> None:
         """Advance the loop by ``seconds`` of simulated time."""
         for _ in range(round(seconds * 240 / SERVICE_STEPS)):
             for _ in range(SERVICE_STEPS // CONTROL_STEPS):
                 self.control()
-                self.world.step(CONTROL_STEPS)
-                self.gripper.update()
+                self.world.step(CONTROL_STEPS)  # the grasp checks its fingers after each advance
             self.service()
 
     def reach(self, goal: Mapping[str, Any], limit: float = 15.0) -> dict[str, Any]:

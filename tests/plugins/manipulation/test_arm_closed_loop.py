@@ -96,5 +96,7 @@ def test_in_the_use_case_lab_the_arm_picks_the_red_cylinder_off_the_workbench() 
                 assert loop.reach({"id": number, "group": group, "pose": name})["state"] == "reached"
             assert loop.gripper.held == cylinder
             assert lab.pose(cylinder)[0][2] - truth[2] > 0.03  # off the table top
+            assert loop.reach({"id": 6, "group": "gripper", "pose": "open"})["state"] == "reached"
+            assert loop.gripper.held is None  # opening lets it go
         finally:
             plugin.stop()

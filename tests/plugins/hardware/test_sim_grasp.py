@@ -1,0 +1,67 @@
+"""``hardware.sim`` Param ``grasp``: a gripper channel whose fingers hold what they close on (D87, D187).
+
+Without it the use case's cylinder was held by finger friction alone and slid out while the base
+drove home; with it the object both fingers touch is fixed to the wrist until a command opens them."""
+
+from __future__ import annotations
+
+import pybullet as p
+import pytest
+
+from plugins.hardware.simulation import ManualClock, PlantScope
+from runtime.kernel.interfaces import ParamError
+from tests.plugins.sim.conftest import add_box
+from tests.plugins.sim.test_backend import channel, open_all
+
+SCALE, OFFSET = 0.0051183, 511.5  # AX-12 steps, as configs/usecase/nodes.xml
+OPEN, CLOSED = OFFSET + 0.045 / SCALE, OFFSET  # the fingers' joint: 0 closed, 0.045 m open
+GRIPPER = {"joint": "gripper_joint", "mirror": "gripper_right_joint", "mode": "position", "scale": str(SCALE),
+           "offset": str(OFFSET), "body": "turtlebot"}  # fmt: skip
+
+
+def test_the_fingers_hold_what_they_close_on_until_they_open() -> None:
+    clock = ManualClock()
+    scope = PlantScope(clock, name="grasp-test")
+    (gripper,) = open_all(scope, channel("gripper", "out", "bus", 1, grasp="arm_wrist_flex_link", pose="1 1 0",
+                                         **GRIPPER))  # fmt: skip
+    gripper.write(OPEN)
+    clock.advance(1.0)
+    gripper.write(OPEN)  # a write advances the world to the clock first
+    sim, device = gripper._require()  # type: ignore[attr-defined]
+    robot, world = device.robot, sim.world
+    cid = world.client
+    tool = robot.link_pose(robot.link("gripper_tool_link"))[0]
+    part = add_box(world, tool, 0.012, [0.0, 0.6, 0.0, 1.0], mass=0.05)
+    p.resetBasePositionAndOrientation(part, tool, robot.link_pose(robot.link("gripper_tool_link"))[1],
+                                      physicsClientId=cid)  # fmt: skip
+    p.changeConstraint(p.createConstraint(part, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0], [0, 0, 0], tool,
+                                          physicsClientId=cid), maxForce=5.0, physicsClientId=cid)  # fmt: skip
+    gripper.write(CLOSED)
+    clock.advance(2.0)
+    gripper.write(CLOSED)  # the actuator repeats its command: still closing
+    assert device.grasp.held == part  # both fingers touch it: held to the wrist
+    clock.advance(0.5)
+    gripper.write(CLOSED)
+    assert device.grasp.held == part
+    gripper.write(OPEN)
+    assert device.grasp.held is None  # an opening command lets it go
+
+
+def test_without_grasp_nothing_is_held() -> None:
+    (gripper,) = open_all(PlantScope(ManualClock(), name="grasp-none"), channel("gripper", "out", "bus", 1, **GRIPPER))
+    assert gripper._require()[1].grasp is None  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize(
+    ("direction", "params", "message"),
+    [
+        ("in", {"joint": "gripper_joint", "mirror": "gripper_right_joint"}, "only for an out channel"),
+        ("out", {"joint": "gripper_joint"}, "whose 'joint' and 'mirror' are its two fingers"),
+        ("out", {"joint": "gripper_joint", "mirror": "gripper_right_joint", "mode": "velocity"}, "mode 'position'"),
+    ],
+)
+def test_a_bad_grasp_is_refused_naming_the_channel(direction: str, params: dict[str, str], message: str) -> None:
+    with pytest.raises(ParamError, match=message) as caught:
+        open_all(PlantScope(ManualClock(), name="grasp-bad"),
+                 channel("gripper", direction, "bus", 1, body="turtlebot", grasp="arm_wrist_flex_link", **params))
+    assert "sim channel 'gripper'" in str(caught.value)
