@@ -197,20 +197,20 @@ class EuclideanClustering(ProcessingPlugin):
             )
         return depth
 
+    def clustering(self) -> dict[str, Any]:
+        """The clustering Params as keyword arguments of :func:`segment` (and the tabletop's segmentation)."""
+        p = self.params
+        return {
+            "tolerance": p["tolerance"],
+            "min_points": p["minPoints"],
+            "max_range": p["maxRange"],
+            "plane_distance": p["planeDistance"],
+            "plane_angle": p["planeAngle"],
+        }
+
     def process(self, data: Any, context: Context) -> list[Cluster]:
         """The clusters of the depth image, left to right."""
-        depth = self.depth_image(data)
-        p = self.params
-        return segment(
-            depth,
-            self.camera,
-            tolerance=p["tolerance"],
-            min_points=p["minPoints"],
-            max_range=p["maxRange"],
-            plane=p["plane"],
-            plane_distance=p["planeDistance"],
-            plane_angle=p["planeAngle"],
-        )
+        return segment(self.depth_image(data), self.camera, plane=self.params["plane"], **self.clustering())
 
 
 ROUND = ("cylinder", "sphere")

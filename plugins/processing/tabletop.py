@@ -112,15 +112,4 @@ class TabletopClustering(EuclideanClustering):
 
     def process(self, data: Any, context: Context) -> list[Cluster]:
         """The clusters standing on the floor or on a table, left to right."""
-        depth = self.depth_image(data)
-        p = self.params
-        return tabletop_segment(
-            depth,
-            self.camera,
-            tolerance=p["tolerance"],
-            min_points=p["minPoints"],
-            max_range=p["maxRange"],
-            planes=p["planes"],
-            plane_distance=p["planeDistance"],
-            plane_angle=p["planeAngle"],
-        )
+        return tabletop_segment(self.depth_image(data), self.camera, planes=self.params["planes"], **self.clustering())
