@@ -13,6 +13,11 @@ time and per-state figures come from the recording (:mod:`benchmarks.mission_rep
 summary (``OUT/summary.json``, the ``--json`` line) and a box plot of each state's time per plan
 (``OUT/mission-states.png``) follow. ``--no-randomise`` runs the configuration as it is (any
 configuration with plans: the tests use ``configs/examples/plan_two_agents.xml``).
+
+``--scenario NAME`` disturbs every run on purpose — a box in the corridor, the target moved during
+the approach, the object dropped on the way home, the humanoid's process killed — and records in
+each run and in the summary what was done and whether the missions handled it as they say
+(:mod:`benchmarks.mission_scenarios`, issue K point 3).
 """
 
 from __future__ import annotations
@@ -24,13 +29,14 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import ckmconf
 from benchmarks.mission_random import Jitter, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
+from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, run_split
 from runtime.missions.recording import RunError, read_run
 from runtime.missions.report import build_report
 
@@ -93,10 +99,12 @@ def run_once(
     time_scale: float | None,
     log: Path,
     timeout: float | None = None,
+    env: Mapping[str, str] | None = None,
 ) -> tuple[int | None, float]:
     """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s).
 
-    ``timeout`` (wall seconds) defaults to ``duration / time_scale`` plus :data:`MARGIN_S`.
+    ``timeout`` (wall seconds) defaults to ``duration / time_scale`` plus :data:`MARGIN_S`; ``env``
+    is added to the run's environment (a world scenario).
     """
     command = [sys.executable, "-m", "runtime.cli", str(config), "--plan", plan, "--duration", f"{duration:g}"]
     command += ["--log-dir", str(run_dir)]
@@ -109,7 +117,8 @@ def run_once(
     with log.open("w") as out:
         out.write("$ " + " ".join(command) + "\n")
         out.flush()
-        process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+        process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                                   env={**os.environ, **(env or {})})  # fmt: skip
         try:
             code: int | None = process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -119,6 +128,20 @@ def run_once(
         except KeyboardInterrupt:  # its own session does not get the terminal's SIGINT: pass it on
             _stop(process)
             raise
+    return code, time.monotonic() - started
+
+
+def _run(
+    config: Path, plan: str, run_dir: Path, scenario: Scenario | None, duration: float, scale: float | None, logs: Path
+) -> tuple[int | None, float]:
+    """One run of the benchmark, disturbed as ``scenario`` says: split over processes to kill an agent."""
+    log = logs / f"{run_dir.name}.log"
+    if scenario is None or scenario.kill_agent is None:
+        return run_once(config, plan, run_dir, duration=duration, time_scale=scale, log=log, env=environment(scenario))
+    started = time.monotonic()
+    log.parent.mkdir(parents=True, exist_ok=True)
+    code = run_split(config, plan, run_dir, scenario, duration=duration, time_scale=scale, log=log,
+                     timeout=duration / (scale or 1.0) + MARGIN_S)  # fmt: skip
     return code, time.monotonic() - started
 
 
@@ -146,6 +169,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, default=Path("runs/bench-mission"), help="copies, runs, summary, plot")
     parser.add_argument("--no-randomise", action="store_true", help="run the configuration as it is")
     parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the sensor noise (0: none)")
+    parser.add_argument(
+        "--scenario",
+        help="disturb every run: blocked-path, moved-object, dropped-object, "
+        "lost-humanoid, or a FILE.scenario of world events (benchmarks/mission_scenarios.py)",
+    )
+    parser.add_argument("--kill-agent", help="kill the process of this plan agent in every run (a split run)")
+    parser.add_argument("--kill-after", type=float, help="simulated s after that agent's mission started (default 5)")
     return parser
 
 
@@ -163,6 +193,9 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         parser.error(f"--noise-scale must not be negative, not {args.noise_scale}")
     try:
         finals = {plan: success_finals(args.config, plan) for plan in args.plans}
+        scenario = choose(args.scenario, args.kill_agent, args.kill_after)
+        if scenario is not None:
+            check(scenario, args.config, args.plans)
     except (ckmconf.ConfigError, ValueError, OSError) as error:
         parser.error(str(error))
     scale = args.time_scale or None
@@ -177,16 +210,11 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
             config, changed = randomised.config, randomised.to_json()
         for plan in args.plans:
             name = f"{plan}-seed{seed}"
-            code, wall = run_once(
-                config,
-                plan,
-                out / "runs" / name,
-                duration=args.duration,
-                time_scale=scale,
-                log=out / "runs" / f"{name}.log",
-            )
+            code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs")
             record = collect(out / "runs" / name, code, finals[plan])
             record.update(plan=plan, seed=seed, wall_s=round(wall, 3), randomised=changed)
+            if scenario is not None:
+                judge(scenario, out / "runs" / name, record, config, finals[plan])
             results[plan].append(record)
             print(
                 f"{name}: exit {code}, {'success' if record['success'] else 'failure'}, "
@@ -199,6 +227,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         "time_scale": scale,
         "duration_s": args.duration,
         "randomised": not args.no_randomise,
+        "scenario": None if scenario is None else scenario.to_dict(),
         "plans": plans,
         "results": [r for plan in args.plans for r in results[plan]],
         "plot": str(plot(plans, out / "mission-states.png")),

@@ -111,6 +111,7 @@ def summarise(plan: str, results: Sequence[dict[str, Any]]) -> dict[str, Any]:
                 {"state": row.state, "thesis_s": round(sum(row.times), 3), "mean_s": _mean(ours), "runs": len(ours)}
             )
     wall = sum(r["wall_s"] for r in recorded)
+    disturbed = [r for r in results if r.get("disturbed")]  # a --scenario's runs it did disturb
     return {
         "plan": plan,
         "runs": runs,
@@ -122,6 +123,8 @@ def summarise(plan: str, results: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "mean_all_mission_s": _mean([r["mission_s"] for r in recorded]),
         "realtime_factor": round(sum(r["mission_s"] for r in recorded) / wall, 4) if wall > 0 else None,
         "states_from": "successful" if successes else "all",
+        "disturbed": len(disturbed),
+        "handled": sum(1 for r in disturbed if r.get("handled")),
         "states": states,
         "thesis": thesis,
     }
@@ -152,6 +155,18 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
         )
     )
     rows.append(("realtime factor", " | ".join(_num(p["realtime_factor"], 3) for p in plans)))
+    scenario = result.get("scenario")
+    if scenario:
+        kill = ""
+        if scenario["kill_agent"]:
+            kill = f", kills agent {scenario['kill_agent']} {scenario['kill_after']:g} s in"
+        rows.append(("scenario", f"{scenario['name']} (expects {scenario['expect']}{kill})"))
+        rows.append(
+            (
+                "handled as the missions say",
+                " | ".join(f"{p.get('handled', 0)}/{p.get('disturbed', 0)} disturbed runs" for p in plans),
+            )
+        )
     names: list[str] = []
     for p in plans:
         names.extend(s["name"] for s in p["states"] if s["name"] not in names)

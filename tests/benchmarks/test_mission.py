@@ -3,10 +3,12 @@ tiny real plan (``configs/examples/plan_two_agents.xml``: seconds, not the lab's
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -19,6 +21,7 @@ from plugins.sim.plan import WorldPlan
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import build_report
 from runtime.verification.verify import verify_safely
+from tests.runtime.network.conftest import private_network
 
 LAB = Path("configs/usecase/lab.xml")
 PLAN = Path("configs/examples/plan_two_agents.xml")
@@ -242,3 +245,92 @@ def test_the_lab_missions_rows_are_set_next_to_table_7_9(tmp_path: Path) -> None
     assert spot["times_s"] == pytest.approx([3.0, 5.0]) and spot["avg_performance"] == pytest.approx(0.8)
     assert spot["contribution"] == pytest.approx((3 / 44 + 5 / 61) / 2, abs=1e-5)
     assert summary["realtime_factor"] == pytest.approx((44 + 61) / 200)
+
+
+# ---------------------------------------------------------------------- --scenario (issue K point 3, D179)
+
+ROVER = Path("tests/data/plans/disturbed_rover.xml")  # a sim lidar: ckm-run starts a world server
+LOST = Path("tests/data/plans/lost_spotter.xml")  # the fetcher takes its failure branch on lost('spotter')
+
+
+def _on_private_network(config: Path, tmp_path: Path) -> Path:
+    """``config`` on a private loopback network: a split run's processes talk over it."""
+    system = ckmconf.load(config)
+    path = tmp_path / config.name
+    ckmconf.dump(dataclasses.replace(system, network=private_network()), path)
+    return path
+
+
+def _bench(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[dict[str, Any], str]:
+    assert main(["mission", "--json", "--runs", "1", "--time-scale", "0", "--no-randomise", *argv]) == 0
+    printed = capsys.readouterr().out
+    return json.loads(printed.strip().splitlines()[-1]), printed
+
+
+def test_a_world_scenario_reaches_the_runs_world_server_and_is_named_in_the_summary(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scenario = tmp_path / "crate.scenario"
+    scenario.write_text("at 0.3 add box crate 0.4 0.4 0.4 beside rover 1.0 0\n")
+    out = tmp_path / "bench"
+    argv = ["--config", str(ROVER), "--plans", "alone", "--duration", "20", "--scenario", str(scenario)]
+    result, printed = _bench([*argv, "--out", str(out)], capsys)
+    assert result["scenario"] == {"name": "crate", "world": str(scenario), "kill_agent": None, "kill_after": 5.0,
+                                  "expect": "success"}  # fmt: skip
+    (record,) = result["results"]
+    assert record["success"] and record["scenario"] == "crate" and record["killed"] is None
+    assert [(f["body"], f["line"]) for f in record["disturbances"]] == [("crate", 1)]
+    assert record["disturbed"] and record["handled"] and record["object_home"] is None  # no drop table here
+    run_dir = Path(record["run_dir"])
+    assert json.loads((run_dir / "sim-disturbances.json").read_text()) == record["disturbances"]
+    assert json.loads((run_dir / "scenario.json").read_text())["scenario"]["name"] == "crate"
+    (plan,) = result["plans"]
+    assert (plan["disturbed"], plan["handled"]) == (1, 1)
+    assert "crate (expects success)" in printed and "1/1 disturbed runs" in printed
+
+
+def test_a_killed_agent_is_reported_lost_and_the_other_takes_its_failure_branch(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = _on_private_network(LOST, tmp_path)
+    out = tmp_path / "bench"
+    argv = ["--config", str(config), "--plans", "together", "--duration", "30", "--scenario", "lost-humanoid"]
+    result, printed = _bench([*argv, "--kill-agent", "spotter", "--kill-after", "0.5", "--out", str(out)], capsys)
+    (record,) = result["results"]
+    assert record["killed"]["agent"] == "spotter" and record["killed"]["node"] == "spotter-pc"
+    assert record["outcomes"]["fetcher"] == "failed" and not record["success"]
+    assert record["lost_reported"] == ["fetcher"] and record["handled"]
+    assert result["scenario"]["name"] == "lost-humanoid" and result["scenario"]["expect"] == "failure"
+    assert "lost-humanoid (expects failure, kills agent spotter 0.5 s in)" in printed
+    logs = sorted(p.name for p in (out / "runs").glob("together-seed1.*.log"))
+    assert logs == ["together-seed1.fetcher-pc.log", "together-seed1.spotter-pc.log"]
+
+
+def test_the_examples_carrier_does_not_handle_a_lost_walker(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """plan_two_agents' carrier has no lost() branch: it waits on, and the bench says it did not cope."""
+    config = _on_private_network(PLAN, tmp_path)
+    argv = ["--config", str(config), "--plans", "fetch-together", "--duration", "8", "--kill-agent", "walker"]
+    result, _ = _bench([*argv, "--kill-after", "0.3", "--out", str(tmp_path / "bench")], capsys)
+    (record,) = result["results"]
+    assert record["killed"]["agent"] == "walker" and record["lost_reported"] == ["carrier"]
+    assert record["outcomes"]["carrier"] == "stopped" and not record["handled"]
+    assert result["plans"][0]["handled"] == 0 and result["plans"][0]["disturbed"] == 1
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--scenario", "blocked-path"], "disturbs the simulated world, but"),
+        (["--scenario", "nope"], "no scenario 'nope' (scenarios: blocked-path, moved-object, dropped-object, lost"),
+        (["--kill-agent", "nobody"], "plan fetch-together has no agent 'nobody' (agents: walker, carrier)"),
+        (["--kill-after", "2"], "--kill-after goes with --kill-agent"),
+        (["--scenario", "moved-object", "--kill-after", "2"], "scenario 'moved-object' kills no agent"),
+    ],
+)
+def test_a_scenario_that_cannot_apply_is_refused_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    with pytest.raises(SystemExit):
+        main(["mission", "--config", str(PLAN), "--plans", "fetch-together", "--out", str(tmp_path), *args])
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
