@@ -91,11 +91,14 @@ class BagData:
 
 def find_bags(run_dir: Path) -> list[Path]:
     """The bag directories of a run: the run directory itself or a folder up to two levels below
-    it holding ``metadata.yaml`` or a storage file (``.mcap``/``.db3``)."""
+    it holding ``metadata.yaml`` or a storage file (``.mcap``/``.db3``); the sqlite3 twin ``BAG-sqlite3``
+    of a bag ``BAG`` (``--record-format mcap+sqlite3``) is left out, its messages being BAG's."""
     candidates = [run_dir]
     for child in sorted(p for p in run_dir.iterdir() if p.is_dir()):
         candidates += [child, *sorted(p for p in child.iterdir() if p.is_dir())]
-    return [c for c in candidates if _is_bag(c)]
+    bags = [c for c in candidates if _is_bag(c)]
+    # --record-format mcap+sqlite3 (runtime.ros.recording): BAG-sqlite3 holds BAG's messages again
+    return [b for b in bags if not (b.name.endswith("-sqlite3") and b.with_name(b.name[: -len("-sqlite3")]) in bags)]
 
 
 def _is_bag(folder: Path) -> bool:

@@ -35,7 +35,10 @@ from .convert import to_message
 from .types import RosTypeError
 
 LOG = logging.getLogger("ckm.record")
-RECORD_FORMATS: tuple[Storage, ...] = ("mcap", "sqlite3")
+BOTH = "mcap+sqlite3"
+RECORD_FORMATS: tuple[str, ...] = ("mcap", "sqlite3", BOTH)
+TWIN_SUFFIX = "-sqlite3"
+"""``--record-format mcap+sqlite3`` writes the same messages into BAG (MCAP) and BAG-sqlite3 (D182)."""
 QUEUE_LIMIT = 10_000  # samples waiting for the writer; beyond it they are dropped and counted
 _STOP = object()
 
@@ -117,22 +120,26 @@ class RunRecorder:
         nodes: the nodes running in this process.
         path: the bag directory to create (it must not exist).
         spec: ``all`` or comma-separated topic names (:func:`plan_recording`).
-        storage: ``mcap`` or ``sqlite3``.
+        storage: ``mcap``, ``sqlite3`` or ``mcap+sqlite3`` (both: the sqlite3 twin is ``PATH-sqlite3``).
 
     Everything ``--record`` asks is checked here, before the run starts (RecordingError).
     """
 
-    def __init__(self, system: System, nodes: Sequence[Node], path: Path, spec: str, storage: Storage) -> None:
+    def __init__(self, system: System, nodes: Sequence[Node], path: Path, spec: str, storage: str) -> None:
         if storage not in RECORD_FORMATS:
             raise RecordingError(f"--record-format {storage!r}: use {' or '.join(RECORD_FORMATS)}")
-        if path.exists():
-            raise RecordingError(f"{path} exists already: rosbag2 bags are never overwritten")
+        storages: list[tuple[Path, Storage]] = [(path, "sqlite3" if storage == "sqlite3" else "mcap")]
+        if storage == BOTH:
+            storages.append((path.with_name(path.name + TWIN_SUFFIX), "sqlite3"))
+        for where, _ in storages:
+            if where.exists():
+                raise RecordingError(f"{where} exists already: rosbag2 bags are never overwritten")
         self.types = ConfigRosTypes(system)
         self.topics = plan_recording(system, nodes, spec, self.types)
         self.path = path
         self.storage = storage
         self.failure: str | None = None
-        self._bag = BagRecorder(path, storage=storage, types=self.types.ros)
+        self._bags = [BagRecorder(where, storage=kind, types=self.types.ros) for where, kind in storages]
         self._queue: queue.Queue[Any] = queue.Queue(QUEUE_LIMIT)
         self._counts = {t.qos.name: _Counts() for t in self.topics}
         self._by_transport = {t.qos.name: t for t in self.topics}
@@ -143,7 +150,7 @@ class RunRecorder:
 
     @classmethod
     def in_run(
-        cls, system: System, nodes: Sequence[Node], run_dir: Path, label: str | None, spec: str, storage: Storage
+        cls, system: System, nodes: Sequence[Node], run_dir: Path, label: str | None, spec: str, storage: str
     ) -> RunRecorder:
         """The recorder of a run: its bag is RUN_DIR/bag, or RUN_DIR/bag-LABEL for one node's process
         (``--node``; several may share a run directory)."""
@@ -197,7 +204,8 @@ class RunRecorder:
                 }
                 for t in self.topics
             }
-        return {"bag": str(self.path), "format": self.storage, "failure": self.failure, "topics": topics}
+        bags = [str(bag.path) for bag in self._bags]
+        return {"bag": str(self.path), "bags": bags, "format": self.storage, "failure": self.failure, "topics": topics}
 
     # ------------------------------------------------------------------ internals
 
@@ -213,10 +221,11 @@ class RunRecorder:
     def _run(self) -> None:
         """The recorder's thread: open the bag, write what arrives until told to stop, close it."""
         try:
-            self._bag.open()
-            for topic in self.topics:
-                qos = offered_qos(topic.qos.reliability, topic.qos.history)
-                self._bag.add_topic(topic.bag_name, topic.ros_type, qos=qos)
+            for bag in self._bags:
+                bag.open()
+                for topic in self.topics:
+                    qos = offered_qos(topic.qos.reliability, topic.qos.history)
+                    bag.add_topic(topic.bag_name, topic.ros_type, qos=qos)
         except Exception as error:
             self._fail(f"cannot record into {self.path}: {type(error).__name__}: {error}")
             self._close()
@@ -236,10 +245,11 @@ class RunRecorder:
         self._close()
 
     def _close(self) -> None:
-        try:
-            self._bag.close()
-        except Exception as error:
-            self._fail(f"cannot finish the bag {self.path}: {type(error).__name__}: {error}")
+        for bag in self._bags:
+            try:
+                bag.close()
+            except Exception as error:
+                self._fail(f"cannot finish the bag {bag.path}: {type(error).__name__}: {error}")
 
     def _write(self, sample: Sample) -> None:
         topic = self._by_transport.get(sample.topic)
@@ -250,7 +260,8 @@ class RunRecorder:
             value = value != 0  # a digital channel reads 0.0 / 1.0: numbers fit bool topics (verify)
         try:
             payload = self.types.payload(topic.ros_type, value)
-            data = self._bag.types.encode(topic.ros_type, to_message(self._bag.types, topic.ros_type, payload))
+            ros = self.types.ros
+            data = ros.encode(topic.ros_type, to_message(ros, topic.ros_type, payload))
         except (RosTypeError, TypeError, ValueError) as error:  # this value does not fit the type
             self._drop(sample.topic, str(error))
             return
@@ -258,7 +269,8 @@ class RunRecorder:
         if not math.isfinite(stamp) or stamp < 0:  # a publisher's bad clock: this sample, not the bag
             self._drop(sample.topic, f"its time stamp {sample.stamp!r} is not a time since the epoch")
             return
-        self._bag.write_cdr(topic.bag_name, data, stamp)
+        for bag in self._bags:  # one encoding, the same bytes in every storage
+            bag.write_cdr(topic.bag_name, data, stamp)
         with self._lock:
             self._counts[sample.topic].written += 1
 

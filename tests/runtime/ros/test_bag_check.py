@@ -1,10 +1,11 @@
 """``ckm-bag check``: a recorded simulated run read back by independent readers (issue L point 2, D181).
 
-A few simulated seconds of configs/examples/sim_ros_types.xml (the Turtlebot's lidar, RGB-D camera,
-arm joints and odometry on ROS 2 types) are recorded by ``ckm-run --record all`` in MCAP and in
-sqlite3; the check reads them with ``mcap`` + ``mcap-ros2-support`` and with ``rosbags`` and must
-decode every message. Broken bags (another format version, a truncated file, a message that is not
-CDR of its type) must be reported, naming the file. Runs use a private network on 127.0.0.1.
+Two simulated seconds of configs/examples/sim_ros_types.xml (the Turtlebot's lidar, RGB-D camera,
+arm joints and odometry on ROS 2 types) are recorded by ``ckm-run --record all --record-format
+mcap+sqlite3`` into an MCAP bag and its sqlite3 twin; the check reads them with ``mcap`` +
+``mcap-ros2-support`` and with ``rosbags`` and must decode every message. Broken bags (another
+format version, a truncated file, a message that is not CDR of its type) must be reported, naming
+the file. Runs use a private network on 127.0.0.1.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import pytest
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
+from runtime.missions.report_bag import find_bags as report_bags
 from runtime.ros.bag import BagRecorder
 from runtime.ros.check import check_bag, check_run
 from tests.conftest import REPO
@@ -53,31 +55,33 @@ def _run(*args: str, timeout: float = 90.0) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
-def test_a_recorded_simulated_run_is_read_back_whole_by_the_independent_readers(storage: str, tmp_path: Path) -> None:
+def test_a_recorded_simulated_run_is_read_back_whole_by_the_independent_readers(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
-    done = _run("-m", "runtime.cli", str(_private_copy(tmp_path)), "--duration", "3", "--log-dir", str(run_dir),
-                "--record", "all", "--record-format", storage)
+    done = _run("-m", "runtime.cli", str(_private_copy(tmp_path)), "--duration", "2", "--log-dir", str(run_dir),
+                "--record", "all", "--record-format", "mcap+sqlite3")
     assert done.returncode == 0, done.stderr
     recording = json.loads((run_dir / "stats.json").read_text())["recording"]
-    assert recording["failure"] is None
+    assert recording["failure"] is None and recording["bags"] == [str(run_dir / "bag"), str(run_dir / "bag-sqlite3")]
     assert all(t["dropped"] == 0 for t in recording["topics"].values()), recording["topics"]
+    assert report_bags(run_dir) == [run_dir / "bag"]  # the report reads the messages once
 
     checked = _run("-m", "runtime.ros.bag_cli", "check", "--json", str(run_dir))
     assert checked.returncode == 0, checked.stderr
-    (result,) = [json.loads(line) for line in checked.stdout.splitlines()]
-    assert result["ok"] and result["problems"] == [] and result["version"] == 9 and result["storage"] == storage
-    assert result["readers"] == (["mcap + mcap-ros2-support"] if storage == "mcap" else ["rosbags"])
-    topics = result["topics"]
-    for topic, ros_type in ROS_TOPICS.items():
-        assert topics[topic]["type"] == ros_type
-        assert topics[topic]["decoded"] == topics[topic]["announced"] > 0, (topic, topics[topic])
-    assert result["messages"] == sum(t["written"] for t in recording["topics"].values())
+    results = {r["storage"]: r for r in (json.loads(line) for line in checked.stdout.splitlines())}
+    assert sorted(results) == ["mcap", "sqlite3"]
+    assert results["mcap"]["readers"] == ["mcap + mcap-ros2-support"] and results["sqlite3"]["readers"] == ["rosbags"]
+    for result in results.values():
+        assert result["ok"] and result["problems"] == [] and result["version"] == 9
+        topics = result["topics"]
+        for topic, ros_type in ROS_TOPICS.items():
+            assert topics[topic]["type"] == ros_type
+            assert topics[topic]["decoded"] == topics[topic]["announced"] > 0, (topic, topics[topic])
+        assert result["messages"] == sum(t["written"] for t in recording["topics"].values())
 
     # what the sensors said, read by rosbags: frames from the URDF, stamps of the sensors' reads
     store = get_typestore(Stores.ROS2_JAZZY)
     frames: dict[str, set[str]] = {}
-    with Reader(run_dir / "bag") as reader:
+    with Reader(run_dir / "bag-sqlite3") as reader:
         wanted = [c for c in reader.connections if c.topic in ROS_TOPICS]
         for connection, logged, data in reader.messages(connections=wanted):
             message: Any = store.deserialize_cdr(data, connection.msgtype)
