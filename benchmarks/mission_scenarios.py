@@ -31,6 +31,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -127,6 +128,21 @@ def _started(run_dir: Path, agent: str) -> bool:
         return False
 
 
+@contextlib.contextmanager
+def _environ(extra: dict[str, str]) -> Iterator[None]:
+    """``extra`` in this process's environment while the block runs (a child started there inherits it)."""
+    saved = {name: os.environ.get(name) for name in extra}
+    os.environ.update(extra)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 def _stop(process: subprocess.Popen[bytes], sig: int = signal.SIGINT) -> None:
     try:
         os.killpg(process.pid, sig)
@@ -160,7 +176,8 @@ def run_split(
     server = None
     if WorldPlan.of(list(system.nodes)) is not None:
         options = ["--scenario", env[ENV_SCENARIO]] if ENV_SCENARIO in env else []
-        server = ServerProcess(config, run_dir, options=options)
+        with _environ({k: v for k, v in env.items() if k in (simtime.SCALE_VARIABLE, simtime.ORIGIN_VARIABLE)}):
+            server = ServerProcess(config, run_dir, options=options)  # on the run's clock, as the nodes
         env.update(server.environ())
     processes: dict[str, subprocess.Popen[bytes]] = {}
     started = time.monotonic()

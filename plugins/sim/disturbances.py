@@ -151,6 +151,7 @@ class Disturbances:
     def _apply(self, action: Action, world: World) -> list[float]:
         body = self.bodies[action.body.text]
         cid = world.client
+        self._let_go(body, world)
         (x, y, z), orientation = world.pose(body)
         if action.verb in ("move-to", "move-by"):
             dx, dy, *dz = action.numbers
@@ -173,6 +174,17 @@ class Disturbances:
             self._set_down(body, tx, ty, yaw, world)
         p.resetBaseVelocity(body, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=cid)
         return list(world.pose(body)[0])
+
+    @staticmethod
+    def _let_go(body: int, world: World) -> None:
+        """Remove every constraint holding ``body``: a gripper's grasp (D187) lets go of what a
+        disturbance moves. The grasp keeps its stale constraint id until the gripper opens; removing
+        it again then only makes pybullet warn."""
+        cid = world.client
+        count = p.getNumConstraints(physicsClientId=cid)
+        for uid in [p.getConstraintUniqueId(i, physicsClientId=cid) for i in range(count)]:
+            if p.getConstraintInfo(uid, physicsClientId=cid)[2] == body:  # the held (child) body
+                p.removeConstraint(uid, physicsClientId=cid)
 
     @staticmethod
     def _set_down(body: int, x: float, y: float, yaw: float, world: World) -> None:
