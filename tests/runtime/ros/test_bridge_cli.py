@@ -57,7 +57,7 @@ def test_the_bridge_command_shows_ckm_topics_to_ros_and_brings_ros_samples_in(
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
     )
     try:
-        deadline, tokens = time.monotonic() + 40, []
+        deadline, tokens = time.monotonic() + 40, list[str]()
         while time.monotonic() < deadline and len(tokens) < 1 + 2 * TOPICS:
             tokens = [str(r.ok.key_expr) for r in ros_side.liveliness().get("@ros2_lv/0/**", timeout=1.0) if r.ok]
             time.sleep(0.1)
