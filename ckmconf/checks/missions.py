@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..model import Behavior, CompositionMatrix, Mission, Plan, State, System, Transition
+from ..model import Agent, Behavior, CompositionMatrix, Dependency, Mission, Plan, Signal, State, System, Transition
 from .report import Reporter, missing
 from .resources import check_bounds, check_value
 from .scope import Scope
@@ -277,16 +277,22 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
                 agent, missing("mission", agent.mission, "the system", [m.name for m in system.missions]), "mission"
             )
     signals = {s.name: s for s in plan.signals}
-    for signal in plan.signals:
-        emitter = agents.get(signal.agent)
-        if emitter is None:
-            report.error(signal, missing("agent", signal.agent, where, agents), "agent")
-        elif system.mission(emitter.mission) and resolve_state(system, emitter.mission, signal.state) is None:
+
+    def agent_state(record: Signal | Dependency) -> Agent | None:
+        """The agent a signal or dependency names (checked with that state of its mission)."""
+        agent = agents.get(record.agent)
+        if agent is None:
+            report.error(record, missing("agent", record.agent, where, agents), "agent")
+        elif system.mission(agent.mission) and resolve_state(system, agent.mission, record.state) is None:
             report.error(
-                signal,
-                f"state {signal.state!r} does not exist in mission {emitter.mission!r} of agent {emitter.name!r}",
+                record,
+                f"state {record.state!r} does not exist in mission {agent.mission!r} of agent {agent.name!r}",
                 "state",
             )
+        return agent
+
+    for signal in plan.signals:
+        agent_state(signal)
         if signal.type is not None and not scope.type_exists(signal.type):
             report.error(signal, missing("message type", signal.type, "the system", scope.type_names()), "type")
         elif signal.topic is not None:
@@ -298,15 +304,7 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
                     signal, f"signal type {signal.type!r} differs from its topic's type {topic.type!r}", "type"
                 )
     for dependency in plan.dependencies:
-        waiter = agents.get(dependency.agent)
-        if waiter is None:
-            report.error(dependency, missing("agent", dependency.agent, where, agents), "agent")
-        elif system.mission(waiter.mission) and resolve_state(system, waiter.mission, dependency.state) is None:
-            report.error(
-                dependency,
-                f"state {dependency.state!r} does not exist in mission {waiter.mission!r} of agent {waiter.name!r}",
-                "state",
-            )
+        waiter = agent_state(dependency)
         wanted = signals.get(dependency.signal)
         if wanted is None:
             report.error(dependency, missing("signal", dependency.signal, where, signals), "signal")
