@@ -334,3 +334,23 @@ def test_a_scenario_that_cannot_apply_is_refused_before_anything_runs(
         main(["mission", "--config", str(PLAN), "--plans", "fetch-together", "--out", str(tmp_path), *args])
     assert message in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_split_run_shares_one_world_server_on_the_runs_clock(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The lab's lost-humanoid in small: the rover's node (a sim lidar) and the spotter's run as two
+    processes on one world server the bench started, all at --time-scale 0.5; the spotter is killed."""
+    config = _on_private_network(ROVER, tmp_path)
+    argv = ["--config", str(config), "--plans", "together", "--duration", "40", "--kill-agent", "spotter"]
+    argv += ["--kill-after", "0.5", "--out", str(tmp_path / "bench")]
+    assert main(["mission", "--json", "--runs", "1", "--time-scale", "0.5", "--no-randomise", *argv]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    (record,) = result["results"]
+    assert record["outcomes"]["rover"] == "gave_up" and record["lost_reported"] == ["rover"] and record["handled"]
+    run_dir = Path(record["run_dir"])
+    assert sorted(p.name for p in run_dir.glob("sim-server*.json")) == ["sim-server.json"]  # one world, the bench's
+    final = json.loads((run_dir / "sim-final.json").read_text())
+    assert 0 < final["time"] < 0.75 * record["wall_s"]  # the world's clock ran at the run's scale (0.5)
+    gave_up = next(e for e in read_run(run_dir).events if e.kind == "exit" and e.fields["state"] == "NAV")
+    assert gave_up.fields["to"] == "gave_up" and gave_up.t < 20  # lost after 1.5 s, not NAV's 60 s timeout
