@@ -33,8 +33,7 @@ import sys
 from collections.abc import Iterable
 from typing import Any
 
-from ckmconf.binding import Record, walk
-from ckmconf.checks.report import Reporter
+from ckmconf.binding import Record
 from ckmconf.errors import ConfigError
 from ckmconf.model import (
     BUILTIN_TYPES,
@@ -43,23 +42,20 @@ from ckmconf.model import (
     Controller,
     Function,
     HWChannel,
-    MessageType,
     Node,
-    Param,
     Plugin,
     Profile,
     Sensor,
     Service,
     SmartResource,
     System,
-    Topic,
 )
 from ckmconf.rostypes import is_ros_type
-from ckmconf.source import Limits, SourceFile, read_source
 
 from ..kernel.vectors import chain_refusal, is_vector, shape_of
-from ..registry import NOUNS, Registry, RegistryError, default_registry
-from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ParamError, defaulted, params_of, ports_of, strays
+from ..registry import Registry, default_registry
+from .checker import Checker
+from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ports_of
 from .types import describe, fits
 
 _ChannelRead = tuple[HWChannel, str | None, type[Any] | None]
@@ -78,32 +74,8 @@ def verify(system: System, registry: Registry | None = None) -> list[ConfigError
     return sorted(set(checker.report.errors), key=ConfigError.sort_key)
 
 
-def _sources(system: System) -> dict[str, SourceFile]:
-    """The files the system was read from, for attribute locations (unreadable ones are skipped)."""
-    found: dict[str, SourceFile] = {}
-    for record in walk(system):
-        if record.loc is not None and record.loc.file not in found:
-            try:
-                found[record.loc.file] = read_source(record.loc.file, Limits())
-            except ConfigError:
-                continue
-    return found
-
-
-class _Verifier:
-    """One pass over a system; problems collect in ``report``."""
-
-    def __init__(self, system: System, registry: Registry) -> None:
-        self.system = system
-        self.registry = registry
-        self.report = Reporter(_sources(system))
-        self.types: dict[str, MessageType] = {m.name: m for m in system.message_types}
-        self._ros_types: Any = None
-        self.external: dict[str, Topic] = {t.name: t for t in system.topics}
-        for node in system.nodes:
-            for topic in node.topics:
-                if topic.scope == "external":
-                    self.external.setdefault(topic.name, topic)
+class _Verifier(Checker):
+    """One pass over a system, element by element (the shared checks are :class:`Checker`'s)."""
 
     def run(self) -> None:
         self._ros_topics()
@@ -113,99 +85,6 @@ class _Verifier:
             self._resource(resource)
         for behavior in self.system.behaviors:
             self._behavior(behavior)
-
-    # ------------------------------------------------------------------ kinds and Params
-
-    def _kind(self, record: Record, category: str, kind: str, attr: str) -> type[Any] | None:
-        """The class of ``kind``, or None after reporting why there is none."""
-        try:
-            cls = self.registry.find(category, kind)
-        except RegistryError as exc:
-            self.report.error(record, str(exc), attr)
-            return None
-        if cls is None:
-            self.report.error(record, self.registry.missing(category, kind), attr)
-        return cls
-
-    def _params(self, record: Record, cls: type[Any], params: Iterable[Param], owner: str) -> None:
-        """Each Param against the kind's declaration (a per-name value at its bad entry); missing
-        required ones at ``record``. The same conversions as ``read_params``, which builds the kind."""
-        declared = params_of(cls)
-        given: dict[str, Param] = {}
-        values: dict[str, Any] = {}
-        for param in params:
-            given[param.name] = param
-            entry = declared.specs.get(param.name)
-            if entry is None:
-                accepted = ", ".join(sorted(declared)) or "none"
-                self.report.error(param, f"{owner} takes no parameter {param.name!r} (accepted: {accepted})", "name")
-                continue
-            try:
-                values[param.name] = entry.convert(param.value)
-            except ParamError as exc:
-                self.report.error(param, f"{owner}: {exc}", "value", exc.offset)
-        for name, entry in declared.specs.items():
-            if entry.required and name not in given:
-                self.report.error(record, f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})")
-            elif name not in given and not entry.required:
-                try:
-                    values[name] = defaulted(entry, entry.default)
-                except ParamError:
-                    continue  # the kind's own default: not the configuration's problem
-        for name, problem in strays(declared, values, {n: p.value for n, p in given.items()}):
-            at = given.get(name)
-            if at is None:
-                self.report.error(record, f"{owner}: {problem}")
-            else:
-                self.report.error(at, f"{owner}: {problem}", "value", problem.offset)
-
-    def _checked(
-        self, record: Record, category: str, kind: str, params: Iterable[Param], attr: str = "kind"
-    ) -> type[Any] | None:
-        cls = self._kind(record, category, kind, attr)
-        if cls is not None:
-            self._params(record, cls, params, f"{NOUNS[category]} {kind!r}")
-        return cls
-
-    # ------------------------------------------------------------------ topics and types
-
-    def _topic_type(self, name: str, node: Node | None) -> str | None:
-        """The type a topic carries as ``node`` sees it (its own topics first), None if unknown."""
-        if node is not None:
-            own = next((t for t in node.topics if t.name == name), None)
-            if own is not None:
-                return own.type
-        found = self.external.get(name)
-        return found.type if found is not None else None
-
-    def _signal_types(self, name: str) -> list[str]:
-        """The declared types of the plan signals called ``name``."""
-        return [s.type for plan in self.system.plans for s in plan.signals if s.name == name and s.type]
-
-    def _ros(self) -> Any:
-        """The ROS types of the system (runtime.ros.config.ConfigRosTypes), loaded on first need."""
-        if self._ros_types is None:
-            from ..ros.config import ConfigRosTypes  # rosbags' store: only for systems naming ROS types
-
-            self._ros_types = ConfigRosTypes(self.system)
-        return self._ros_types
-
-    def _ros_topics(self) -> None:
-        """Each topic of a custom ROS type whose ``.msg`` definition does not load, at the topic."""
-        for topic in [*self.system.topics, *(t for n in self.system.nodes for t in n.topics)]:
-            if is_ros_type(topic.type) and topic.type in self._ros().problems:
-                self.report.error(topic, self._ros().problems[topic.type], "type")
-
-    def _flow(self, record: Record, attr: str, value: str, carried: str | None, sentence: str, size: int = 1) -> None:
-        """Report when ``value`` does not fit a topic of type ``carried``; ``sentence`` holds a {} for it."""
-        if carried is not None and is_ros_type(carried):
-            for problem in self._ros().value_problems(value, carried):
-                self.report.error(
-                    record, sentence.format(describe(value, size)) + f" of ROS type {carried}: {problem}", attr
-                )
-            return
-        if carried is not None and not fits(value, carried, self.types):
-            self.report.error(record, sentence.format(describe(value, size)) + f" of type {carried}", attr)
 
     # ------------------------------------------------------------------ nodes
 
