@@ -10,7 +10,10 @@ import threading
 import time
 from pathlib import Path
 
-from ckmconf.loader import load
+import pytest
+
+from ckmconf import ConfigError
+from ckmconf.loader import load, load_bytes
 from plugins.hardware.simulation import ManualClock
 from runtime import simtime
 from runtime.missions.agent import AgentRunner
@@ -82,3 +85,13 @@ def test_the_default_clock_is_the_scaled_one_under_a_time_scale() -> None:
                             cwd=Path(__file__).resolve().parents[3])  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert abs(float(result.stdout) - 0.25) < 0.01
+
+
+def test_lost_of_an_agent_no_plan_has_is_refused_where_it_is_written(tmp_path: Path) -> None:
+    text = PLANS.read_text().replace("lost('spotter')", "lost('spoter')")
+    line = next(n for n, row in enumerate(text.splitlines(), start=1) if "lost('spoter')" in row)
+    with pytest.raises(ConfigError) as caught:
+        load_bytes(text.encode(), str(tmp_path / "plans.xml"))
+    message = str(caught.value)
+    assert message.startswith(f"{tmp_path / 'plans.xml'}:{line}:") and "agent 'spoter' does not exist" in message
+    assert "did you mean 'spotter'" in message
