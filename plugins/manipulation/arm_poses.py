@@ -19,7 +19,7 @@ Outputs (only the keys naming a service Output are published):
   joint's velocity limit (URDF, or Param ``maxVelocity``), speed the service Parameter ``speed``
   (Table 7.1's configuration) or the goal's own;
 - ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose",
-  "state": "moving" | "reached" | "failed", "active", "error"}`` (and ``holding`` for the gripper);
+  "state": "moving" | "reached" | "failed", "active", "error", "holding"}`` (holding: a gripper goal's);
 - the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
   readable), else 0;
 - the measure ``holding`` (the gripper's measure, issue K): 1 from a closing gripper goal that
@@ -194,9 +194,8 @@ class ArmPoses(ProcessingPlugin):
         if goal is not None:
             error = goal.error or reading
             result["status"] = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose,
-                                "state": goal.state, "active": active, "error": error}
-            if goal.group == "gripper":
-                result["status"]["holding"] = goal.holding
+                                "state": goal.state, "active": active, "error": error,
+                                "holding": goal.holding}  # never true for an arm goal
         return result
 
     def _positions(self, state: Any) -> list[float] | None:

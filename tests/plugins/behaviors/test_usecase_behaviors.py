@@ -20,6 +20,7 @@ from runtime.registry import default_registry
 from runtime.resources.api import Bounds
 
 REPO = Path(__file__).resolve().parents[3]
+STANDOFF = 0.29  # APPR's standoff in configs/usecase/behaviors.xml (D188)
 
 
 class Service:
@@ -131,7 +132,7 @@ def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -
     rig.services["arm"].outputs["status"] = {"id": arm["id"], "state": "reached"}
     rig.behavior.step()
     move = rig.last("move")
-    assert move["x"] == pytest.approx(1.0 - 0.28)
+    assert move["x"] == pytest.approx(1.0 - STANDOFF)
     rig.services["base"].outputs["move_status"] = {"id": move["id"] + 100, "state": "done"}
     assert not rig.behavior.step().done  # a stale status of another goal
     rig.services["base"].outputs["move_status"] = {
@@ -204,7 +205,7 @@ def test_approach_places_a_map_target_relative_to_the_robot(lab: System) -> None
     rig.inputs["pose"] = {"pose": {"x": 2.0, "y": 2.0, "yaw": math.pi / 2}}  # facing +y, 1 m short of it
     rig.behavior.step()
     move = rig.last("move")
-    assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.28, 0.0), abs=1e-6)
+    assert (move["x"], move["y"]) == pytest.approx((1.0 - STANDOFF, 0.0), abs=1e-6)
     assert move["yaw"] == pytest.approx(0.0, abs=1e-6)
 
 
@@ -218,7 +219,7 @@ def test_approach_uses_the_pose_the_fusion_placed_the_target_with(lab: System) -
     rig.services["arm"].outputs["status"] = {"id": rig.last("arm_goal")["id"], "state": "reached"}
     rig.behavior.step()
     move = rig.last("move")
-    assert (move["x"], move["y"]) == pytest.approx((1.0 - 0.28, 0.0), abs=1e-6)  # straight ahead, as seen
+    assert (move["x"], move["y"]) == pytest.approx((1.0 - STANDOFF, 0.0), abs=1e-6)  # straight ahead, as seen
 
 
 def test_spot_passes_the_observer_pose_on_with_the_target(lab: System) -> None:
