@@ -4,7 +4,8 @@ The bridge command runs as its own process on a private CKMultiPeer network; a Z
 peer mode listening on 127.0.0.1 plays the ROS side's router and node: it must see the bridge's
 liveliness tokens (the node, a publisher and a subscription per topic of configs/examples/
 sim_ros_types.xml), and a LaserScan it puts on ``/scan`` the rmw_zenoh way (CDR, 33-byte attachment)
-must reach a CKM subscriber of ``/scan``.
+must reach a CKM subscriber of ``/scan``; and the simulated Turtlebot's scans (ckm-run of the example)
+reach that node through the bridge as CDR LaserScans in ``hokuyo_link``.
 """
 
 from __future__ import annotations
@@ -17,10 +18,12 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import zenoh
+from rosbags.typesys import Stores, get_typestore
 
 import ckmconf
 from runtime.network import Transport
@@ -90,6 +93,45 @@ def test_the_bridge_command_shows_ckm_topics_to_ros_and_brings_ros_samples_in(
     assert set(statistics) == {"/scan", "/camera/rgb/image_raw", "/camera/rgb/camera_info", "/camera/depth/image_raw",
                                "/camera/depth/camera_info", "/joint_states", "/odom", "/tf"}
     assert statistics["/scan"]["toCkm"] >= 1 and statistics["/scan"]["dropped"] == 0
+
+
+@pytest.mark.timeout(120)
+def test_a_ros_node_receives_the_simulated_scan_through_the_bridge(tmp_path: Path) -> None:
+    net = private_network("multipeer")
+    element = (f'<Network interface="127.0.0.1" group="{net.group}" discoveryPort="{net.discovery_port}" '
+               f'basePort="{net.base_port}"/>')
+    config = tmp_path / EXAMPLE.name
+    config.write_text(re.sub(r"(<System [^>]*>)", lambda m: m.group(1) + "\n  " + element, EXAMPLE.read_text(),
+                             count=1))
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    ros_side = zenoh.open(_config([endpoint], []))
+    heard: list[zenoh.Sample] = []
+    listener = ros_side.declare_subscriber("0/scan/**", heard.append)
+    try:
+        bridge = subprocess.Popen(
+            [sys.executable, "-m", "runtime.ros.bridge_cli", str(config), "--router", endpoint, "--topics", "/scan,/tf",
+             "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+        )
+        try:
+            run = subprocess.run(
+                [sys.executable, "-m", "runtime.cli", str(config), "--duration", "4", "--log-dir", str(tmp_path / "r")],
+                capture_output=True, text=True, timeout=90, cwd=REPO,
+            )
+        finally:
+            bridge.send_signal(signal.SIGTERM)
+            out, err = bridge.communicate(timeout=30)
+        assert run.returncode == 0, run.stderr
+        assert bridge.returncode == 0, err
+        listener.undeclare()  # type: ignore[no-untyped-call]
+    finally:
+        ros_side.close()  # type: ignore[no-untyped-call]
+    assert heard, "the ROS node heard no scan"
+    store = get_typestore(Stores.ROS2_JAZZY)
+    message: Any = store.deserialize_cdr(heard[-1].payload.to_bytes(), "sensor_msgs/msg/LaserScan")
+    assert message.header.frame_id == "hokuyo_link" and len(message.ranges) == 683
+    assert heard[-1].attachment is not None and len(heard[-1].attachment.to_bytes()) == 33
+    statistics = json.loads(out.splitlines()[-1])
+    assert statistics["/scan"]["toRos"] == len(heard) and statistics["/tf"]["toRos"] > 0
 
 
 def test_a_system_without_ros_topics_is_refused(tmp_path: Path) -> None:
