@@ -65,7 +65,7 @@ KIND = Entries("line|point", choices=KINDS)
 """``inputs``: each input's feature kind (eq. 6.32)."""
 POSE = Entries("x y z roll pitch yaw", 6, numbers=True, of="inputs", noun="an input")
 """``poses``: a sensor's optical frame in the common frame (m, rad)."""
-CAMERA = Entries("fx fy cx cy width height", 6, numbers=True, of="inputs", noun="an input")
+CAMERA = Entries("fx fy cx cy width height", 6, numbers=True, of="inputs", of_value="line", noun="a line input")
 """``cameras``: a line input's intrinsics at its calibration size (px)."""
 SIGMA = Entries("σ", numbers=True, above=0.0, of="inputs", noun="an input")
 """``sigmas``: an input's own uncertainty."""
@@ -148,8 +148,6 @@ class FeatureFusion(ProcessingPlugin):
         default = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
         self.cameras = {name: default for name, kind in self.kinds.items() if kind == "line"}
         for name, (fx, fy, cx, cy, width, height) in p["cameras"].items():
-            if self.kinds[name] != "line":
-                raise ParamError(f"{owner}: parameter 'cameras' names {name!r}, not a line input of 'inputs'")
             if min(fx, fy, width, height) <= 0 or width != int(width) or height != int(height):
                 raise ParamError(f"{owner}: parameter 'cameras' for {name!r} needs fx, fy > 0 and a whole size")
             self.cameras[name] = Camera(fx, fy, cx, cy, int(width), int(height))

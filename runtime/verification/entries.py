@@ -46,6 +46,7 @@ class Entries:
         choices: the accepted words (one value each).
         above: every number must be greater than this.
         of: the Param whose entry names this one's names must be (``"inputs"``).
+        of_value: what those entries of ``of`` must hold (``"line"``: only line inputs have cameras).
         noun: what ``of``'s entries are, with its article, for messages (``"an input"``).
         need: what an entry of words needs, for messages (default: ``form``).
     """
@@ -57,6 +58,7 @@ class Entries:
     choices: tuple[str, ...] = ()
     above: float | None = None
     of: str | None = None
+    of_value: str | None = None
     noun: str = "an entry"
     need: str = ""
 
@@ -101,7 +103,7 @@ class Entries:
         return values
 
     def strays(self, param: str, value: Parsed, text: str | None, values: Mapping[str, Any]) -> Iterator[ParamError]:
-        """A ParamError for each entry of ``value`` whose name is not an entry of Param ``of``.
+        """A ParamError for each entry of ``value`` whose name is not an entry of Param ``of`` (holding ``of_value``).
 
         Args:
             param: this Param's name.
@@ -114,7 +116,7 @@ class Entries:
             return
         starts = {e.partition(":")[0].strip(): s for s, e in _split(text)} if text is not None else {}
         for name in value:
-            if name not in names:
+            if name not in names or (self.of_value is not None and tuple(names[name])[:1] != (self.of_value,)):
                 yield ParamError(
                     f"parameter {param!r} names {name!r}, not {self.noun} of {self.of!r}", starts.get(name)
                 )

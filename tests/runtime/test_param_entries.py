@@ -79,6 +79,13 @@ def test_the_example_with_per_name_params_validates(capsys: pytest.CaptureFixtur
             "sigmas",
             "parameter 'sigmas' for 'rgb' needs 1 finite number, got ['x']",
         ),
+        (
+            "</Plugin>",
+            '<Param name="cameras" value="rgb: 525 525 319.5 239.5 640 480; depth: 1 1 1 1 1 1"/></Plugin>',
+            "depth: 1",
+            "cameras",
+            "parameter 'cameras' names 'depth', not a line input of 'inputs'",
+        ),
     ],
 )
 def test_ckm_validate_reports_a_bad_entry_at_its_file_line_column(
@@ -101,7 +108,7 @@ def test_a_stray_name_in_a_defaulted_reference_is_reported_at_the_param(
     line, column = _position(text, "pantilt: 1")
     assert code == 1
     assert out.startswith(f"{tmp_path / 'service_api.xml'}:{line}:{column}: ")
-    assert out.endswith("parameter 'cameras' names 'pantilt', not an input of 'inputs'")
+    assert out.endswith("parameter 'cameras' names 'pantilt', not a line input of 'inputs'")
 
 
 SPEC = Params(
