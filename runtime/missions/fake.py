@@ -4,7 +4,9 @@ The mission runs on the real HFSM engine in simulated time, its behaviors replac
 ones (progress ramps over ``dwell`` simulated seconds) and its services by simulated ones that
 meet every requirement. A ``signal('s')`` is taken as true only for a signal some agent of a plan can send and that is
 in no deadlock (:func:`~runtime.missions.validation.plans.assumable_signals`); with no plan in
-the system every signal counts as an outside input. The fake interaction decides, when a state is entered (or when its
+the system every signal counts as an outside input. ``lost('agent')`` is always an outside input
+(any agent's process may die, D177): the solver sets it as it sets any call. The fake interaction
+decides, when a state is entered (or when its
 nested mission has ended), which transition it will take, and after the dwell makes exactly that
 transition's condition the first that holds (:mod:`runtime.missions.solver`). Episodes are
 repeated from the initial state, each steering towards transitions not yet covered: an
