@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 import ckmconf
-from plugins.sim.disturbances import ENV_SCENARIO
+from plugins.sim.disturbances import ENV_SCENARIO, Disturbances
 from plugins.sim.plan import WorldPlan
 from plugins.sim.scenario import ScenarioError, read
 from runtime import simtime
@@ -102,11 +102,21 @@ def choose(name: str | None, kill_agent: str | None, kill_after: float | None) -
 
 
 def check(scenario: Scenario, config: Path, plans: list[str]) -> None:
-    """ValueError if ``scenario`` cannot apply to ``config`` (no simulated world, no such agent)."""
+    """ValueError if ``scenario`` cannot apply to ``config`` (no simulated world, a body it does not
+    have, no such agent)."""
     system = ckmconf.load(config)
-    if scenario.world is not None and WorldPlan.of(list(system.nodes)) is None:
-        raise ValueError(f"scenario {scenario.name} disturbs the simulated world, but {config} has no hardware.sim "
-                         "channel")  # fmt: skip
+    if scenario.world is not None:
+        world = WorldPlan.of(list(system.nodes))
+        if world is None:
+            raise ValueError(f"scenario {scenario.name} disturbs the simulated world, but {config} has no "
+                             "hardware.sim channel")  # fmt: skip
+        sim = world.build()  # its names, against the world every run will build (FILE:LINE:COL)
+        try:
+            Disturbances(read(scenario.world)).install(sim.world)
+        except ScenarioError as error:
+            raise ValueError(str(error)) from None
+        finally:
+            sim.world.close()
     if scenario.kill_agent is not None:
         for name in plans:
             plan = system.plan(name)

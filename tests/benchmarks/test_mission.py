@@ -336,6 +336,19 @@ def test_a_scenario_that_cannot_apply_is_refused_before_anything_runs(
     assert not (tmp_path / "runs").exists()
 
 
+def test_a_world_scenario_naming_a_body_the_world_lacks_is_refused_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scenario = tmp_path / "boulder.scenario"
+    scenario.write_text("# the rover's world has no boulder\nat 1 remove boulder\n")
+    with pytest.raises(SystemExit):
+        main(
+            ["mission", "--config", str(ROVER), "--plans", "alone", "--scenario", str(scenario), "--out", str(tmp_path)]
+        )
+    assert f"{scenario}:2:13: no body 'boulder' in the world (bodies: rover)" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
+
+
 def test_a_split_run_shares_one_world_server_on_the_runs_clock(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
