@@ -212,6 +212,8 @@ class KeypointMatching(ProcessingPlugin):
         P("threads", 1, "OpenCV threads (0: OpenCV's default).", min=0),
     )
     SAME_POINT = 0.04
+    CUTS = 8
+    """Places a wrapping print is tried unwrapped at (D175)."""
     """Model points closer than this share of the texture's size are one point (ratio test)."""
 
     def __init__(self, record: Plugin) -> None:
@@ -290,21 +292,43 @@ class KeypointMatching(ProcessingPlugin):
         return dist[:, 0] < self.params["ratio"] * second, nearest
 
     def _locate(self, index: int, model: Points, image: Points, cols: int, rows: int) -> dict[str, Any] | None:
-        """The detection of object ``index`` from its matches, or None if no plausible homography explains them."""
+        """The detection of object ``index`` from its matches, or None if no plausible homography explains them.
+
+        A print that repeats side by side (``wrap``: round a cylinder) may show the end of one copy
+        and the start of the next. Its texture points are then unwrapped at one of ``CUTS`` cuts
+        (those left of the cut move one copy to the right) and the cut whose homography explains
+        most matches wins (D175). Each match stands for one point, so no degenerate homography
+        gathers a point's several copies.
+        """
         assert self.model is not None
+        width, height = self.model.sizes[index]
+        wraps = bool(self.model.wraps[index]) if self.model.wraps else False
         threshold = max(2.0, self.params["reprojection"] * cols / 640.0)
-        homography, mask = cv2.findHomography(model, image, cv2.RANSAC, threshold)
-        if homography is None or mask is None:
+        best: tuple[int, Image, Image, Points] | None = None
+        for cut in np.arange(self.CUTS if wraps else 1) * width / self.CUTS:
+            source = model.copy()
+            if cut > 0:
+                source[source[:, 0] < cut, 0] += width
+            found, found_mask = cv2.findHomography(source, image, cv2.RANSAC, threshold)
+            if found is not None and found_mask is not None and (best is None or int(found_mask.sum()) > best[0]):
+                best = (int(found_mask.sum()), found, found_mask, source)
+        if best is None:
             return None
-        inliers = int(mask.sum())
+        inliers, homography, mask, source = best
         if 2 * inliers < len(model) or inliers < 4:
             return None
-        width, height = self.model.sizes[index]
-        corners = np.array([[[0, 0], [width, 0], [width, height], [0, height]]], np.float32)
+        # The texture's own frame, or for a wrapping print the one-copy span the inliers show.
+        left = 0.0
+        if wraps:
+            used = source[mask.ravel().astype(bool), 0]
+            left = float((used.min() + used.max()) / 2 - width / 2)
+        right = left + width
+        corners = np.array([[[left, 0], [right, 0], [right, height], [left, height]]], np.float32)
         quad = cv2.perspectiveTransform(corners, homography)[0]
         if not _plausible(quad):
             return None
-        centre = cv2.perspectiveTransform(np.array([[[width / 2, height / 2]]], np.float32), homography)[0, 0]
+        middle = np.array([[[left + width / 2, height / 2]]], np.float32)
+        centre = cv2.perspectiveTransform(middle, homography)[0, 0]
         return {
             "name": self.model.names[index],
             "matches": len(model),

@@ -24,6 +24,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from .views import read_views
+
 Image = npt.NDArray[Any]
 """An image as OpenCV and numpy hand it around (uint8 here)."""
 Points = npt.NDArray[np.float32]
@@ -44,6 +46,9 @@ class TextureSpec:
     seed: int = 0
     width: int = 160
     height: int = 240
+    wrap: bool = False
+    """The print repeats side by side (a label around a can): a view may show the end of one copy
+    and the start of the next, which the matcher unwraps (D175)."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +63,8 @@ class ModelSpec:
     levels: int = 3
     scales: tuple[float, ...] = (0.7, 0.5, 0.35, 0.25)
     """Texture sizes (shares of width × height) the keypoints are extracted at."""
+    views: str = ""
+    """File of keypoints learnt from rendered views (``views.py``, D175), relative to the model file."""
 
 
 def rgb(color: str) -> tuple[int, int, int]:
@@ -161,12 +168,20 @@ def _floats(text: str) -> tuple[float, ...]:
     return tuple(float(v) for v in text.split())
 
 
+def boolean(text: str) -> bool:
+    """``true`` or ``false`` (any case); ValueError otherwise."""
+    if text.lower() not in ("true", "false"):
+        raise ValueError(text)
+    return text.lower() == "true"
+
+
 _TOP: Mapping[str, tuple[str, Callable[[str], Any]]] = {
     "version": ("version", int),
     "features": ("features", int),
     "scaleFactor": ("scale_factor", float),
     "levels": ("levels", int),
     "scales": ("scales", _floats),
+    "views": ("views", str),
 }
 _ITEM: Mapping[str, tuple[str, Callable[[str], Any]]] = {
     "name": ("name", str),
@@ -176,6 +191,7 @@ _ITEM: Mapping[str, tuple[str, Callable[[str], Any]]] = {
     "seed": ("seed", int),
     "width": ("width", int),
     "height": ("height", int),
+    "wrap": ("wrap", boolean),
 }
 
 
@@ -287,6 +303,8 @@ class Model:
     descriptors: Image
     points: Points
     labels: npt.NDArray[np.intp]
+    wraps: tuple[bool, ...] = ()
+    """Whether each texture's print repeats side by side (:attr:`TextureSpec.wrap`)."""
 
 
 _PAD = 32  # grey margin, so that ORB's border exclusion does not hide the texture's own edges
@@ -296,7 +314,8 @@ def build_model(path: str | Path) -> Model:
     """The ORB model of a model file: each texture resized to each scale, its keypoints extracted.
 
     Several scales, because ORB's pyramid only covers sizes its patch (31 pixels) still fits in:
-    an object seen small (QVGA, QQVGA, far away) needs descriptors learnt at about its size.
+    an object seen small (QVGA, QQVGA, far away) needs descriptors learnt at about its size. The
+    model file's ``views`` file (if any) adds keypoints learnt from rendered views (D175).
     """
     spec = read_model(path)
     orb = cv2.ORB.create(nfeatures=spec.features, scaleFactor=spec.scale_factor, nlevels=spec.levels)
@@ -315,10 +334,17 @@ def build_model(path: str | Path) -> Model:
             count += len(found)
         if count < 4:
             raise ValueError(f"{path}: object {obj.name!r} has {count} keypoints; its texture is too plain")
+    names = tuple(o.name for o in spec.objects)
+    if spec.views:  # keypoints learnt from rendered views (D175), in the same texture frame
+        learnt, at, which = read_views(Path(path).parent / spec.views, names)
+        descriptors.append(learnt)
+        points.append(at)
+        labels.append(which)
     return Model(
-        tuple(o.name for o in spec.objects),
+        names,
         tuple((o.width, o.height) for o in spec.objects),
         np.concatenate(descriptors),
         np.concatenate(points).astype(np.float32),
         np.concatenate(labels),
+        tuple(o.wrap for o in spec.objects),
     )

@@ -11,7 +11,10 @@ RGB recognition (ORB keypoint matching) never recognises it. A skin is a visual 
   own aspect, cropped to the face's width;
 - the caps show the print's centre at the sides' scale.
 
-u falls left to right seen from outside: pybullet's texture loader mirrors images otherwise.
+Orientation (D174): pybullet's texture loader keeps the image's first row at v = 1 (OpenGL's
+bottom-up convention), so the print's top is at v = 1 and its left edge at u = 0; u grows left to
+right seen from outside (counter-clockwise seen from above, the way the base's corners and the
+cylinder's angle run), so every print reads upright and unmirrored.
 :class:`~plugins.sim.world.World` gives every textured 2.5D cylinder and box its skin as the body's
 own visual shape (its collision shape is unchanged, D145); :func:`dress` adds skins to a world whose
 objects do not wear them yet (as separate visual-only bodies).
@@ -46,6 +49,9 @@ SEGMENTS = 48
 OUTSIDE = 0.001
 """How far (m) a separate skin body stands outside its object's own (plain) surface."""
 
+CAP = 0.002
+"""Points this close (m) to a skin's top or bottom edge count as on its cap (:func:`texture_point`)."""
+
 
 @dataclass
 class Mesh:
@@ -70,7 +76,8 @@ def _cap(ring: list[tuple[float, float]], z: float, up: bool, scale: tuple[float
     su, sv = scale
     points = [(0.0, 0.0), *ring]
     vertices = [[x, y, z] for x, y in points]
-    uvs = [[0.5 - x / su, 0.5 - y / sv] for x, y in points]
+    side = 1.0 if up else -1.0  # the bottom cap is seen from below: mirrored in x
+    uvs = [[0.5 + side * x / su, 0.5 + y / sv] for x, y in points]
     normals = [[0.0, 0.0, 1.0 if up else -1.0]] * len(points)
     indices: list[int] = []
     for i in range(1, len(ring) + 1):
@@ -80,15 +87,17 @@ def _cap(ring: list[tuple[float, float]], z: float, up: bool, scale: tuple[float
 
 
 def tube(radius: float, z0: float, z1: float, repeats: int, segments: int = SEGMENTS) -> Mesh:
-    """A closed cylinder's skin: the print ``repeats`` times around (u around, v down), and caps."""
+    """A closed cylinder's skin: the print ``repeats`` times around (u with the angle, v up), and caps.
+
+    At angle 0 (the object's +x) a copy of the print starts: its left edge, seen from outside."""
     mesh = Mesh([], [], [], [])
     for i in range(segments + 1):
         angle = 2 * math.pi * i / segments
         c, s = math.cos(angle), math.sin(angle)
-        for z, v in ((z0, 1.0), (z1, 0.0)):
+        for z, v in ((z0, 0.0), (z1, 1.0)):
             mesh.vertices.append([radius * c, radius * s, z])
             mesh.normals.append([c, s, 0.0])
-            mesh.uvs.append([-repeats * i / segments, v])  # u decreasing with the angle: the print reads unmirrored
+            mesh.uvs.append([repeats * i / segments, v])  # left to right seen from outside, top up
     for i in range(segments):
         a, b, c_, d = 2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3
         mesh.indices += [a, c_, b, b, c_, d]
@@ -112,9 +121,9 @@ def sides(width: float, depth: float, z0: float, z1: float, aspect: float) -> Me
         normal = [(y1 - y0) / length, -(x1 - x0) / length, 0.0]
         base = len(mesh.vertices)
         share = min(1.0, length / ((z1 - z0) * aspect))  # the print's central share the face shows
-        # u falls left to right, as on the tube: pybullet's loaded textures read mirrored otherwise
-        for (x, y), u in (((x0, y0), 0.5 + share / 2), ((x1, y1), 0.5 - share / 2)):
-            for z, v in ((z0, 1.0), (z1, 0.0)):
+        # corners run counter-clockwise seen from above: left to right seen from outside, as on the tube
+        for (x, y), u in (((x0, y0), 0.5 - share / 2), ((x1, y1), 0.5 + share / 2)):
+            for z, v in ((z0, 0.0), (z1, 1.0)):
                 mesh.vertices.append([x, y, z])
                 mesh.uvs.append([u, v])
                 mesh.normals.append(normal)
@@ -132,10 +141,50 @@ def skin_mesh(prism: Prism, spec: TextureSpec, z0: float, z1: float, margin: flo
     height = prism.zmax - prism.zmin
     aspect = spec.width / spec.height
     if isinstance(base, Circle):
-        repeats = max(1, round(2 * math.pi * base.radius / (height * aspect)))
-        return tube(base.radius + margin, z0, z1, repeats)
+        return tube(base.radius + margin, z0, z1, repeats(base.radius, height, spec))
     if isinstance(base, Rectangle):
         return sides(base.width + 2 * margin, base.depth + 2 * margin, z0, z1, aspect)
+    return None
+
+
+def repeats(radius: float, height: float, spec: TextureSpec) -> int:
+    """How many copies of ``spec``'s print go round a cylinder of ``radius`` and ``height`` (m)."""
+    return max(1, round(2 * math.pi * radius / (height * spec.width / spec.height)))
+
+
+def texture_point(prism: Prism, spec: TextureSpec, point: tuple[float, float, float]) -> tuple[float, float] | None:
+    """The texture pixel (x right, y down) the skin of ``prism`` shows at ``point`` of its side.
+
+    ``point`` is in the skin's frame (the body's: centred on the base, z from −height/2 to
+    height/2, as :class:`~plugins.sim.world.World` builds it). None on a cap (within ``CAP`` of
+    the top or bottom), or for a base neither ``<Circle>`` nor ``<Rectangle>``. The inverse of the
+    skin's texture mapping: keypoints learnt from rendered views are placed in the print with it (D175).
+    """
+    x, y, z = point
+    height = prism.zmax - prism.zmin
+    up = z / height + 0.5
+    if not CAP / height < up < 1.0 - CAP / height:
+        return None
+    row = (1.0 - up) * spec.height
+    base = prism.base
+    if isinstance(base, Circle):
+        turn = math.atan2(y, x) % (2 * math.pi) / (2 * math.pi)
+        return (repeats(base.radius, height, spec) * turn) % 1.0 * spec.width, row
+    if isinstance(base, Rectangle):
+        hx, hy = base.width / 2, base.depth / 2
+        corners = [(hx, -hy), (hx, hy), (-hx, hy), (-hx, -hy)]
+        nearest: tuple[float, float] | None = None
+        for k in range(4):  # the face whose plane the point is nearest, as sides() builds them
+            (x0, y0), (x1, y1) = corners[k], corners[(k + 1) % 4]
+            length = math.hypot(x1 - x0, y1 - y0)
+            off = abs((x - x0) * (y1 - y0) - (y - y0) * (x1 - x0)) / length
+            along = ((x - x0) * (x1 - x0) + (y - y0) * (y1 - y0)) / length**2
+            share = min(1.0, length / (height * spec.width / spec.height))
+            u = 0.5 - share / 2 + share * min(max(along, 0.0), 1.0)
+            if nearest is None or off < nearest[0]:
+                nearest = (off, u)
+        assert nearest is not None
+        return nearest[1] * spec.width, row
     return None
 
 
