@@ -18,9 +18,10 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from ckmconf.errors import ConfigError
+from ckmconf.errors import ConfigError, located
 from ckmconf.model import Alarm, Node, System
 from ckmconf.model.kernel import Controller as ControllerRecord
+from ckmconf.source import Limits, read_source
 
 from ..network.api import Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry, default_registry
@@ -100,6 +101,7 @@ class NodeRuntime:
         self.resources: dict[str, SmartResourceRuntime] = self.hosting.resources  # hosted here (main process)
         self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
+        self._ros: Any = None  # the ROS 2 type store, for sensors publishing a ROS type (D193)
         self.switching = ControllerSwitching(self.controllers, self._watch, self._watched, self.report)
         self._controller_classes = {c.name: self.registry.resolve("controller", c.kind, c) for c in node.controllers}
         self._backend_classes = {
@@ -149,9 +151,9 @@ class NodeRuntime:
             if refusal is not None:
                 raise self._error(sensor, f"sensor {sensor.name!r}: {refusal}")
             try:
-                shape = shaper(qos.type, channel, types, f"sensor {sensor.name!r}")
-            except ValueError as exc:
-                raise self._error(sensor, str(exc)) from None
+                shape = shaper(sensor, qos.type, channel, types, self._ros_types)
+            except ValueError as exc:  # verify's sentence at the same FILE:LINE:COL (D193)
+                raise self._error(sensor, str(exc), "topic") from None
             chains = [build_chain(sensor.adaptation, self.registry, inverse=False) for _ in range(channel.size)]
             self.sensors[sensor.name] = SensorService(
                 sensor, self.backends[sensor.channel], chain, publisher,
@@ -184,6 +186,14 @@ class NodeRuntime:
 
         if self.partition in (None, ""):
             self.hosting.setup()
+
+    def _ros_types(self) -> Any:
+        """The system's ROS 2 type store (``runtime.ros.config``), loaded once, on a sensor's first need (D193)."""
+        if self._ros is None:
+            from ..ros.config import ConfigRosTypes  # rosbags: only for a sensor on a ROS type
+
+            self._ros = ConfigRosTypes(self.system).ros
+        return self._ros
 
     def _watch(self, topic: str) -> Subscription:
         if topic not in self._watched:
@@ -348,5 +358,12 @@ class NodeRuntime:
         """Record a node event: kept, logged, and published on the node's alarm topic."""
         self.log.report(kind, detail)
 
-    def _error(self, record: Any, message: str) -> ConfigError:
-        return ConfigError.of(record, message)
+    def _error(self, record: Any, message: str, attr: str | None = None) -> ConfigError:
+        """The problem at ``record`` (its attribute ``attr``: where ``verify`` places it, read from the file)."""
+        if attr is not None:
+            loc = located(record)
+            try:
+                return ConfigError.at(read_source(loc.file, Limits()).attr_loc_at(loc, attr), message)
+            except (ConfigError, OSError):  # a record built in code: no file to read
+                pass
+        return ConfigError.of(record, message, attr)

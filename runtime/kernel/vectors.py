@@ -11,20 +11,27 @@ says it reads arrays (``runtime.verification.manifest.ARRAY``). Its read is publ
   a field named like one of the channel's Params that Param's value (an Image's ``width`` and
   ``height``), any other single string field the channel's ``units`` (an Image's ``encoding``:
   ``rgb8``), every other field its type's zero;
-- on a MessageType of exactly ``size`` scalar numeric fields: a dict of them in declaration order.
+- on a MessageType of exactly ``size`` scalar numeric fields: a dict of them in declaration order;
+- on a ROS 2 type (``sensor_msgs/msg/LaserScan``, ``std_msgs/msg/Float64MultiArray``): the message,
+  its first array of numbers holding the read (:mod:`runtime.ros.sensors`, decision D193).
 
-:func:`vector_field` and :func:`shape_of` are shared with ``verify``, which accepts exactly these.
+:func:`vector_field`, :func:`shape_of` and :func:`problem` are shared with ``verify``, which accepts
+exactly these and refuses the others with the kernel's sentence (:func:`refusal`) at ``<Sensor topic>``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ckmconf.model import BUILTIN_TYPES, HWChannel, MessageType
+from ckmconf.model import BUILTIN_TYPES, HWChannel, MessageType, Sensor
 from ckmconf.model.kernel import Field
+from ckmconf.rostypes import is_ros_type
+
+if TYPE_CHECKING:  # rosbags' store is loaded only for a sensor on a ROS type
+    from ..ros.types import RosTypes
 
 NUMERIC = frozenset(BUILTIN_TYPES - {"string", "bytes"})
 DTYPES: dict[str, Any] = {
@@ -94,15 +101,56 @@ def _bytes(values: np.ndarray[Any, Any], owner: str) -> bytes:
     return values.astype(np.uint8).tobytes()
 
 
-def shaper(carried: str, channel: HWChannel, types: Mapping[str, MessageType], owner: str) -> Shaper:
-    """The function turning a vector read into what a sensor publishes on a topic of type ``carried``.
+def problem(
+    carried: str, channel: HWChannel, types: Mapping[str, MessageType], ros: Callable[[], RosTypes]
+) -> str | None:
+    """Why a topic of type ``carried`` cannot carry whole reads of ``channel``, a clause following the
+    type's name; None when it can, or when the type is unknown (the topic's own problem). ``ros``
+    gives the ROS type store."""
+    if is_ros_type(carried):
+        from ..ros.sensors import vector_refusal  # rosbags' store: only for sensors on ROS types
+
+        return vector_refusal(ros(), carried, channel)
+    if carried not in BUILTIN_TYPES and carried not in types:
+        return None
+    if shape_of(carried, channel.size, types) is None:
+        return ('which has no field to carry them: a numeric or bytes topic, a MessageType with a count="0" '
+                f"number field or a bytes field, or one of {channel.size} scalar numbers")
+    return None
+
+
+def refusal(sensor: Sensor, channel: HWChannel, carried: str, why: str) -> str:
+    """The one sentence the kernel (at set-up) and ``verify`` give at the ``topic`` of a ``<Sensor>``
+    whose topic cannot carry its whole reads (``why``: :func:`problem`'s clause)."""
+    kind = "ROS type" if is_ros_type(carried) else "type"
+    return (f"sensor {sensor.name!r} writes whole reads of channel {channel.name!r} (size {channel.size}) "
+            f"onto topic {sensor.topic!r} of {kind} {carried}, {why}")
+
+
+def shaper(
+    sensor: Sensor,
+    carried: str,
+    channel: HWChannel,
+    types: Mapping[str, MessageType],
+    ros: Callable[[], RosTypes],
+) -> Shaper:
+    """The function turning a vector read of ``sensor`` into what it publishes on a topic of type ``carried``.
 
     Raises:
-        ValueError: the topic's type cannot carry the read (``verify`` reports it first).
+        ValueError: the topic's type cannot carry the read: :func:`refusal`'s sentence.
     """
+    owner = f"sensor {sensor.name!r}"
+    why = problem(carried, channel, types, ros)
+    if why is None and is_ros_type(carried):
+        from ..ros.sensors import ros_shaper
+
+        try:
+            return ros_shaper(ros(), carried, channel, sensor.period, owner)
+        except ValueError as exc:  # unknown type, a Param that does not convert to its field
+            why = str(exc)
     shape = shape_of(carried, channel.size, types)
-    if shape is None:
-        raise ValueError(f"{owner}: topic type {carried} cannot carry vectors of {channel.size} numbers")
+    if why is not None or shape is None:
+        raise ValueError(refusal(sensor, channel, carried, why or "which cannot carry them"))
     if shape == "array":
         dtype = DTYPES.get(carried, np.float64)
         return lambda raw, stamp: np.asarray(raw, dtype=dtype)

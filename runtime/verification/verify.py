@@ -9,7 +9,8 @@ single node; ``verify`` does the same for a loaded System:
 - every ``<Param>`` is declared by its kind, converts to the declared type and lies in the declared
   range; every required Param is given;
 - the value types of producers, topics and consumers agree: what a sensor writes (one number, or a
-  vector of ``size`` numbers) and what controllers, actuators and behaviors read and write, against
+  vector of ``size`` numbers, which its topic's type must carry as the kernel shapes it: D99, D193)
+  and what controllers, actuators and behaviors read and write, against
   the ``type`` of the topic or plan signal (:mod:`runtime.verification.types`); a topic of a ROS 2
   type (``sensor_msgs/msg/LaserScan``) against its fields (:mod:`runtime.ros.config`, issue L), and
   a custom ROS type's ``.msg`` file must load;
@@ -36,7 +37,6 @@ from typing import Any
 from ckmconf.binding import Record
 from ckmconf.errors import ConfigError
 from ckmconf.model import (
-    BUILTIN_TYPES,
     Actuator,
     Behavior,
     Controller,
@@ -52,7 +52,7 @@ from ckmconf.model import (
 )
 from ckmconf.rostypes import is_ros_type
 
-from ..kernel.vectors import chain_refusal, is_vector, shape_of
+from ..kernel.vectors import chain_refusal, is_vector, problem, refusal
 from ..registry import Registry, default_registry
 from .checker import Checker
 from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ports_of
@@ -144,25 +144,13 @@ class _Verifier(Checker):
 
     def _vector_sensor(self, node: Node, sensor: Sensor, record: HWChannel, cls: type[Any]) -> None:
         """A vector sensor: its chain must apply per element, its topic must carry the read (D99)."""
-        refusal = chain_refusal(record, cls) if sensor.adaptation is not None else None
-        if refusal is not None:
-            self.report.error(sensor.adaptation or sensor, f"sensor {sensor.name!r}: {refusal}")
+        chain = chain_refusal(record, cls) if sensor.adaptation is not None else None
+        if chain is not None:
+            self.report.error(sensor.adaptation or sensor, f"sensor {sensor.name!r}: {chain}")
         carried = self._topic_type(sensor.topic, node)
-        if carried is not None and is_ros_type(carried):
-            self._flow(
-                sensor, "topic", NUMBERS, carried, f"sensor {sensor.name!r} writes {{}} onto topic {sensor.topic!r}"
-            )
-            return
-        known = carried is not None and (carried in BUILTIN_TYPES or carried in self.types)
-        if known and carried is not None and shape_of(carried, record.size, self.types) is None:
-            self.report.error(
-                sensor,
-                f"sensor {sensor.name!r} writes whole reads of channel {record.name!r} (size {record.size}) "
-                f"onto topic {sensor.topic!r} of type {carried}, which has no field to carry them: a numeric "
-                f'or bytes topic, a MessageType with a count="0" number field or a bytes field, or one of '
-                f"{record.size} scalar numbers",
-                "topic",
-            )
+        why = None if carried is None else problem(carried, record, self.types, lambda: self._ros().ros)
+        if carried is not None and why is not None:  # the kernel's sentence, at the same place (D193)
+            self.report.error(sensor, refusal(sensor, record, carried, why), "topic")
 
     def _controller(self, node: Node, controller: Controller) -> None:
         cls = self._checked(controller, "controller", controller.kind, controller.params)
