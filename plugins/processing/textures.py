@@ -336,7 +336,11 @@ def build_model(path: str | Path) -> Model:
             raise ValueError(f"{path}: object {obj.name!r} has {count} keypoints; its texture is too plain")
     names = tuple(o.name for o in spec.objects)
     if spec.views:  # keypoints learnt from rendered views (D175), in the same texture frame
-        learnt, at, which = read_views(Path(path).parent / spec.views, names)
+        views = Path(path).parent / spec.views
+        try:
+            learnt, at, which = read_views(views, names)
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read its views file {views}: {exc.strerror}") from None
         descriptors.append(learnt)
         points.append(at)
         labels.append(which)

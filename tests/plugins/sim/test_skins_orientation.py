@@ -18,6 +18,7 @@ from ckmconf.model import Environment
 from ckmconf.model.environment import Circle, Geometry25D, Rectangle
 from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import read_model, render_texture
+from plugins.sim.skins import skin_mesh, texture_point
 from plugins.sim.world import World
 from tests.conftest import CONFIGS
 
@@ -126,3 +127,32 @@ def test_a_cylinder_shows_its_print_upright_unmirrored_at_the_column_its_angle_p
     expected = (repeats * (azimuth - obj.pose.yaw) / (2 * math.pi)) % 1.0 * w
     offset = (column + width / 2 - expected + w / 2) % w - w / 2
     assert abs(offset) < 0.06 * w, (column, expected)
+
+
+@pytest.mark.parametrize("name", ["cylinder_red_stripes", "box_cereal"])
+def test_texture_point_inverts_the_skin_mapping(name: str) -> None:
+    """Every side vertex of a skin maps back to the print pixel its texture coordinates show: the map
+    the keypoints learnt from rendered views are placed in the print with (D175)."""
+    obj = next(o for o in ENVIRONMENT.objects if o.name == name)
+    assert isinstance(obj.geometry, Geometry25D)
+    prism = obj.geometry.prism
+    spec = next(o for o in read_model(USECASE_MODEL).objects if o.name == name)
+    half = (prism.zmax - prism.zmin) / 2
+    mesh = skin_mesh(prism, spec, -half, half)
+    assert mesh is not None
+    checked = 0
+    for k in range(0, len(mesh.indices), 3):
+        corners = mesh.indices[k : k + 3]
+        if any(mesh.normals[i][2] != 0.0 for i in corners):
+            continue  # a cap
+        # the triangle's centroid, which its corners' texture coordinates interpolate
+        centre = np.mean([mesh.vertices[i] for i in corners], axis=0)
+        u, v = np.mean([mesh.uvs[i] for i in corners], axis=0)
+        at = texture_point(prism, spec, (float(centre[0]), float(centre[1]), float(centre[2])))
+        assert at is not None
+        expected = (u % 1.0 if spec.wrap else u) * spec.width, (1.0 - v) * spec.height
+        gap = abs(at[0] - expected[0])
+        assert min(gap, spec.width - gap) < 0.5 and abs(at[1] - expected[1]) < 0.5, (centre, (u, v), at)
+        checked += 1
+    assert checked >= 8  # a box: 4 faces of 2 triangles; a cylinder: 2 per facet
+    assert texture_point(prism, spec, (0.0, 0.0, half)) is None  # the top cap
