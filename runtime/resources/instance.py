@@ -1,7 +1,8 @@
 """One client's instance of a Smart Resource service: its TCM, parameters, publishers and measures.
 
 The service's own instance has client ``""`` and publishes on the configured output topics; a
-client's instance (a *replica*, §7.2) publishes on ``OUTPUT/CLIENT``. Instances are driven by
+client's instance (a *replica*, §7.2) publishes on ``OUTPUT/CLIENT``. Results travel in the
+codec's plain form, under the Output topic's ROS 2 type when it has one (CDR on the wire, D194). Instances are driven by
 :class:`runtime.resources.resource.SmartResourceRuntime`: the processing thread calls
 :meth:`Instance.deliver` with each fresh result, the TCM thread calls :meth:`Instance.tick`.
 """
@@ -31,6 +32,21 @@ ALARM_AFTER = 3
 
 Send = Callable[[str, dict[str, Any]], None]
 """Publishes a message on the service's ``quality`` or ``alarms`` topic."""
+
+SERVICE_DATA = "ckm/service-data"
+"""The type a service result travels under when its Output topic is of no type the wire codes."""
+
+
+def output_type(transport: Transport, topic: str) -> str:
+    """The type an Output's results travel under: the ROS 2 type the topic is declared with when the
+    transport's wire codec carries it (``runtime.ros.wire.CdrWire.topic_type``: CDR on the wire, as
+    any producer of that topic sends; decision D194), else :data:`SERVICE_DATA` (msgpack).
+
+    A replica's copy (``OUTPUT/CLIENT``) travels as its Output does.
+    """
+    named = getattr(getattr(transport, "codec", None), "topic_type", None)
+    found = named(topic) if callable(named) else None
+    return found if isinstance(found, str) and found else SERVICE_DATA
 
 
 @dataclass
@@ -91,7 +107,7 @@ class Instance:
         self._send = send
         self._lock = threading.Lock()
         self.outputs: dict[str, Publisher] = {
-            o.name: transport.publisher(TopicQoS(client_topic(o.topic, client), "ckm/service-data"))
+            o.name: transport.publisher(TopicQoS(client_topic(o.topic, client), output_type(transport, o.topic)))
             for o in service.outputs
         }
         self._sources = {m.source: m.name for m in service.measures if m.source not in KERNEL_MEASURES}

@@ -37,7 +37,6 @@ from ckmconf.model import System, Topic
 from ckmconf.rostypes import is_ros_type
 
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
-from ..resources import codec as resources_codec
 from .config import ConfigRosTypes, all_topics
 from .rmw_zenoh import (
     Attachment,
@@ -221,10 +220,7 @@ class RmwZenohBridge:
             publisher = self._ckm_publishers.get(name)
             if publisher is None:
                 return
-            wire = self.transport.codec
-            if wire is None or not wire.encodes(bridged.topic.type):  # no CDR here: the codec's plain form
-                value = resources_codec.encode(value)  # (what services publish, arrays included)
-            with self._lock:
+            with self._lock:  # the value is in the codec's plain form, CDR on the CKM side or not (D194)
                 bridged.recent.append(value)  # the very object: not sent back when it comes round
                 bridged.to_ckm += 1
             publisher.publish(value, stamp=stamp)

@@ -28,6 +28,7 @@ from rosbags.typesys import Stores, get_typestore
 import ckmconf
 from runtime.network import Transport
 from runtime.network.api import TopicQoS
+from runtime.resources import codec
 from runtime.ros.convert import encode_payload
 from runtime.ros.rmw_zenoh import Attachment, encode_attachment, topic_keyexpr
 from runtime.ros.types import RosTypes
@@ -80,8 +81,9 @@ def test_the_bridge_command_shows_ckm_topics_to_ros_and_brings_ros_samples_in(
             time.sleep(0.2)
         sample = heard.latest()
         assert sample is not None, "the CKM subscriber heard nothing from the ROS side"
-        assert sample.value["header"]["frame_id"] == "laser"
-        assert np.allclose(sample.value["ranges"], [0.5, 1.0, 1.5, 2.0])
+        value = codec.decode(sample.value)  # the codec's plain form, as every CKM consumer reads it (D194)
+        assert value["header"]["frame_id"] == "laser"
+        assert np.allclose(value["ranges"], [0.5, 1.0, 1.5, 2.0])
     finally:
         bridge.send_signal(signal.SIGTERM)
         out, err = bridge.communicate(timeout=30)

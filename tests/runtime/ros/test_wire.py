@@ -4,7 +4,7 @@ Two transports of one private network on 127.0.0.1, each with the configuration'
 (tests/data/ros/ros_typed_loop.xml: LaserScan, Float64 and a custom .msg). What goes on the wire is
 caught below the transport (CKMultiPeer's TOPICDATA frames, a raw Zenoh subscriber on the same
 session) and decoded with ``rosbags``' own Jazzy type store, not CKM code; the receiving transport
-hands its subscribers the CKM payload. Topics of CKM types stay msgpack.
+hands its subscribers the CKM payload in the codec's plain form (D194). Topics of CKM types stay msgpack.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from runtime.network import Transport
 from runtime.network.api import TopicQoS
 from runtime.network.frames import Frame, FrameType
 from runtime.network.wire import WireError, incoming, outgoing
+from runtime.resources import codec as plain_codec
 from runtime.ros.config import ConfigRosTypes
 from runtime.ros.types import CDR_LE_HEADER
 from runtime.ros.wire import CDR, CdrWire, install
@@ -128,6 +129,8 @@ def test_ros_typed_topics_travel_as_cdr(kind: str, transports: Callable[..., Tra
     received = {name: sub.latest() for name, sub in subs.items()}
     assert all(sample is not None for sample in received.values())
     got_scan = received["/scan"].value  # type: ignore[union-attr]
+    assert set(got_scan["ranges"]) == {"~nd"}  # the codec's plain form, as a service publishes locally (D194)
+    got_scan = plain_codec.decode(got_scan)
     assert got_scan["header"] == {"stamp": 1700000000.25, "frame_id": "laser"}
     assert np.array_equal(got_scan["ranges"], ranges) and got_scan["angle_max"] == pytest.approx(1.5)
     assert received["/speed"].value == 1.25  # type: ignore[union-attr]  # the bare value again
