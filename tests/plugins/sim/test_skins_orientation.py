@@ -122,7 +122,7 @@ def test_a_cylinder_shows_its_print_upright_unmirrored_at_the_column_its_angle_p
     tiled = np.hstack([texture, texture])  # the strip may straddle the end of one copy and the next
     scores = _scores(patch, tiled)
     upright, column = scores["upright"]
-    assert upright > 0.85, scores
+    assert upright > 0.75, scores
     assert all(upright > score + 0.15 for name, (score, _) in scores.items() if name != "upright"), scores
     expected = (repeats * (azimuth - obj.pose.yaw) / (2 * math.pi)) % 1.0 * w
     offset = (column + width / 2 - expected + w / 2) % w - w / 2
