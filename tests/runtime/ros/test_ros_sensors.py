@@ -116,7 +116,7 @@ def test_kernel_sensors_publish_ros_types_as_cdr(
         assert _same(mine, theirs), name
 
     store = get_typestore(Stores.ROS2_JAZZY)  # rosbags' own, not CKM's store
-    messages = {}
+    messages: dict[str, Any] = {}
     for name, (data, tag, type_name) in ((n, wire.of(n)[-1]) for n in names):
         assert tag == CDR and data[:4] == CDR_LE_HEADER, name
         messages[name] = store.deserialize_cdr(data, type_name)
@@ -222,6 +222,6 @@ def test_service_results_travel_as_cdr_of_their_output_type(
     assert latest["ranges"].dtype == np.float32 and latest["ranges"].shape == (4,) and latest["ranges"][0] >= 1
     data, tag, type_name = wire.of("/ranges/agent1")[-1]
     assert (tag, type_name, data[:4]) == (CDR, "sensor_msgs/msg/LaserScan", CDR_LE_HEADER)
-    message = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(data, type_name)
+    message: Any = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(data, type_name)
     assert message.header.frame_id == "laser" and message.header.stamp.nanosec == 500_000_000
     assert len(message.ranges) == 4
