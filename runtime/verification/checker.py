@@ -21,7 +21,7 @@ from ckmconf.rostypes import is_ros_type
 from ckmconf.source import Limits, SourceFile, read_source
 
 from ..registry import NOUNS, Registry, RegistryError
-from .manifest import ParamError, defaulted, params_of, strays
+from .manifest import param_problems
 from .types import describe, fits
 
 
@@ -68,34 +68,11 @@ class Checker:
     def _params(self, record: Record, cls: type[Any], params: Iterable[Param], owner: str) -> None:
         """Each Param against the kind's declaration (a per-name value at its bad entry); missing
         required ones at ``record``. The same conversions as ``read_params``, which builds the kind."""
-        declared = params_of(cls)
-        given: dict[str, Param] = {}
-        values: dict[str, Any] = {}
-        for param in params:
-            given[param.name] = param
-            entry = declared.specs.get(param.name)
-            if entry is None:
-                accepted = ", ".join(sorted(declared)) or "none"
-                self.report.error(param, f"{owner} takes no parameter {param.name!r} (accepted: {accepted})", "name")
-                continue
-            try:
-                values[param.name] = entry.convert(param.value)
-            except ParamError as exc:
-                self.report.error(param, f"{owner}: {exc}", "value", exc.offset)
-        for name, entry in declared.specs.items():
-            if entry.required and name not in given:
-                self.report.error(record, f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})")
-            elif name not in given and not entry.required:
-                try:
-                    values[name] = defaulted(entry, entry.default)
-                except ParamError:
-                    continue  # the kind's own default: not the configuration's problem
-        for name, problem in strays(declared, values, {n: p.value for n, p in given.items()}):
-            at = given.get(name)
-            if at is None:
-                self.report.error(record, f"{owner}: {problem}")
+        for problem in param_problems(cls, tuple(params), owner):
+            if problem.param is None:
+                self.report.error(record, problem.message)
             else:
-                self.report.error(at, f"{owner}: {problem}", "value", problem.offset)
+                self.report.error(problem.param, problem.message, problem.attr, problem.offset)
 
     def _checked(
         self, record: Record, category: str, kind: str, params: Iterable[Param], attr: str = "kind"

@@ -303,6 +303,62 @@ def strays(declared: Params, values: Mapping[str, Any], given: Mapping[str, str]
                 yield name, problem
 
 
+@dataclass(frozen=True)
+class ParamProblem:
+    """One Param that does not fit its kind's declaration, where ``verify`` places it.
+
+    ``param`` is None for a required Param not given (placed at the owning element); ``attr`` and
+    ``offset`` name the attribute and the character of its value (a per-name entry).
+    """
+
+    param: Param | None
+    message: str
+    attr: str | None = None
+    offset: int | None = None
+
+
+def param_problems(cls: type, params: Sequence[Param], owner: str) -> list[ParamProblem]:
+    """Every ``<Param>`` of ``params`` against the declaration of kind ``cls``, with the conversions
+    ``read_params`` makes to build it: one check for ``verify`` and for a delegated plugin's description.
+
+    Args:
+        cls: the registered class.
+        params: the element's Params.
+        owner: how messages name the element ("plugin kind 'resize'").
+    """
+    declared = params_of(cls)
+    problems: list[ParamProblem] = []
+    given: dict[str, Param] = {}
+    values: dict[str, Any] = {}
+    for param in params:
+        given[param.name] = param
+        entry = declared.specs.get(param.name)
+        if entry is None:
+            accepted = ", ".join(sorted(declared)) or "none"
+            problems.append(ParamProblem(param, f"{owner} takes no parameter {param.name!r} (accepted: {accepted})",
+                                         "name"))
+            continue
+        try:
+            values[param.name] = entry.convert(param.value)
+        except ParamError as exc:
+            problems.append(ParamProblem(param, f"{owner}: {exc}", "value", exc.offset))
+    for name, entry in declared.specs.items():
+        if entry.required and name not in given:
+            problems.append(ParamProblem(None, f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})"))
+        elif name not in given and not entry.required:
+            try:
+                values[name] = defaulted(entry, entry.default)
+            except ParamError:
+                continue  # the kind's own default: not the configuration's problem
+    for name, problem in strays(declared, values, {n: p.value for n, p in given.items()}):
+        at = given.get(name)
+        if at is None:
+            problems.append(ParamProblem(None, f"{owner}: {problem}"))
+        else:
+            problems.append(ParamProblem(at, f"{owner}: {problem}", "value", problem.offset))
+    return problems
+
+
 __all__ = [
     "ANY",
     "ARRAY",
@@ -313,11 +369,13 @@ __all__ = [
     "Entries",
     "P",
     "ParamError",
+    "ParamProblem",
     "Params",
     "Parsed",
     "Ports",
     "as_params",
     "defaulted",
+    "param_problems",
     "params_of",
     "ports_of",
     "read_params",
