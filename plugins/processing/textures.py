@@ -9,7 +9,9 @@ The model file is a subset of YAML read by ``read_model`` without PyYAML (not a 
 nothing here needs more): top-level ``key: value`` lines, then ``objects:`` and a list of
 ``- key: value`` items; values are integers, floats, space-separated numbers, or strings (quote
 those starting with ``#``); ``#`` after a blank starts a comment. Anything else is an error
-naming ``FILE:LINE``. ``build_model`` turns it into the descriptors the matcher searches.
+naming ``FILE:LINE``. ``build_model`` turns it into the descriptors the matcher searches. Top-level
+``views`` names a file of keypoints learnt from rendered views (``views.py``, D175); an object's
+``wrap: true`` says its print repeats side by side (round a cylinder), which the matcher unwraps.
 """
 
 from __future__ import annotations
