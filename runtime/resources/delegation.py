@@ -29,6 +29,8 @@ import time
 from collections.abc import Callable, Hashable, Mapping
 from typing import Any
 
+from ckmconf.model.resources import SmartResource
+
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
 from . import codec
 from .delegation_protocol import (
@@ -41,7 +43,7 @@ from .delegation_protocol import (
     channel,
     describe,
     get_field,
-    plugin_record,
+    plugin_of,
 )
 from .plugin_host import PluginHost
 from .spt import Context, ProcessingPlugin, Topology
@@ -58,7 +60,7 @@ __all__ = [
     "PluginHost",
     "channel",
     "describe",
-    "plugin_record",
+    "plugin_of",
 ]
 
 
@@ -107,9 +109,12 @@ class DelegatedPlugin(ProcessingPlugin):
         timeout: float = 5.0,
         frame_timeout: float = 1.0,
         on_event: Callable[[DelegationEvent], None] | None = None,
+        resource: SmartResource | None = None,
     ) -> None:
+        """``resource``: the giver's record, whose name and services the offer's text carries (D195)."""
         # No super().__init__: the original already read and checked the params.
         self.record, self.name, self.params = inner.record, inner.name, inner.params
+        self.resource = resource
         self.inner = inner
         self.transport = transport
         self.node = node
@@ -142,7 +147,7 @@ class DelegatedPlugin(ProcessingPlugin):
             raise ValueError(f"resource {topology.name!r} has no plugin {name!r} (plugins: {known})")
         if isinstance(original, DelegatedPlugin):
             return original
-        wrapper = cls(original, transport, node, **options)
+        wrapper = cls(original, transport, node, resource=topology.resource, **options)
         _swap(topology, original, wrapper)
         return wrapper
 
@@ -214,7 +219,7 @@ class DelegatedPlugin(ProcessingPlugin):
                 ) from None
             self._mail.expect(("offer", ident))
             offer = {"op": "offer", "id": ident, "from": self.node, "reply": self._reply.name}
-            out.publish(offer | {"plugin": describe(self.record), "state": state})
+            out.publish(offer | {"plugin": describe(self.record, self.node, self.resource), "state": state})
             answer = self._mail.wait(("offer", ident), deadline - time.monotonic())
             if answer is None:
                 out.publish({"op": "release", "id": ident})  # in case it was built after all

@@ -1,8 +1,9 @@
 """The taker of SPT plugin delegation (§3.1.2.5–6): a node's PluginHost runs plugins other nodes give it.
 
-The messages are :mod:`runtime.resources.delegation_protocol`. The host builds an offered plugin
-from its kind and ``<Plugin>`` data through the registry, restores the offered state, and serves
-PROCESS calls in order on one worker thread, returning each result with the plugin's state.
+The messages are :mod:`runtime.resources.delegation_protocol`. The host reads an offered plugin's
+configuration text as ``ckm-validate`` reads a file (a bad one is refused with the located message,
+D195), builds it through the registry, restores the offered state, and serves PROCESS calls in
+order on one worker thread, returning each result with the plugin's state.
 """
 
 from __future__ import annotations
@@ -15,13 +16,12 @@ from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any
 
-from ckmconf.errors import ConfigError
 from ckmconf.model.resources import Plugin
 
 from ..network.api import Publisher, Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry, default_registry
 from . import codec
-from .delegation_protocol import PREFIX, BadMessage, channel, get_field, plugin_record
+from .delegation_protocol import PREFIX, BadMessage, channel, get_field, plugin_of
 from .spt import Context, ProcessingPlugin
 
 LOG = logging.getLogger("ckm.plugin-delegation")
@@ -148,7 +148,8 @@ class PluginHost:
                 raise BadMessage(f"delegation {ident!r} already exists")
             if len(self._hosted) >= self.max_plugins:
                 raise BadMessage(f"node {self.node!r} already runs {self.max_plugins} delegated plugins")
-            plugin = self._build(plugin_record(message.get("plugin")), get_field(message, "state", dict))
+            record, cls = plugin_of(message.get("plugin"), giver, self.registry)  # refused where it is (D195)
+            plugin = self._build(record, cls, get_field(message, "state", dict))
         except Exception as exc:
             self._reject(f"offer {ident!r} refused: {exc}")
             publisher.publish({"op": "refuse", "id": ident, "reason": str(exc)})
@@ -158,11 +159,7 @@ class PluginHost:
         self.transport.wait_for_subscribers(reply, 1, 1.0)
         publisher.publish({"op": "ready", "id": ident})
 
-    def _build(self, record: Plugin, state: Any) -> ProcessingPlugin:
-        try:
-            cls = self.registry.resolve("plugin", record.kind, record)
-        except ConfigError as exc:
-            raise BadMessage(f"node {self.node!r} cannot run plugin {record.name!r}: {exc.message}") from None
+    def _build(self, record: Plugin, cls: type[Any], state: Any) -> ProcessingPlugin:
         if not isinstance(cls, type) or not issubclass(cls, ProcessingPlugin):
             raise BadMessage(f"plugin kind {record.kind!r} is not a ProcessingPlugin on node {self.node!r}")
         plugin = cls(record)

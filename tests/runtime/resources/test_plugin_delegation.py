@@ -27,6 +27,7 @@ from runtime.resources.delegation import (
     DelegationRefused,
     PluginHost,
     channel,
+    describe,
 )
 from runtime.resources.spt import Context, ProcessingPlugin, Topology
 from tests.conftest import REPO
@@ -246,7 +247,11 @@ def test_hostile_messages_are_refused_with_a_reason_and_the_host_keeps_serving(
 
     giver.subscribe(TopicQoS(reply), collect)
     send = giver.publisher(channel("taker")).publish
-    resize = {"name": "h", "kind": "resize", "params": [["scale", "0.5"]]}
+    def text(kind: str = "resize", **params: str) -> str:  # a plugin as configuration text (D195)
+        record = Plugin(name="h", kind=kind, params=tuple(Param(name=n, value=v) for n, v in params.items()))
+        return describe(record, "evil")
+
+    resize = text(scale="0.5")
 
     def offer(ident: str, **fields: Any) -> dict[str, Any]:
         return {"op": "offer", "id": ident, "from": "evil", "reply": reply, "plugin": resize, "state": {}} | fields
@@ -265,10 +270,12 @@ def test_hostile_messages_are_refused_with_a_reason_and_the_host_keeps_serving(
             {"op": "offer"},
             offer("elsewhere", reply="/robot/cmd_vel"),
             offer("no-dict", plugin="resize"),
-            offer("bad-params", plugin=resize | {"params": [[1, 2]]}),
-            offer("bad-param", plugin=resize | {"params": [["bogus", "1"]]}),
+            offer("bad-params", plugin={"name": "h", "kind": "resize", "params": [["scale", "0.5"]]}),
+            offer("bad-param", plugin=text(bogus="1")),
+            offer("bad-value", plugin=text(scale="big")),
+            offer("include", plugin=resize.replace("<Node", '<Include href="/etc/passwd"/><Node')),
             offer("bad-state", state=[1, 2]),
-            offer("no-kind", plugin={"name": "h", "kind": "rm -rf", "params": []}),
+            offer("no-kind", plugin=text("rm-rf")),
             {"op": "process", "id": "unknown", "seq": 1},
             offer("ok"),
             {"op": "process", "id": "ok", "seq": 1, "frame": 0, "stamp": 0.0, "resource": "r", "data": 1},
@@ -283,14 +290,29 @@ def test_hostile_messages_are_refused_with_a_reason_and_the_host_keeps_serving(
         for message in hostile:
             send(message)
         with arrived:
-            arrived.wait_for(lambda: len(answers) >= 14, 10)
+            arrived.wait_for(lambda: len(answers) >= 16, 10)
         by_id = {(a["id"], a.get("seq")): a for a in answers}
         reasons = {key: a.get("reason", "") for key, a in by_id.items()}
-        assert reasons[("no-dict", None)] == "field 'plugin' must be a dict"
-        assert reasons[("bad-params", None)] == "field 'params' must be a list of [name, value] strings"
-        assert "takes no parameter 'bogus'" in reasons[("bad-param", None)]
+        # refused as ckm-validate refuses a file, where the problem is in the offered text (D195)
+        assert reasons[("no-dict", None)].startswith("<delegation from evil>:1:1: /: malformed XML")
+        assert reasons[("bad-params", None)] == (
+            "<delegation from evil>:1:1: /: a plugin description is configuration text, not dict"
+        )
+        where = "/Part/SmartResource[@name='evil']/Plugin[@name='h']/Param"
+        assert f"{where}[@name='bogus']/@name: plugin kind 'resize' takes no parameter 'bogus'" in reasons[
+            ("bad-param", None)
+        ]
+        assert f"{where}[@name='scale']/@value: plugin kind 'resize': parameter 'scale' = 'big'" in reasons[
+            ("bad-value", None)
+        ]
+        assert reasons[("bad-param", None)].startswith("<delegation from evil>:6:14:")  # its name, line 6 of the text
+        assert reasons[("include", None)] == (
+            "<delegation from evil>:3:12: /Part/Include/@href: cannot include /etc/passwd: "
+            "text received from another process includes no file"
+        )
         assert reasons[("bad-state", None)] == "field 'state' has type list"
-        assert "plugin 'rm -rf' does not exist in the registry" in reasons[("no-kind", None)]
+        missing = "Plugin[@name='h']/@kind: processing plugin 'rm-rf' does not exist in the registry"
+        assert missing in reasons[("no-kind", None)]
         assert by_id[("ok", None)]["op"] == "ready"
         assert reasons[("ok", 1)] == "BadMessage: PROCESS before GO"
         assert reasons[("ok", 2)] == "BadMessage: field 'frame' has type str"
