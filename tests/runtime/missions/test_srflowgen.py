@@ -118,7 +118,8 @@ def usecase() -> System:
 QUALITY = 0.9  # the weakest data-flow step: Fusion's, Pan-Tilt Recog.'s and Track's policies (0.9)
 MOBILE = 0.95  # AMCL's, Scan's and Displacement's policies
 ARM = 0.99  # MoveIt's "active" policy
-PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("ObjectPlace", "PLACE"): ARM,
+PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("ObjectPlace", "DOCK"): MOBILE,
+         ("ObjectPlace", "PLACE"): ARM,
          ("ObjectPlace", "BACK"): MOBILE}  # fmt: skip
 
 
