@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -44,7 +43,7 @@ from shapely.prepared import prep
 from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.resources import codec
-from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 from .map_model import MapModel, MapObject
@@ -86,7 +85,7 @@ class EnvironmentMap(ProcessingPlugin):
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
-        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        base = config_dir(record)
         self.environment_file = base / self.params["environment"] if self.params["environment"] else LAB
         self.area_names = _area_names(self.params["areas"])
         self.model: MapModel | None = None

@@ -32,7 +32,6 @@ centre — from the environment model's Object of that name (Param ``environment
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -43,7 +42,7 @@ from ckmconf.model.environment import Geometry2D, Geometry3D
 from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
-from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import MAPPING, Entries, P, Params, Ports, fixed_numbers
 
 from .head import HeadModel, map_frame, on_plane
@@ -96,7 +95,7 @@ class PanTiltTrack(ProcessingPlugin):
             if not low < high:
                 raise ParamError(f"{owner}: parameter '{axis}Min' = {low} must be less than '{axis}Max' = {high}")
         self.heights: dict[str, float] = {name: z for name, (z,) in v["heights"].items()}
-        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        base = config_dir(record)
         model = str(v["model"])
         self.model_path = base / model if Path(model).suffix else MODELS / f"{model}.urdf"
         self.environment = base / v["environment"] if v["environment"] else None

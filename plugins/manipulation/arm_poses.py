@@ -37,7 +37,6 @@ limits (solved once, at set-up, in a private pybullet client: :mod:`.kinematics`
 from __future__ import annotations
 
 import math
-import os
 from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -45,7 +44,7 @@ from typing import Any, ClassVar
 
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
-from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 from .kinematics import MODELS, ArmModel, PoseFile, Solution, read_poses
@@ -98,7 +97,7 @@ class ArmPoses(ProcessingPlugin):
         if len(self.joints) != 5 or len(set(self.joints)) != 5:
             raise ParamError(f"{self.owner}: parameter 'joints' must name 4 arm joints and the gripper joint, "
                              f"each once, got {v['joints']!r}")
-        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        base = config_dir(record)
         model = str(v["model"])
         self.model_path = base / model if Path(model).suffix else MODELS / f"{model}.urdf"
         self.poses_path = base / v["poses"]

@@ -31,9 +31,7 @@ free point within ``goalEscape`` (decision D107). Top-level ``dispersion`` is th
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -47,7 +45,7 @@ from plugins.localization.estimate import Estimate
 from plugins.localization.raster import GridMap
 from plugins.localization.trajectories import LAB
 from runtime.kernel.interfaces import ParamError
-from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbers
 
 from .frames import (
@@ -131,7 +129,7 @@ class AmclNavigation(ProcessingPlugin):
         if sigma_xy < 0 or sigma_yaw < 0:
             raise ParamError(f"{owner}: parameter 'initialSpread' = {p['initialSpread']!r} must not be negative")
         self.spread = (sigma_xy, sigma_yaw)
-        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        base = config_dir(record)
         self.environment_file = base / p["environment"] if p["environment"] else LAB
         self.env: Environment | None = None
         self.localizer: Localizer | None = None

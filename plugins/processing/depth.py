@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -51,7 +50,7 @@ from plugins.processing.descriptor import describe
 from plugins.processing.pcd import PcdError, ShapeModel, read_pcd
 from plugins.processing.shape_training import SHAPE_LABELS, TRAINING_PROFILES, generate_model, write_model
 from runtime.kernel.interfaces import ParamError
-from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import ANY, ARRAY, MAPPING, P, Params, Ports
 
 __all__ = [
@@ -252,7 +251,7 @@ class KdTreeShapeClassifier(ProcessingPlugin):
             raise ParamError(f"{self.owner}: parameter 'threshold' = {p['threshold']} is not in [0, 1]")
         if not p["spread"] > 0:
             raise ParamError(f"{self.owner}: parameter 'spread' = {p['spread']} must be greater than 0")
-        base = Path(record.loc.file).parent if record.loc is not None else Path()
+        base = config_dir(record)
         self.path = base / p["model"]
         self.model: ShapeModel | None = None
         self.tree: KDTree | None = None

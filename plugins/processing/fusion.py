@@ -40,9 +40,7 @@ Parameter ``max_sensors`` sets it at run time (:meth:`FeatureFusion.apply_servic
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -50,7 +48,7 @@ import numpy as np
 from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
-from runtime.resources.spt import Context, ProcessingPlugin
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import MAPPING, Entries, P, Params, Ports
 
 from .cameras import XTION, Camera
@@ -158,7 +156,7 @@ class FeatureFusion(ProcessingPlugin):
         self.catalog: dict[str, tuple[str, str | None]] = {
             name: (values[0], values[1] if len(values) == 2 else None) for name, values in p["objects"].items()
         }
-        base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
+        base = config_dir(record)
         self.environment = base / p["environment"] if p["environment"] else None
         self._loaded = self.environment is None
         self.placement = Placement(p, self.kinds, base, owner)

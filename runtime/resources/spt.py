@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import os
+import pathlib
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -50,6 +52,13 @@ class Context:
     frame: int
     stamp: float
     resource: str = ""
+
+
+def config_dir(record: Record) -> pathlib.Path:
+    """The directory of the configuration file ``record`` was read from, absolute: the files a
+    plugin's Params name (a model, an environment, a poses file) are relative to it. A record built
+    in code has no file: the working directory."""
+    return pathlib.Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else pathlib.Path.cwd()
 
 
 class ProcessingPlugin(abc.ABC):
