@@ -8,6 +8,9 @@ queued by the transport's thread and written by the recorder's own thread throug
 :class:`runtime.ros.config.ConfigRosTypes` gives its topic. In the bag a topic is named like a
 ROS topic: ``/motor_node/speed`` (decision D132).
 
+An item may limit its topic's rate and compress its images (``NAME@HZ:jpeg``, :mod:`.sparse`,
+D197): a camera recorded as a frame every few seconds, as JPEG ``CompressedImage``.
+
 A value that does not fit its type is dropped and counted per topic (the first reason logged);
 a full queue drops and counts too. Only a failure of the bag itself (a disk error) stops the
 recording: :attr:`RunRecorder.failure` says why, for the run's exit code.
@@ -22,7 +25,7 @@ import queue
 import re
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +35,7 @@ from ..network.api import Sample, Subscription, TopicQoS, Transport
 from .bag import BagRecorder, Storage, offered_qos
 from .config import ConfigRosTypes, all_topics, plain
 from .convert import to_message
+from .sparse import COMPRESSED, Compression, Item, SpecError, Throttle, compress, is_image_type, parse_spec
 from .types import RosTypeError
 
 LOG = logging.getLogger("ckm.record")
@@ -49,12 +53,17 @@ class RecordingError(ValueError):
 
 @dataclass(frozen=True)
 class RecordedTopic:
-    """One topic to record: its configured name, its transport QoS, its bag name and ROS type."""
+    """One topic to record: its configured name, its transport QoS, its bag name and ROS type (in
+    the bag: ``CompressedImage`` when compressed, the topic's own type being ``source_type``), its
+    rate limit (Hz) and compression (:mod:`.sparse`)."""
 
     name: str
     qos: TopicQoS
     bag_name: str
     ros_type: str
+    rate: float | None = None
+    compression: Compression | None = None
+    source_type: str | None = None
 
 
 def bag_topic_name(transport_name: str) -> str:
@@ -64,7 +73,8 @@ def bag_topic_name(transport_name: str) -> str:
 
 
 def plan_recording(system: System, nodes: Sequence[Node], spec: str, types: ConfigRosTypes) -> list[RecordedTopic]:
-    """The topics ``--record SPEC`` names: ``all`` or comma-separated configured topic names.
+    """The topics ``--record SPEC`` names: ``all`` or comma-separated configured topic names, each
+    with its options (``NAME[@HZ][:jpeg|:png]``, :func:`.sparse.parse_spec`).
 
     External topics are recorded whichever node runs here; internal ones only for the nodes
     running in this process (``nodes``), each under its node-local transport name.
@@ -86,29 +96,49 @@ def plan_recording(system: System, nodes: Sequence[Node], spec: str, types: Conf
         except RosTypeError as error:
             raise RecordingError(f"topic {topic.name!r}: {error}") from error
         candidates.append(RecordedTopic(topic.name, qos, bag_topic_name(transport), ros_type))
-    wanted = [w.strip() for w in spec.split(",") if w.strip()]
+    try:
+        items = parse_spec(spec)
+    except SpecError as error:
+        raise RecordingError(str(error)) from error
+    wanted = [item.name for item in items]
     if not wanted:
         raise RecordingError("--record needs 'all' or topic names separated by commas")
-    if wanted != ["all"]:
-        known = {c.name for c in candidates} | {c.qos.name for c in candidates}
-        unknown = [w for w in wanted if w not in known]
-        if unknown:
-            names = ", ".join(sorted({c.name for c in candidates})) or "none"
-            raise RecordingError(f"--record: no topic {', '.join(map(repr, unknown))} here (topics: {names})")
+    named = [w for w in wanted if w != "all"]
+    known = {c.name for c in candidates} | {c.qos.name for c in candidates}
+    unknown = [w for w in named if w not in known]
+    if unknown:
+        names = ", ".join(sorted({c.name for c in candidates})) or "none"
+        raise RecordingError(f"--record: no topic {', '.join(map(repr, unknown))} here (topics: {names})")
+    if "all" not in wanted:
         candidates = [c for c in candidates if c.name in wanted or c.qos.name in wanted]
+    candidates = [_with_options(c, items, types) for c in candidates]
     seen: dict[str, int] = {}
     unique = []
     for candidate in candidates:  # two transport names may sanitise alike: keep bag names apart
         count = seen[candidate.bag_name] = seen.get(candidate.bag_name, 0) + 1
         bag_name = candidate.bag_name if count == 1 else f"{candidate.bag_name}_{count}"
-        unique.append(RecordedTopic(candidate.name, candidate.qos, bag_name, candidate.ros_type))
+        unique.append(replace(candidate, bag_name=bag_name))
     return unique
+
+
+def _with_options(topic: RecordedTopic, items: Sequence[Item], types: ConfigRosTypes) -> RecordedTopic:
+    """``topic`` with the rate limit and compression of the (last) item naming it."""
+    item = next((i for i in reversed(items) if i.name in (topic.name, topic.qos.name)), None)
+    if item is None or (item.rate is None and item.compression is None):
+        return topic
+    if item.compression is None:
+        return replace(topic, rate=item.rate)
+    if not is_image_type(types.ros, topic.ros_type):
+        raise RecordingError(f"--record {topic.name}:{item.compression}: its type {topic.ros_type} is not an image")
+    return replace(topic, bag_name=topic.bag_name + "/compressed", ros_type=COMPRESSED, rate=item.rate,
+                   compression=item.compression, source_type=topic.ros_type)  # fmt: skip
 
 
 @dataclass
 class _Counts:
     written: int = 0
     dropped: int = 0
+    throttled: int = 0
     first_drop: str | None = None
 
 
@@ -119,7 +149,7 @@ class RunRecorder:
         system: the loaded system.
         nodes: the nodes running in this process.
         path: the bag directory to create (it must not exist).
-        spec: ``all`` or comma-separated topic names (:func:`plan_recording`).
+        spec: ``all`` or comma-separated topic names, each ``NAME[@HZ][:jpeg|:png]`` (:func:`plan_recording`).
         storage: ``mcap``, ``sqlite3`` or ``mcap+sqlite3`` (both: the sqlite3 twin is ``PATH-sqlite3``).
 
     Everything ``--record`` asks is checked here, before the run starts (RecordingError).
@@ -143,6 +173,7 @@ class RunRecorder:
         self._queue: queue.Queue[Any] = queue.Queue(QUEUE_LIMIT)
         self._counts = {t.qos.name: _Counts() for t in self.topics}
         self._by_transport = {t.qos.name: t for t in self.topics}
+        self._throttles = {t.qos.name: Throttle(t.rate) for t in self.topics if t.rate is not None}
         self._subscriptions: list[Subscription] = []
         self._lock = threading.Lock()
         self._opened = threading.Event()
@@ -201,6 +232,9 @@ class RunRecorder:
                     "written": self._counts[t.qos.name].written,
                     "dropped": self._counts[t.qos.name].dropped,
                     "firstDrop": self._counts[t.qos.name].first_drop,
+                    "throttled": self._counts[t.qos.name].throttled,
+                    "maxRate": t.rate,
+                    "compression": t.compression,
                 }
                 for t in self.topics
             }
@@ -212,6 +246,11 @@ class RunRecorder:
     def _received(self, sample: Sample) -> None:
         """The transport's thread: hand the sample over, never block it."""
         if self.failure is not None:
+            return
+        throttle = self._throttles.get(sample.topic)
+        if throttle is not None and not throttle.admit(sample.stamp - sample.offset):  # before queueing a frame
+            with self._lock:
+                self._counts[sample.topic].throttled += 1
             return
         try:
             self._queue.put_nowait(sample)
@@ -258,14 +297,19 @@ class RunRecorder:
         value = plain(sample.value)
         if topic.qos.type == "bool" and isinstance(value, int | float) and not isinstance(value, bool):
             value = value != 0  # a digital channel reads 0.0 / 1.0: numbers fit bool topics (verify)
+        stamp = sample.stamp - sample.offset
         try:
-            payload = self.types.payload(topic.ros_type, value)
+            source = topic.source_type or topic.ros_type
+            payload = self.types.payload(source, value)
             ros = self.types.ros
-            data = ros.encode(topic.ros_type, to_message(ros, topic.ros_type, payload))
+            message = to_message(ros, source, payload)
+            if topic.compression is not None:
+                data = compress(ros, message, source, topic.compression, stamp)
+            else:
+                data = ros.encode(topic.ros_type, message)
         except (RosTypeError, TypeError, ValueError) as error:  # this value does not fit the type
             self._drop(sample.topic, str(error))
             return
-        stamp = sample.stamp - sample.offset
         if not math.isfinite(stamp) or stamp < 0:  # a publisher's bad clock: this sample, not the bag
             self._drop(sample.topic, f"its time stamp {sample.stamp!r} is not a time since the epoch")
             return
