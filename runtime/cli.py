@@ -75,7 +75,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--name", help="with --await-config: the agent's name (default: the host name)")
     parser.add_argument(
-        "--record", metavar="TOPICS", help="record these topics (comma-separated, or 'all') as a rosbag2 bag (run dir)"
+        "--record",
+        metavar="TOPICS",
+        help="record these topics (comma-separated, or 'all') as a rosbag2 bag (run dir); NAME@HZ records at most "
+        "HZ messages a second, NAME:jpeg (or :png) an image topic as CompressedImage on BAG_NAME/compressed: "
+        "/nao/camera/image@0.5:jpeg (runtime.ros.sparse, D197)",
     )
     parser.add_argument(
         "--record-format", choices=RECORD_FORMATS, default="mcap", help="storage of the --record bag (default: mcap)"
