@@ -38,7 +38,7 @@ from .scheduler import Scheduler, Task
 from .services import ActuationService, ControlService, FutureActions, SensorService
 from .switching import ControllerSwitching
 from .topics import declared_topic, topic_qos
-from .vectors import chain_refusal, is_vector, shaper
+from .vectors import chain_refusal, is_vector, scalar_refusals, shaper
 
 LOG = logging.getLogger("ckm.node")
 __all__ = ["EVENTS_KEPT", "NodeRuntime"]
@@ -101,7 +101,7 @@ class NodeRuntime:
         self.resources: dict[str, SmartResourceRuntime] = self.hosting.resources  # hosted here (main process)
         self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
-        self._ros: Any = None  # the ROS 2 type store, for sensors publishing a ROS type (D193)
+        self._ros: Any = None  # the ROS 2 types, for sensors publishing a ROS type (D193)
         self.switching = ControllerSwitching(self.controllers, self._watch, self._watched, self.report)
         self._controller_classes = {c.name: self.registry.resolve("controller", c.kind, c) for c in node.controllers}
         self._backend_classes = {
@@ -144,6 +144,9 @@ class NodeRuntime:
             publisher = self.transport.publisher(qos)
             channel = channels[sensor.channel]
             if not is_vector(channel, self._backend_classes[channel.name]):
+                refusals = scalar_refusals(sensor, channel, qos.type, self._ros_config)
+                if refusals:  # verify's sentence at the same FILE:LINE:COL (D193)
+                    raise self._error(sensor, refusals[0], "topic")
                 self.sensors[sensor.name] = SensorService(sensor, self.backends[sensor.channel], chain, publisher)
                 continue
             # decision D99: the whole read, shaped for the topic; a chain adapts each element apart
@@ -151,7 +154,7 @@ class NodeRuntime:
             if refusal is not None:
                 raise self._error(sensor, f"sensor {sensor.name!r}: {refusal}")
             try:
-                shape = shaper(sensor, qos.type, channel, types, self._ros_types)
+                shape = shaper(sensor, qos.type, channel, types, lambda: self._ros_config().ros)
             except ValueError as exc:  # verify's sentence at the same FILE:LINE:COL (D193)
                 raise self._error(sensor, str(exc), "topic") from None
             chains = [build_chain(sensor.adaptation, self.registry, inverse=False) for _ in range(channel.size)]
@@ -187,12 +190,12 @@ class NodeRuntime:
         if self.partition in (None, ""):
             self.hosting.setup()
 
-    def _ros_types(self) -> Any:
-        """The system's ROS 2 type store (``runtime.ros.config``), loaded once, on a sensor's first need (D193)."""
+    def _ros_config(self) -> Any:
+        """The system's ROS 2 types (``runtime.ros.config.ConfigRosTypes``), loaded on a sensor's first need (D193)."""
         if self._ros is None:
             from ..ros.config import ConfigRosTypes  # rosbags: only for a sensor on a ROS type
 
-            self._ros = ConfigRosTypes(self.system).ros
+            self._ros = ConfigRosTypes(self.system)
         return self._ros
 
     def _watch(self, topic: str) -> Subscription:

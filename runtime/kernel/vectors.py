@@ -30,7 +30,10 @@ from ckmconf.model import BUILTIN_TYPES, HWChannel, MessageType, Sensor
 from ckmconf.model.kernel import Field
 from ckmconf.rostypes import is_ros_type
 
+from ..verification.manifest import NUMBER
+
 if TYPE_CHECKING:  # rosbags' store is loaded only for a sensor on a ROS type
+    from ..ros.config import ConfigRosTypes
     from ..ros.types import RosTypes
 
 NUMERIC = frozenset(BUILTIN_TYPES - {"string", "bytes"})
@@ -125,6 +128,19 @@ def refusal(sensor: Sensor, channel: HWChannel, carried: str, why: str) -> str:
     kind = "ROS type" if is_ros_type(carried) else "type"
     return (f"sensor {sensor.name!r} writes whole reads of channel {channel.name!r} (size {channel.size}) "
             f"onto topic {sensor.topic!r} of {kind} {carried}, {why}")
+
+
+def scalar_refusals(sensor: Sensor, channel: HWChannel, carried: str, ros: Callable[[], ConfigRosTypes]) -> list[str]:
+    """Why the single numbers a scalar sensor publishes cannot travel on its topic of ROS type
+    ``carried`` (a type with no numeric ``data`` field, D131): the sentences ``verify`` and the
+    kernel give at ``<Sensor topic>``; none for a CKM type (``verify``'s type rules apply)."""
+    if not is_ros_type(carried):
+        return []
+    return [
+        f"sensor {sensor.name!r} writes single numbers (channel {channel.name!r}, size {channel.size}) "
+        f"onto topic {sensor.topic!r} of ROS type {carried}: {problem}"
+        for problem in ros().value_problems(NUMBER, carried)
+    ]
 
 
 def shaper(

@@ -52,7 +52,7 @@ from ckmconf.model import (
 )
 from ckmconf.rostypes import is_ros_type
 
-from ..kernel.vectors import chain_refusal, is_vector, problem, refusal
+from ..kernel.vectors import chain_refusal, is_vector, problem, refusal, scalar_refusals
 from ..registry import Registry, default_registry
 from .checker import Checker
 from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ports_of
@@ -131,6 +131,11 @@ class _Verifier(Checker):
             return
         if is_vector(record, cls):  # decision D99: the whole read, shaped for the topic's type
             self._vector_sensor(node, sensor, record, cls)
+            return
+        carried = self._topic_type(sensor.topic, node)
+        if carried is not None and is_ros_type(carried):  # the kernel's own check (D193)
+            for refusal_text in scalar_refusals(sensor, record, carried, self._ros):
+                self.report.error(sensor, refusal_text, "topic")
             return
         self._flow(
             sensor,

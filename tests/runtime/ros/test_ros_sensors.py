@@ -155,6 +155,29 @@ def test_verify_and_the_kernel_refuse_alike(
     assert str(refused.value) == str(found)  # same FILE:LINE:COL, same words
 
 
+def test_a_scalar_sensor_on_a_ros_type_without_a_number_is_refused_alike(
+    tmp_path: Path, transports: Callable[..., Transport]  # noqa: F811
+) -> None:
+    channel = '<HWChannel name="wheel" direction="in"/>'
+    path = tmp_path / "scalar.xml"
+    path.write_text(
+        '<System xmlns="urn:ckm:1" version="1.0" name="scalar"><Topic name="/scan" type="sensor_msgs/msg/LaserScan"/>'
+        f'<Node name="robot" kind="light">{channel}'
+        '<Sensor name="speed" channel="wheel" topic="/scan" period="0.1"/></Node></System>'
+    )
+    made = ckmconf.load(path)
+    (found,) = verify(made)
+    assert found.message == (
+        "sensor 'speed' writes single numbers (channel 'wheel', size 1) onto topic '/scan' of ROS type "
+        "sensor_msgs/msg/LaserScan: sensor_msgs/msg/LaserScan has no 'data' field to hold them (a ROS-typed "
+        "topic carries a dict of its fields)"
+    )
+    runtime = NodeRuntime(made.nodes[0], made, transports(private_network(), "scalar"))
+    with pytest.raises(ConfigError) as refused:
+        runtime.setup()
+    assert str(refused.value) == str(found)
+
+
 SERVICE = """<?xml version="1.0" encoding="UTF-8"?>
 <System xmlns="urn:ckm:1" version="1.0" name="ros-service">
   <Topic name="/ranges" type="sensor_msgs/msg/LaserScan"/>
