@@ -1,16 +1,18 @@
 """``ckm-mission report RUN_DIR --html``: one self-contained HTML page about a run (§7.4–7.5, issue K).
 
-The page holds, with every picture embedded as a base64 PNG and the CSS inline (no other file, no
+The page holds, with every picture embedded (base64 PNG, camera frames JPEG) and the CSS inline (no other file, no
 network): the header (system, plan, agents and how each ended, mission time, run date, the
 off-line validation verdict when ``RUN_DIR/validation.json`` holds ``ckm-mission validate --json``'s
 object), Table 7.9 per agent (:func:`.report.build_report`) next to the thesis' values
 (:mod:`.report_thesis`), the Fig. 7.23 progress plots (:func:`.report.write_plots`), the Fig. 7.16
 map (:mod:`.report_figures`, the configuration's ``<Environment>`` with the trajectories and
-zoom-map areas of the run's bag, :mod:`.report_bag`), the Fig. 7.19 recognition reliability, the
-camera frames at the moments of Fig. 7.22 and 7.24 (entering SPOT, PICK, PLACE, OBJ_FIX), and every
-problem of the run counted (:mod:`.report_problems`). What a run lacks (no bag, no such topic, no
-configuration) is said where it would have been shown. The configuration is the one ``stats.json``
-names (or ``--config``); the bags are the rosbag2 folders in the run directory (or ``--bag``).
+zoom-map areas of the run's bag, :mod:`.report_bag`), the Fig. 7.19 recognition reliability, each
+agent's camera frames at the moments of Fig. 7.22 and 7.24 (entering and ending NAV, SPOT, APPR,
+PICK, PLACE, OBJ_FIX: :mod:`.report_snapshots`), the simulated world's scenario, disturbances and
+final state (:mod:`.report_world`), and every problem of the run counted (:mod:`.report_problems`).
+What a run lacks (no bag, no such topic, no configuration) is said where it would have been shown.
+The configuration is the one ``stats.json`` names (or ``--config``); the bags are the rosbag2
+folders in the run directory (or ``--bag``).
 """
 
 from __future__ import annotations
@@ -28,14 +30,17 @@ from ckmconf.model import System
 
 from .recording import Run, RunError, read_run
 from .report import AgentReport, Report, build_report, write_plots
-from .report_bag import BagData, ReportTopics, find_bags, read_bags
+from .report_bag import BagData, Moment, ReportTopics, find_bags, read_bags
 from .report_problems import Problems, collect
+from .report_snapshots import snapshots_section
 from .report_thesis import TABLE_SOURCE, compare
-from .report_views import map_section, note, png_tag, reliability_section, snapshots_section
+from .report_views import map_section, note, png_tag, reliability_section
+from .report_world import world_rows
 from .validation.online import replay
 
-SNAPSHOT_STATES = ("SPOT", "PICK", "PLACE", "OBJ_FIX")
-"""States whose entries are the moments of Fig. 7.22 (Turtlebot) and Fig. 7.24 (Nao and Turtlebot)."""
+SNAPSHOT_STATES = ("NAV", "SPOT", "APPR", "PICK", "PLACE", "OBJ_FIX")
+"""States whose entries and ends are the moments of Fig. 7.22 (the Turtlebot navigates to the goal
+area, recognises, grasps and places the object) and Fig. 7.24 (the Nao fixes on it)."""
 
 CSS = """
 body{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}
@@ -44,7 +49,7 @@ table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding
 th{background:#eee}td.num{text-align:right;font-family:monospace}
 .note{color:#7d6608;background:#fef9e7;padding:2px 6px}.error{color:#922b21;background:#fdedec;padding:2px 6px}
 .ok{color:#1e8449;font-weight:bold}.bad{color:#922b21;font-weight:bold}
-table.snapshots td{vertical-align:top;text-align:center}table.snapshots img{max-width:330px}
+table.snapshots td{vertical-align:top;text-align:center;font-size:.85em}table.snapshots img{max-width:250px}
 img{max-width:100%}
 """
 
@@ -151,20 +156,6 @@ def _replays(run: Run, report: Report, system: System | None) -> str:
     return "<br>".join(lines) or "no agent with a mission of the configuration"
 
 
-def _final_world(run_dir: Path) -> str:
-    """Where the simulated world's movable bodies stood when the run ended (the world server's sim-final*.json)."""
-    cells = []
-    for path in sorted(run_dir.glob("sim-final*.json")):
-        try:
-            final = json.loads(path.read_text(encoding="utf-8"))
-            positions = final["positions"]
-            for name, xyz in positions.items():
-                cells.append(f"{escape(str(name))} ({', '.join(f'{float(v):.2f}' for v in xyz)})")
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            cells.append(f'<span class="bad">{escape(path.name)}: unreadable: {escape(str(error))}</span>')
-    return ", ".join(cells) or "no simulated world (no sim-final.json)"
-
-
 def _origin(run: Run) -> float | None:
     """The epoch time of the recordings' run time 0 (``start.wall − t``), None without a wall clock."""
     walls = [e.get("wall") - e.t for e in run.events if e.kind == "start" and isinstance(e.get("wall"), int | float)]
@@ -191,7 +182,7 @@ def _header(
         ["Mission time", f"{finish - begin:.1f} s"],
         ["Off-line validation", _validation(run.run_dir)],
         ["Off-line vs on-line", _replays(run, report, system)],
-        ["World at the end", _final_world(run.run_dir)],
+        *world_rows(run.run_dir),
         ["Problems", f'<a href="#problems">{problems.total} in {len(problems.problems)} kind(s)</a>'],
     ]
     agents = [
@@ -252,14 +243,20 @@ def _progress(run: Run) -> str:
         return "".join(png_tag(p.read_bytes(), f"Fig. 7.23 {p.stem}") for p in paths)
 
 
-def _moments(run: Run, states: tuple[str, ...], origin: float | None) -> list[tuple[float, str]]:
+def _moments(run: Run, states: tuple[str, ...], origin: float | None) -> list[Moment]:
+    """Each agent entering and leaving one of ``states`` (Fig. 7.22 / 7.24), on the bags' epoch clock."""
     if origin is None:
         return []
     return [
-        (origin + e.t, f"{e.agent} enters {e.get('path')} at {e.t:.1f} s")
+        Moment(origin + e.t, e.t, e.agent, str(e.get("state")), str(e.get("path")), _edge(e.kind, e.get("reason")))
         for e in run.events
-        if e.kind == "enter" and e.get("state") in states
+        if e.kind in ("enter", "exit") and e.get("state") in states
     ]
+
+
+def _edge(kind: str, reason: object) -> str:
+    """How a moment came: the state ``entered``, ``ended`` by a transition, or ``stopped`` with the run."""
+    return "entered" if kind == "enter" else "stopped" if reason == "stopped" else "ended"
 
 
 def _problems(problems: Problems) -> str:

@@ -8,7 +8,9 @@ run directory. The report takes from it, by topic (:class:`ReportTopics`, every 
 - the **zoom-map areas** (§6.1.3) when a topic carries them (``{x, y, width, depth}``, the shape of
   ``plugins.environment.zoom.Recentring``);
 - the **recognition results** (``/recog/objects`` fused, and each source's) for Fig. 7.19;
-- the **camera frame nearest** each moment of Fig. 7.22 / 7.24 (an ``Image`` on a camera topic).
+- the **camera frame nearest** each moment of Fig. 7.22 / 7.24 (:class:`Moment`: an agent entering
+  or ending a state): an ``Image`` on a camera topic, or its ``CompressedImage`` on
+  ``CAMERA/compressed`` as ``ckm-run --record CAMERA@HZ:jpeg`` records it (runtime.ros.sparse, D197).
 
 Payloads are read by shape, not by type name, so a CKM MessageType recorded as its generated
 ``ckm_msgs/msg/…`` type and a standard ROS type (``geometry_msgs/msg/PoseStamped``,
@@ -29,6 +31,7 @@ from rosbags.rosbag2 import Reader
 
 from ..ros.bag import BagSource
 from ..ros.convert import IMAGE_ENCODINGS
+from ..ros.sparse import decompress
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 
@@ -46,9 +49,31 @@ class ReportTopics:
     cameras: tuple[str, ...] = ("/turtlebot/xtion_rgb_raw", "/nao/camera/image", "/nao/camera_raw")
     zoom: tuple[str, ...] = ("/nav/zoom", "/env/zoom", "/zoom_map/area")
 
+    def camera_topics(self) -> tuple[str, ...]:
+        """Each camera topic and its compressed stream (``CAMERA/compressed``, image_transport's name)."""
+        return tuple(t for c in self.cameras for t in (c, c.rstrip("/") + "/compressed"))
+
     def wanted(self) -> set[str]:
         """Every topic the report reads, to load only those from the bags."""
-        return {self.estimate, self.fused, *self.truth, *self.recognition, *self.cameras, *self.zoom}
+        return {self.estimate, self.fused, *self.truth, *self.recognition, *self.camera_topics(), *self.zoom}
+
+
+@dataclass(frozen=True)
+class Moment:
+    """A moment of Fig. 7.22 / 7.24: an agent entering or ending a state, at an epoch ``time``
+    (``run_time`` on the recordings' clock)."""
+
+    time: float
+    run_time: float
+    agent: str
+    state: str
+    path: str
+    edge: str  # "entered", "ended" (a transition) or "stopped" (the run ended in it)
+
+    @property
+    def label(self) -> str:
+        """``turtlebot Agent1Fetch/ObjectInteraction/PICK ended at 80.0 s``."""
+        return f"{self.agent} {self.path} {self.edge} at {self.run_time:.1f} s"
 
 
 @dataclass(frozen=True)
@@ -67,10 +92,14 @@ class Frame:
     """The camera frame nearest a moment: the payload is decoded to pixels only for these."""
 
     topic: str
-    moment: float
-    label: str
+    moment: Moment
     time: float = math.nan
     payload: Any = None
+
+    @property
+    def offset(self) -> float:
+        """Seconds from the moment to the frame (negative: taken before it)."""
+        return self.time - self.moment.time
 
 
 @dataclass
@@ -185,6 +214,17 @@ def _zoom_area(payload: Any) -> tuple[float, float, float, float] | None:
     return None
 
 
+def compressed_picture(payload: Any) -> tuple[str, bytes] | None:
+    """(media type, bytes) of a ``sensor_msgs/msg/CompressedImage`` payload, None for another payload.
+
+    Raises:
+        ValueError: a compressed image whose data is neither JPEG nor PNG.
+    """
+    if isinstance(payload, Mapping) and "format" in payload and "data" in payload and "width" not in payload:
+        return decompress(dict(payload))
+    return None
+
+
 def image_pixels(payload: Any) -> np.ndarray:
     """The pixels of an image payload: an (H, W[, C]) array (``sensor_msgs/msg/Image`` read by
     :mod:`runtime.ros.convert`) or a CKM ``Image`` ``{width, height, encoding, data}``."""
@@ -214,15 +254,15 @@ def image_pixels(payload: Any) -> np.ndarray:
     return pixels
 
 
-def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[float, str]]) -> BagData:
-    """Read the wanted topics of ``bags``; ``moments`` are (epoch time, label) for the snapshots.
+def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: Iterable[Moment]) -> BagData:
+    """Read the wanted topics of ``bags``; at each of ``moments`` the nearest frame of every camera.
 
     A bag that cannot be read (no metadata, a corrupt storage file, an undecodable message) adds
     an error naming its files to :attr:`BagData.errors`; what was read before it is kept.
     """
     data = BagData()
     # one frame per camera and moment over every bag (several --node processes each keep a bag)
-    frames = {(c, m, label): Frame(c, m, label) for c in topics.cameras for m, label in moments}
+    frames = {(c, m): Frame(c, m) for c in topics.camera_topics() for m in moments}
     for bag in bags:
         data.bags.append(bag)
         try:
@@ -245,7 +285,7 @@ def read_bags(bags: Iterable[Path], topics: ReportTopics, moments: list[tuple[fl
         except Exception as error:
             stopped = "reading the rosbag2 bag stopped (corrupt or undecodable)"
             data.errors.append(f"{_storage_files(bag)}: {stopped}: {_first_line(error)}")
-    data.frames = sorted((f for f in frames.values() if f.payload is not None), key=lambda f: (f.moment, f.topic))
+    data.frames = sorted((f for f in frames.values() if f.payload is not None), key=lambda f: (f.moment.time, f.topic))
     for track in data.poses.values():  # bags of several processes interleave: time order for lookups
         track.sort()
     for headings in data.headings.values():
@@ -271,7 +311,7 @@ def _take(data: BagData, topics: ReportTopics, topic: str, t: float, payload: An
             data.zoom.append((t, *area))
     if topic == topics.fused or topic in topics.recognition:
         data.detections.setdefault(topic, []).append((t, sightings(payload, t)))
-    if topic in topics.cameras:
-        for (camera, moment, _), frame in frames.items():
-            if camera == topic and (frame.payload is None or abs(t - moment) < abs(frame.time - moment)):
+    if topic in topics.camera_topics():
+        for (camera, moment), frame in frames.items():
+            if camera == topic and (frame.payload is None or abs(t - moment.time) < abs(frame.offset)):
                 frame.time, frame.payload = t, payload

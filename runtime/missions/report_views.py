@@ -1,5 +1,6 @@
-"""The sections of the HTML run report drawn from the run's bags (:mod:`.report_bag`): Fig. 7.16,
-Fig. 7.19 and the camera frames of Fig. 7.22 / 7.24; each says what it lacks instead of failing.
+"""The sections of the HTML run report drawn from the run's bags (:mod:`.report_bag`): Fig. 7.16 and
+Fig. 7.19 (the camera frames of Fig. 7.22 / 7.24: :mod:`.report_snapshots`); each says what it lacks
+instead of failing.
 
 Bag times are seconds since the epoch; the recordings' run time is ``epoch − origin`` where the
 origin is the recordings' wall anchor (:func:`.html_report._origin`), so every plot shares the time
@@ -19,14 +20,12 @@ from ckmconf.model import System
 from ckmconf.model.environment import ZoomMap
 
 from .report import Report
-from .report_bag import BagData, Frame, ReportTopics, Sighting, image_pixels
-from .report_figures import Approach, image_png, map_png, reliability_png
+from .report_bag import BagData, ReportTopics, Sighting
+from .report_figures import Approach, map_png, reliability_png
 
 ZoomArea = tuple[float, float, float, float, float]  # run time, centre x, y, width, depth
 APPROACH_STATES = ("SPOT", "APPR", "PICK", "OBJ_TRACK", "OBJ_FIX")
 """States shaded on the reliability plot: where recognition matters (§7.4.1, Fig. 7.19)."""
-MAX_MOMENTS = 20
-"""Most moments with camera frames shown (a run that re-spots often enters SPOT many times)."""
 POSE_GAP = 1.0
 """Longest time (s) between a recognition and the robot pose it is measured from."""
 
@@ -187,39 +186,3 @@ def reliability_section(
     if not series:
         return "".join(out) + note("The target was never recognised: nothing to plot.")
     return "".join(out) + png_tag(reliability_png(series, approach, spans), "Fig. 7.19")
-
-
-def snapshots_section(
-    data: BagData, topics: ReportTopics, moments: list[tuple[float, str]], states: Sequence[str]
-) -> str:
-    """The camera frame nearest each moment (entering one of ``states``) on every camera topic."""
-    if not moments:
-        return note(f"No moment to show: no agent entered {', '.join(states)} (or the recordings have no wall time).")
-    cameras = [t for t in topics.cameras if t in data.topics]
-    if not cameras:
-        return _missing("camera images", topics.cameras, data)
-    shown = [c for c in cameras if any(f.topic == c for f in data.frames)]
-    if not shown:
-        return note(f"No frame on {', '.join(cameras)}.")
-    frames = {(f.moment, f.label, f.topic): f for f in data.frames}
-    rows = []
-    for moment, label in moments[:MAX_MOMENTS]:
-        cells = [f'<td class="moment">{escape(label)}</td>']
-        for camera in shown:
-            frame = frames.get((moment, label, camera))
-            cells.append(f"<td>{_frame_cell(frame) if frame is not None else 'no frame'}</td>")
-        rows.append("<tr>" + "".join(cells) + "</tr>")
-    head = "<tr><th>Moment</th>" + "".join(f"<th>{escape(c)}</th>" for c in shown) + "</tr>"
-    out = f'<table class="snapshots">{head}{"".join(rows)}</table>'
-    if len(moments) > MAX_MOMENTS:
-        out += note(f"{len(moments) - MAX_MOMENTS} later moment(s) not shown (the first {MAX_MOMENTS} are).")
-    return out
-
-
-def _frame_cell(frame: Frame) -> str:
-    """One snapshot: the frame as PNG and how far from the moment it was taken, or why it is not shown."""
-    try:
-        picture = png_tag(image_png(image_pixels(frame.payload)), frame.label)
-    except ValueError as error:
-        return f'<span class="error">frame not shown: {escape(str(error))}</span>'
-    return f"{picture}<br><small>frame {frame.time - frame.moment:+.2f} s from it</small>"

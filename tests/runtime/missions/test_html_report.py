@@ -18,7 +18,7 @@ from runtime.missions import cli
 from runtime.missions.html_report import Options, build_html, main
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import build_report
-from runtime.missions.report_bag import ReportTopics, find_bags, read_bags
+from runtime.missions.report_bag import Moment, ReportTopics, find_bags, read_bags
 from runtime.ros.bag import BagRecorder, Storage
 from runtime.ros.types import RosTypes
 
@@ -265,20 +265,30 @@ def test_the_page_holds_table_7_9_figures_snapshots_and_problems(
     assert summary["Mission time"] == "151.0 s" and summary["Run date"].startswith("2027-01-15")
     assert summary["Off-line validation"].startswith("not in the run directory")
     assert summary["Problems"] == "5 in 3 kind(s)"
-    # camera frames: the nearest frame to each entry of SPOT, PICK, PLACE (turtlebot) and OBJ_FIX (nao)
-    frames = [(alt, decode(src)) for alt, src in page.images if " enters " in alt]
-    assert len(frames) == 8  # four moments, two cameras
-    spot = [pixels for alt, pixels in frames if "SPOT at 40.0 s" in alt]
-    assert {round(float(p.reshape(-1)[0]) * 255) for p in spot} == {40}  # the frame of t = 40 (stamped 40.3 s)
-    snapshots = page.table("snapshots")
-    assert snapshots[0] == ["Moment", "/turtlebot/xtion_rgb_raw", "/nao/camera/image"]
-    assert [row[0] for row in snapshots[1:]] == [
-        "nao enters Agent2Spot/OBJ_FIX at 20.0 s",
-        "turtlebot enters Agent1FetchCoop/ObjectInteraction/SPOT at 40.0 s",
-        "turtlebot enters Agent1FetchCoop/ObjectInteraction/PICK at 80.0 s",
-        "turtlebot enters Agent1FetchCoop/ObjectPlace/PLACE at 135.0 s",
+    # camera frames: per agent, its own camera's frame nearest each entry and end of the states of
+    # Fig. 7.22 (turtlebot: NAV, SPOT, APPR, PICK, PLACE) and Fig. 7.24 (nao: OBJ_FIX)
+    frames = {alt: decode(src) for alt, src in page.images if " at " in alt and alt.split()[0] in ("turtlebot", "nao")}
+    assert len(frames) == 14  # turtlebot: 6 visits entered and ended; nao: OBJ_FIX entered and ended
+    spot = frames["turtlebot Agent1FetchCoop/ObjectInteraction/SPOT entered at 40.0 s"]
+    assert round(float(spot.reshape(-1)[0]) * 255) == 40  # the frame of t = 40 (stamped 40.3 s)
+    fixed = frames["nao Agent2Spot/OBJ_FIX ended at 45.0 s"]
+    assert fixed.shape[:2] == (4, 5) and abs(float(fixed.reshape(-1)[0]) * 255 - 45) <= 1  # the Nao's own camera
+    turtlebot = [cell for row in page.table("snapshots agent-turtlebot") for cell in row]
+    assert turtlebot[:4] == [
+        "NAV entered at 2.0 sframe +0.30 s from it",
+        "NAV ended at 10.0 sframe +0.30 s from it",
+        "SPOT entered at 40.0 sframe +0.30 s from it",
+        "SPOT ended at 50.0 sframe +0.30 s from it",
     ]
-    assert {cell for row in snapshots[1:] for cell in row[1:]} == {"frame +0.30 s from it"}
+    assert [c.split(" at ")[0] for c in turtlebot[4:]] == [
+        "APPR entered", "APPR ended", "PICK entered", "PICK ended", "NAV entered", "NAV ended", "PLACE entered",
+        "PLACE ended",
+    ]  # fmt: skip
+    assert [cell for row in page.table("snapshots agent-nao") for cell in row] == [
+        "OBJ_FIX entered at 20.0 sframe +0.30 s from it",
+        "OBJ_FIX ended at 45.0 sframe +0.30 s from it",
+    ]
+    assert summary["World at the end"] == "no simulated world (no sim-final.json)"
     text = out.read_text(encoding="utf-8")
     assert "target &#x27;cylinder_red_stripes cylinder red_stripes&#x27;: the object recognised most reliably" in text
     # problems, counted
@@ -299,7 +309,7 @@ def test_a_run_without_bag_or_configuration_says_what_is_missing(tmp_path: Path)
     assert "No bag in the run directory" in notes
     assert "no configuration (no stats.json naming it, no --config)" in notes
     assert "No estimated trajectory: topic /nav/pose: no bag in the run." in notes
-    assert "No recognition results" in notes and "No camera images" in notes
+    assert "No recognition results" in notes and "No camera frames" in notes
     assert {"Fig. 7.23 plan"} <= {alt for alt, _ in page.images}  # the recordings still give Table 7.9 and Fig. 7.23
     assert "Fig. 7.16" not in {alt for alt, _ in page.images}
     agents = {row[0]: row for row in page.table("agents")[1:]}
@@ -315,7 +325,7 @@ def test_topics_absent_from_the_bag_are_noted_and_others_drawn(tmp_path: Path) -
     assert "No true trajectory: topic /sim/turtlebot/pose / /sim/turtlebot/true_pose" in notes
     assert "No zoom-map areas recorded: in the bag /nav/zoom 0 message(s), none usable" in notes
     assert "replayed" not in notes  # no configuration, no <ZoomMap>
-    assert "No recognition results" in notes and "No camera images" in notes
+    assert "No recognition results" in notes and "No camera frames" in notes
     assert "Fig. 7.16" in {alt for alt, _ in page.images}
     assert dict(page.table("summary"))["Off-line validation"] == "passed (Agent1FetchCoop coherent)"
     assert ["/nav/pose", "ckm_msgs/msg/PoseEstimate", "151"] in page.table("topics")
@@ -345,7 +355,9 @@ def test_cli_options_choose_topics_target_and_bag(tmp_path: Path, capsys: pytest
     assert cli.main([*args, "--camera-topic", "/nao/camera/image", "--out", str(tmp_path / "r.html")]) == 0
     page = parse((tmp_path / "r.html").read_text(encoding="utf-8"))
     assert "No true trajectory: topic /none not in the bag." in page.notes
-    assert len([alt for alt, _ in page.images if " enters " in alt]) == 4  # one camera now
+    # one camera now, the Nao's: shown for the turtlebot too, no camera being named after it
+    assert len([alt for alt, _ in page.images if alt.startswith(("turtlebot Agent1", "nao Agent2"))]) == 14
+    assert page.table("snapshots agent-turtlebot") and page.table("snapshots agent-nao")
     assert capsys.readouterr().err == ""
     text = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert "target &#x27;box orange&#x27; (--target)" in text
@@ -383,7 +395,8 @@ def test_the_bags_of_several_processes_are_merged_in_time_order(tmp_path: Path) 
     run_dir = make_run(tmp_path / "run", bag=False, config=False)
     write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]}).rename(run_dir / "bag-remote_pc")
     write_bag(run_dir, {"/nao/camera/image": TOPICS["/nao/camera/image"], "/recog/objects": TOPICS["/recog/objects"]})
-    data = read_bags(find_bags(run_dir), ReportTopics(), [(WALL + 20.0, "OBJ_FIX")])
+    moment = Moment(WALL + 20.0, 20.0, "nao", "OBJ_FIX", "Agent2Spot/OBJ_FIX", "entered")
+    data = read_bags(find_bags(run_dir), ReportTopics(), [moment])
     assert data.bags == [run_dir / "bag", run_dir / "bag-remote_pc"] and data.errors == []
     assert [t for t, _, _ in data.poses["/nav/pose"]] == sorted(t for t, _, _ in data.poses["/nav/pose"])
     assert [f.topic for f in data.frames] == ["/nao/camera/image"]
