@@ -20,10 +20,12 @@ mkdir -p "$run"
 .venv/bin/ckm-mission validate --json configs/usecase/lab.xml | tail -n 1 > "$run/validation.json"
 topics=/nav/pose,/nav/status,/base/odom,/base/path,/base/move_status,/arm/status,/recog/objects
 topics=$topics,/rgbd/rgb/objects,/rgbd/depth/objects,/pantilt/objects,/pantilt/target,/agent1/target
-topics=$topics,/sim/turtlebot/pose  # camera frames (900 kB each) are left out: the bag would grow by 1 MB/s
+topics=$topics,/sim/turtlebot/pose
+# the cameras at most every 2 s as JPEG CompressedImage (tens of kB, not 900 kB, a frame): the report's snapshots (D197)
+topics=$topics,/turtlebot/~xtion_rgb_raw@0.5:jpeg,/nao/camera/image@0.5:jpeg
 status=0
 .venv/bin/ckm-run configs/usecase/lab.xml --plan "$plan" --time-scale "$scale" --duration 900 \
-    --log-dir "$run/run" --record "$topics" || status=$?
+    --log-dir "$run/run" --record "$topics" --record-format mcap+sqlite3 || status=$?
 cp "$run/validation.json" "$run/run/validation.json"
 .venv/bin/ckm-mission report "$run/run" --html --config configs/usecase/lab.xml || [ "$status" -ne 0 ] || status=1
 echo "report: $run/run/report.html"
