@@ -7,9 +7,13 @@ drives the fingers, the grasp follows its commands and the world's steps (D187).
 
 from __future__ import annotations
 
+import logging
+
 import pybullet as p
 
 from .robots import Robot
+
+LOG = logging.getLogger("ckm.sim.grasp")
 
 
 class Gripper:
@@ -82,28 +86,44 @@ class Gripper:
 
 
 class ChannelGrasp:
-    """The grasp of a ``sim`` gripper channel: its ``joint`` and ``mirror`` fingers close towards
-    their lower limit; a command below where the fingers stand is closing (an object is caught
-    when both touch it, checked after each advance of the world), one above them opens and lets the
-    object go (D87, D187)."""
+    """The grasp of a ``sim`` gripper channel (D87, D187): its ``joint`` and ``mirror`` fingers
+    close towards their lower limit. A command below where the fingers stand starts closing; an
+    object both fingers touch while closing is caught (checked after each advance of the world).
+    It is let go when the fingers have really opened — by ``RELEASE_GAP`` beyond where they
+    stood on it — not on a command: a servo's quantised command to hold its position can round
+    a step up, and the object must not fall for that."""
+
+    RELEASE_GAP = 0.003
+    """m the fingers must open beyond their opening on the object to let it go."""
 
     def __init__(self, robot: Robot, joint: str, mirror: str, link: str, hold_force: float) -> None:
         self.gripper = Gripper(robot, left=joint, right=mirror, wrist=link, hold_force=hold_force)
         self.closing = False
+        self.opening_held = 0.0
         robot.world.hooks.append(self._after_advance)
+
+    def _opening(self) -> float:
+        return float(self.gripper.robot.joint_state(self.gripper.fingers[0])[0])
 
     def command(self, target: float) -> None:
         """The channel drove the fingers to ``target`` (joint units)."""
-        position = self.gripper.robot.joint_state(self.gripper.fingers[0])[0]
-        if target > position + 1e-4:  # opening: past where the fingers stand (on the object or not)
-            self.closing = False
-            self.gripper.release()
-        else:
+        position = self._opening()
+        if target < position - 1e-4:
             self.closing = True
+        elif target > position + self.RELEASE_GAP:  # opening: nothing is caught on the way
+            self.closing = False
 
     def _after_advance(self, _world: object) -> None:
-        if self.closing:
-            self.gripper.update()
+        if self.gripper.held is not None:
+            if self._opening() > self.opening_held + self.RELEASE_GAP:
+                LOG.info("t=%.2f: let go of body %s (fingers opened to %.4f m)", self.gripper.robot.world.time,
+                         self.gripper.held, self._opening())
+                self.gripper.release()
+                self.closing = False
+        elif self.closing and self.gripper.update() is not None:
+            self.opening_held = self._opening()
+            LOG.info("t=%.2f: caught body %s (fingers at %.4f m)", self.gripper.robot.world.time, self.gripper.held,
+                     self.opening_held)
 
     @property
     def held(self) -> int | None:

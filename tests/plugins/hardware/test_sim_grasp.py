@@ -43,8 +43,16 @@ def test_the_fingers_hold_what_they_close_on_until_they_open() -> None:
     clock.advance(0.5)
     gripper.write(CLOSED)
     assert device.grasp.held == part
+    standing = robot.joint_state(robot.joint("gripper_joint"))[0]
+    gripper.write(OFFSET + round(standing / SCALE + 0.5))  # hold where they stand, one servo step rounded up
+    clock.advance(0.5)
+    gripper.write(OFFSET + round(standing / SCALE + 0.5))
+    assert device.grasp.held == part  # a quantised hold command does not let it fall
     gripper.write(OPEN)
-    assert device.grasp.held is None  # an opening command lets it go
+    assert device.grasp.held == part  # a command alone does not: the fingers must open
+    clock.advance(0.5)
+    gripper.write(OPEN)
+    assert device.grasp.held is None  # they opened: let go
 
 
 def test_without_grasp_nothing_is_held() -> None:
