@@ -34,6 +34,7 @@ import logging
 import os
 import socket
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator, Sequence
@@ -43,7 +44,7 @@ from typing import Any
 from ckmconf import ConfigError, load
 from ckmconf.model import Node, Partition, System
 
-from . import simtime
+from . import lockstep, simtime
 from .distribution import NAME, run_agent
 from .host import Host, stop_on_signals
 from .host_network import JoinError
@@ -88,6 +89,11 @@ def _parser() -> argparse.ArgumentParser:
         "--time-scale", metavar="S", help="run every process on a clock S (0 < S <= 1) times the wall clock's "
         "speed, as on a machine 1/S times faster (runtime.simtime; default: the wall clock)",
     )
+    parser.add_argument(
+        "--lockstep", metavar="STEP", type=float, help="run every process on a simulated clock that moves (by at "
+        "most STEP seconds at a time) only when every task waits: as fast as the machine allows, the same result "
+        "under any load (runtime.lockstep, D190)",
+    )
     return parser
 
 
@@ -101,6 +107,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("the following arguments are required: config")
     if args.name is not None:
         parser.error("--name goes with --await-config")
+    if args.lockstep is not None and args.time_scale is not None:
+        parser.error("--lockstep and --time-scale exclude each other")
+    if args.lockstep is not None and lockstep.active() is None:  # start again on the run's clock (as below)
+        try:
+            os.environ.update(lockstep.create(args.lockstep, Path(tempfile.mkdtemp(prefix="ckm-lockstep-"))))
+        except ValueError as error:
+            parser.error(f"--lockstep: {error}")
+        os.execv(sys.executable, [sys.executable, "-m", "runtime.cli", *(sys.argv[1:] if argv is None else argv)])
     if args.time_scale is not None:
         try:
             scale = simtime.parse_scale(args.time_scale)

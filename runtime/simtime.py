@@ -17,6 +17,10 @@ of the machine. Timed waits of ``threading`` (``Condition.wait``, hence ``Event.
 ``event.wait(period)`` keeps its period on the run's clock (unscaled it ran ``1/s`` times too often,
 and a scheduler spun the rest of each period, busy, before every release). Lock and socket
 timeouts keep the wall clock.
+
+``ckm-run --lockstep STEP`` puts a run on a clock that is no scale of the wall clock at all: it
+advances only when every participating thread waits (:mod:`runtime.lockstep`, D190); ``install``
+takes that one when ``CKM_LOCKSTEP`` names it.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ import os
 import threading
 import time
 from collections.abc import Callable, MutableMapping
+
+from . import lockstep
 
 SCALE_VARIABLE = "CKM_TIME_SCALE"
 ORIGIN_VARIABLE = "CKM_TIME_ORIGIN"
@@ -62,6 +68,10 @@ def install(env: MutableMapping[str, str] | None = None) -> float | None:
     """
     global _installed
     env = os.environ if env is None else env
+    if lockstep.install(env) is not None:
+        if env.get(SCALE_VARIABLE):
+            raise ValueError(f"{SCALE_VARIABLE} and {lockstep.VARIABLE}: a run is scaled or in lock-step, not both")
+        return None
     text = env.get(SCALE_VARIABLE)
     if not text:
         return None
@@ -103,10 +113,14 @@ def install(env: MutableMapping[str, str] | None = None) -> float | None:
 
 
 def scale() -> float:
-    """The scale this process runs at (1.0: the wall clock)."""
+    """The scale this process runs at (1.0: the wall clock; 0.0 in lock-step, whose clock has no
+    rate against the wall clock: a scheduler spins no wall time before a release)."""
+    if lockstep.active() is not None:
+        return 0.0
     return _installed or 1.0
 
 
 def wall(seconds: float) -> float:
-    """How many wall seconds ``seconds`` of this process's clock take (for waits in the standard library)."""
-    return seconds / scale()
+    """How many wall seconds ``seconds`` of this process's clock take (for waits in the standard
+    library; in lock-step unknown beforehand: ``seconds``)."""
+    return seconds / (scale() or 1.0)

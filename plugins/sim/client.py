@@ -23,6 +23,7 @@ import threading
 from multiprocessing.connection import Client, Connection
 from typing import Any
 
+from runtime import lockstep
 from runtime.kernel.interfaces import ParamError
 
 from .devices import Sample, Spec
@@ -154,8 +155,10 @@ class RemoteDevice:
 
     def write(self, raw: float) -> None:
         """Write ``raw`` to the device in the world server (no reply unless it fails)."""
-        # silent: an actuator's write waits for no round trip (its error comes with the next one)
-        self.link.request({"op": "write", "handle": self.handle, "value": raw, "reply": False}, answer=False)
+        # silent: an actuator's write waits for no round trip (its error comes with the next one); in
+        # lock-step answered, so it is applied before the run's clock moves on (D190)
+        answered = lockstep.active() is not None
+        self.link.request({"op": "write", "handle": self.handle, "value": raw, "reply": answered}, answer=answered)
 
     def close(self) -> None:
         """Release the channel in the world server and drop the link."""

@@ -46,11 +46,13 @@ import numpy as np
 
 from ckmconf import ConfigError, load
 from ckmconf.model import System
+from runtime import lockstep
 from runtime.kernel.interfaces import ParamError
 
 from .client import ENV_KEY, no_delay
 from .devices import ChannelDevice, SimWorld, Spec
 from .disturbances import ENV_SCENARIO, DisturbedPlan, disturbed, fired, record_into
+from .evidence import Trace, watch_parent, write_final, write_ready
 from .plan import WorldPlan
 from .render import RenderWorker, job_of
 from .scenario import ScenarioError
@@ -331,14 +333,6 @@ class WorldServer:
 # ---------------------------------------------------------------------- the process
 
 
-def _watch_parent(parent: int, stop: threading.Event) -> None:
-    while not stop.is_set():
-        if os.getppid() != parent:
-            LOG.error("parent %d is gone: stopping", parent)
-            stop.set()
-        stop.wait(0.5)
-
-
 def main(argv: list[str] | None = None) -> int:
     """``python -m plugins.sim.server``: build the world of a configuration and serve its channels (D100)."""
     parser = argparse.ArgumentParser(prog="python -m plugins.sim.server", description=__doc__.split("\n")[0])
@@ -352,6 +346,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenario", default=os.environ.get(ENV_SCENARIO) or None,
                         help=f"disturb the world as this scenario file says (default: ${ENV_SCENARIO})")
     args = parser.parse_args(argv)
+    lockstep.observe()  # in lock-step it serves while the run's tasks hold the clock, never holds it (D190)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         key = bytes.fromhex(os.environ.get(ENV_KEY, ""))
@@ -394,24 +389,23 @@ def main(argv: list[str] | None = None) -> int:
     if len(renderers) < len(workers):
         LOG.error("%d of %d render workers did not start", len(workers) - len(renderers), len(workers))
     server = WorldServer(sim, key, port=args.port, renderers=renderers)
+    trace = Trace(sim)
     LOG.info("world %s with %s built in %.2f s; listening on %s", plan.world, ", ".join(plan.bodies),
              time.perf_counter() - started, server.address)
     if args.parent is not None:
-        threading.Thread(target=_watch_parent, args=(args.parent, stop), daemon=True).start()
+        threading.Thread(target=watch_parent, args=(args.parent, stop, LOG), daemon=True).start()
     if args.ready is not None:
         ready = {"address": server.address, "pid": os.getpid(), "world": plan.world, "robots": list(plan.bodies),
                  "scenario": args.scenario}  # fmt: skip
-        temporary = args.ready.with_suffix(".tmp")
-        temporary.write_text(json.dumps(ready))
-        temporary.replace(args.ready)  # atomic: a reader never sees half of it
+        write_ready(args.ready, ready)
     try:
         server.serve(stop)
     finally:
         server.close()
         final = {"time": sim.world.time, "positions": sim.world.movable_positions(), "scenario": args.scenario,
-                 "disturbances": fired(plan)}  # fmt: skip
-        if args.ready is not None:  # the run's evidence of what the robots did to the world (the report reads it)
-            args.ready.with_name(args.ready.name.replace("sim-server", "sim-final")).write_text(json.dumps(final))
+                 "disturbances": fired(plan), "trace": trace.samples}  # fmt: skip
+        if args.ready is not None:
+            write_final(args.ready, final)
         LOG.info("stopped after %d requests (%d refused); at %.1f s: %s", server.requests, server.errors,
                  final["time"], final["positions"])
     return 0

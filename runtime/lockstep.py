@@ -1,0 +1,266 @@
+"""Lock-step simulated time: a run's clock that moves only when every participant waits
+(issue J point 5 "Simulated time", ``ckm-run --lockstep STEP``, decision D190).
+
+Every process of the run (ckm-run, its partitions, the world server, its render workers) maps one
+shared clock file: the simulated time in integer nanoseconds and, per process, a block of slots,
+one per *participating* thread, each holding the simulated time at which that thread next needs
+the clock (``RUNNING``: now — it is working; ``IDLE``: never by itself — an untimed wait). A
+thread becomes a participant at its first timed wait (``time.sleep``, ``Condition.wait`` with a
+timeout, hence ``Event.wait``, ``Queue.get``, the kernel scheduler's wait for its next release);
+ckm-run's main thread participates from the start, so building the nodes holds the clock. The
+world server serves as an observer (:func:`observe`): its waits follow the clock, never hold it.
+
+The run's master (a thread of the ckm-run process, the ``CKM_LOCKSTEP`` variable names its pid)
+advances the clock only when no slot is due (every participant waits for a later time), to the
+earliest wake-up or by at most STEP, and sends a datagram to every process, whose ticker thread
+releases the waits now due — marking their slots ``RUNNING`` *before* they wake, so the master
+cannot move on meanwhile. A notify marks the woken participant ``RUNNING`` the same way. So a job
+of a periodic task, a world server request it waits for, and what it notifies all happen at one
+simulated instant, however long they take on the wall clock: the run is as fast as the machine
+allows and its simulated result does not depend on the load (apart from messages between
+processes, which the clock does not wait for: D190).
+
+A process whose master is gone (ckm-run killed) falls back to the wall clock from the last
+simulated time, so its own watchdogs still end it.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import multiprocessing.connection
+import os
+import queue
+import shutil
+import socket
+import threading
+import time
+import types
+from collections.abc import Callable, MutableMapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .lockstep_clock import (
+    _REAL,
+    BLOCKS,
+    IDLE,
+    IDLE_PACE,
+    LOG,
+    ROW,
+    RUNNING,
+    STALL,
+    VARIABLE,
+    SharedClock,
+    _alive,
+    to_ns,
+)
+
+__all__ = ["VARIABLE", "SharedClock", "active", "create", "install", "observe", "real"]
+
+
+def real(name: str) -> Callable[..., Any]:
+    """The wall clock's ``time.NAME`` (``monotonic``, ``sleep``…) as it was before any patch."""
+    function: Callable[..., Any] = _REAL.get(name) or getattr(time, name)
+    return function
+
+
+# ---------------------------------------------------------------------- the master
+
+
+class Master:
+    """Advances the shared clock (a thread of the run's lead process)."""
+
+    def __init__(self, clock: SharedClock) -> None:
+        self.clock = clock
+        self.moves = 0
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        path = clock.directory / "m"
+        path.unlink(missing_ok=True)
+        self.sock.bind(str(path))
+        threading.Thread(target=self._run, name="ckm-lockstep-master", daemon=True).start()
+
+    def _run(self) -> None:
+        clock, blocks, words = self.clock, self.clock.blocks, self.clock.words
+        checked = moved = _REAL["monotonic"]()
+        self.sock.settimeout(0.02)
+        while True:
+            live = blocks[:, 0] != 0
+            now = int(words[0])
+            due = int(blocks[live, 1:].min()) if live.any() else IDLE
+            if due > now:
+                if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
+                    _REAL["sleep"](IDLE_PACE)
+                words[0] = min(due, now + clock.step_ns)
+                self.moves += 1
+                moved = _REAL["monotonic"]()
+                for pid in blocks[live, 0]:
+                    with contextlib.suppress(OSError):
+                        self.sock.sendto(b".", str(clock.directory / f"p{int(pid)}"))
+                continue
+            try:
+                self.sock.recv(16)
+                self.sock.setblocking(False)
+                try:
+                    while True:
+                        self.sock.recv(16)
+                except OSError:
+                    pass
+                finally:
+                    self.sock.settimeout(0.02)
+            except OSError:  # a timeout: look again (a poke may have been lost)
+                pass
+            wall = _REAL["monotonic"]()
+            if wall - checked > 1.0:
+                checked = wall
+                for index in np.flatnonzero(live):
+                    pid = int(blocks[index, 0])
+                    if not _alive(pid):
+                        LOG.warning("lock-step clock: process %d ended; its threads no longer hold the clock", pid)
+                        blocks[index, 1:] = IDLE
+                        blocks[index, 0] = 0
+            if wall - moved > STALL:
+                moved = wall
+                holders = [int(blocks[i, 0]) for i in np.flatnonzero(live) if int(blocks[i, 1:].min()) <= now]
+                LOG.warning("lock-step clock held at %.3f s for %g s by process(es) %s", now * 1e-9, STALL, holders)
+
+
+# ---------------------------------------------------------------------- installing
+
+_clock: SharedClock | None = None
+_master: Master | None = None
+
+
+def create(step: float, directory: Path) -> dict[str, str]:
+    """Make a run's clock in ``directory`` (mastered by this process): the variables that put a
+    process (and its children, which inherit them) on it."""
+    if not step > 0.0:
+        raise ValueError(f"lock-step: the step {step!r} must be a positive number of seconds")
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / "clock").write_bytes(bytes(8 * (1 + BLOCKS * ROW)))
+    real = _REAL.get("monotonic", time.monotonic), _REAL.get("time", time.time)
+    value = f"{directory} {to_ns(step)} {os.getpid()} {real[0]()!r} {real[1]()!r}"
+    return {VARIABLE: value}
+
+
+def install(env: MutableMapping[str, str]) -> SharedClock | None:
+    """Put this process on the run's lock-step clock if ``env`` names one (idempotent)."""
+    global _clock, _master
+    text = env.get(VARIABLE)
+    if not text or _clock is not None:
+        return _clock
+    try:
+        directory, step, master, mono0, wall0 = text.rsplit(" ", 4)
+        clock = SharedClock(Path(directory), int(step), int(master), float(mono0), float(wall0))
+    except (ValueError, OSError) as error:
+        raise ValueError(f"{VARIABLE}={text!r}: not a lock-step clock ({error})") from None
+    for name in ("monotonic", "time", "perf_counter", "sleep"):
+        _REAL[name] = getattr(time, name)
+    # socket timeouts keep the wall clock (simtime's rule): multiprocessing.connection's waits recompute
+    # theirs from time.monotonic, so on a clock held by the very thread polling, poll(0) never ended
+    wall_time = types.ModuleType("time")
+    wall_time.__dict__.update(time.__dict__)
+    multiprocessing.connection.time = wall_time  # type: ignore[attr-defined]
+    _patch(clock)
+    _clock = clock
+    os.register_at_fork(after_in_child=clock.after_fork)
+    if clock.master == os.getpid():
+        clock.participant(threading.main_thread())  # building the run holds the clock (before the master runs)
+        _master = Master(clock)
+        atexit.register(shutil.rmtree, clock.directory, ignore_errors=True)
+    return clock
+
+
+def _patch(clock: SharedClock) -> None:
+    real_sleep, mono0, wall0 = _REAL["sleep"], clock.mono0, clock.wall0
+    allocate = threading.Lock
+
+    def sleep(seconds: float) -> None:
+        if seconds <= 0 or clock.orphaned is not None:
+            real_sleep(max(0.0, seconds))
+            return
+        waiter = allocate()
+        waiter.acquire()
+        entry = clock.enter(waiter, seconds)
+        waiter.acquire()
+        clock.leave(entry)
+
+    time.monotonic = lambda: mono0 + clock.now() * 1e-9
+    time.perf_counter = time.monotonic
+    time.time = lambda: wall0 + clock.now() * 1e-9
+    time.sleep = sleep  # type: ignore[assignment]
+    wall_wait = threading.Condition.wait
+
+    def wait(self: Any, timeout: float | None = None) -> bool:
+        participant = getattr(clock.local, "slot", None) is not None
+        untimed = timeout is None and not participant
+        if clock.orphaned is not None or untimed or (timeout is not None and timeout <= 0):
+            return bool(wall_wait(self, timeout))
+        if not self._is_owned():
+            raise RuntimeError("cannot wait on un-acquired lock")
+        waiter = allocate()
+        waiter.acquire()
+        self._waiters.append(waiter)
+        saved = self._release_save()
+        entry = clock.enter(waiter, timeout)
+        try:
+            waiter.acquire()
+        finally:
+            self._acquire_restore(saved)
+            got = clock.leave(entry)
+            if not got:
+                with contextlib.suppress(ValueError):
+                    self._waiters.remove(waiter)
+        return got
+
+    def notify(self: Any, n: int = 1) -> None:
+        if not self._is_owned():
+            raise RuntimeError("cannot notify on un-acquired lock")
+        waiters = self._waiters
+        while waiters and n > 0:
+            waiter = waiters[0]
+            if clock.notified(waiter):  # not a wait that ended at its time already
+                try:
+                    waiter.release()
+                    n -= 1
+                except RuntimeError:  # released already (gh-92530)
+                    pass
+            with contextlib.suppress(ValueError):
+                waiters.remove(waiter)
+
+    threading.Condition.wait = wait  # type: ignore[method-assign]
+    threading.Condition.notify = notify  # type: ignore[method-assign]
+    wall_join = threading.Thread.join
+
+    def join(self: threading.Thread, timeout: float | None = None) -> None:
+        # a joining participant waits for another thread, which may need the clock to move
+        slot = getattr(clock.local, "slot", None)
+        if slot is None or clock.orphaned is not None:
+            wall_join(self, timeout)
+            return
+        deadline = IDLE if timeout is None else clock.now() + to_ns(max(0.0, timeout)) + 1
+        clock.hold(slot, deadline)
+        try:
+            while self.is_alive() and clock.now() < deadline and clock.orphaned is None:
+                wall_join(self, 0.02)
+        finally:
+            clock.hold(slot, RUNNING)
+
+    threading.Thread.join = join  # type: ignore[method-assign]
+    # the standard library's own aliases of the monotonic clock, taken at its import
+    for module, name in ((threading, "_time"), (queue, "time")):  # (subprocess's waits keep the wall clock)
+        if getattr(module, name, None) is _REAL["monotonic"]:
+            setattr(module, name, time.monotonic)
+
+
+def active() -> SharedClock | None:
+    """This process's lock-step clock, or None (the wall clock or a scaled one)."""
+    return _clock
+
+
+def observe() -> None:
+    """This process's threads follow the clock but never hold it (the world server: it serves the
+    participants' requests while they hold it)."""
+    if _clock is not None:
+        _clock.observer = True

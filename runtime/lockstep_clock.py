@@ -1,0 +1,291 @@
+"""The shared clock of a lock-step run, as one process sees it (issue J point 5, D190;
+:mod:`runtime.lockstep` installs it and documents the protocol)."""
+
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import heapq
+import itertools
+import logging
+import math
+import mmap
+import os
+import socket
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+LOG = logging.getLogger("ckm.lockstep")
+VARIABLE = "CKM_LOCKSTEP"  # "DIRECTORY STEP_NS MASTER_PID MONO0 WALL0"
+BLOCKS = 64  # processes of a run
+SLOTS = 255  # participating threads per process
+ROW = SLOTS + 1  # a block: pid, then the slots' wake-up times
+RUNNING = -1  # a slot's value: the thread works now (holds the clock)
+IDLE = 1 << 62  # an untimed wait, or a free slot
+POLL = 0.5  # wall seconds a ticker or the master waits for a datagram before looking around
+STALL = 10.0  # wall seconds without a move of the clock before the holders are logged
+IDLE_PACE = 0.001  # wall seconds per STEP while no participant waits for a time
+WAITING, FIRED, NOTIFIED = 0, 1, 2
+
+
+
+_REAL: dict[str, Callable[..., Any]] = {}  # the wall clocks, kept before any patch
+
+
+def to_ns(seconds: float) -> int:
+    """Whole nanoseconds, rounded up: a wait never ends before its time."""
+    return math.ceil(seconds * 1e9)
+
+
+class Entry:
+    """One wait: the lock its thread sleeps on, when it ends, and the slot it holds."""
+
+    __slots__ = ("deadline", "slot", "state", "waiter")
+
+    def __init__(self, waiter: Any, deadline: int, slot: int | None) -> None:
+        self.waiter, self.deadline, self.slot, self.state = waiter, deadline, slot, WAITING
+
+
+class _Farewell:
+    """Kept in a participant's thread-local storage: frees its slot when the thread ends."""
+
+    def __init__(self, clock: SharedClock, slot: int) -> None:
+        self.clock, self.slot = clock, slot
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.clock.release_slot(self.slot)
+
+
+class SharedClock:
+    """This process's view of the run's lock-step clock (see the module docstring)."""
+
+    def __init__(self, directory: Path, step_ns: int, master: int, mono0: float, wall0: float) -> None:
+        self.directory, self.step_ns, self.master = directory, step_ns, master
+        self.mono0, self.wall0 = mono0, wall0
+        self._file = os.open(directory / "clock", os.O_RDWR)
+        self._map = mmap.mmap(self._file, 8 * (1 + BLOCKS * ROW))
+        self.words: npt.NDArray[np.int64] = np.frombuffer(self._map, dtype=np.int64)
+        self.blocks = self.words[1:].reshape(BLOCKS, ROW)
+        self.observer = False
+        self.orphaned: tuple[int, float] | None = None  # (clock ns, wall monotonic) when the master went
+        self._reset()
+
+    def _reset(self) -> None:
+        """Per-process state (again in a forked child: the parent's block and ticker are not its own)."""
+        self.lock = threading.Lock()
+        self.block: int | None = None
+        self.heap: list[tuple[int, int, Entry]] = []
+        self.entries: dict[Any, Entry] = {}
+        self.order = itertools.count()
+        self.free = list(range(SLOTS - 1, -1, -1))
+        self.threads: dict[int, threading.Thread] = {}
+        self.local = threading.local()
+        self.sock: socket.socket | None = None
+
+    # ------------------------------------------------------------------ time
+
+    def now(self) -> int:
+        """The run's simulated time, ns since its origin."""
+        if self.orphaned is not None:
+            ns, wall = self.orphaned
+            return ns + to_ns(_REAL["monotonic"]() - wall)
+        return int(self.words[0])
+
+    def seconds(self) -> float:
+        """The simulated time in seconds since the run's origin."""
+        return self.now() * 1e-9
+
+    # ------------------------------------------------------------------ this process's block
+
+    def _claim(self) -> int:
+        """This process's block (claimed on first need, under the file's lock)."""
+        if self.block is not None:
+            return self.block
+        fcntl.flock(self._file, fcntl.LOCK_EX)
+        try:
+            for index in range(BLOCKS):
+                pid = int(self.blocks[index, 0])
+                if pid == 0 or not _alive(pid):
+                    self.blocks[index, 1:] = IDLE
+                    self.blocks[index, 0] = os.getpid()
+                    break
+            else:
+                raise RuntimeError(f"lock-step clock: more than {BLOCKS} processes in one run")
+        finally:
+            fcntl.flock(self._file, fcntl.LOCK_UN)
+        self.block = index
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        path = self.directory / f"p{os.getpid()}"
+        path.unlink(missing_ok=True)
+        self.sock.bind(str(path))
+        self.sock.settimeout(POLL)
+        threading.Thread(target=self._tick, name="ckm-lockstep-ticker", daemon=True).start()
+        return index
+
+    def participant(self, thread: threading.Thread | None = None) -> int | None:
+        """The calling thread's slot, made on its first call (None: an observer process, or full)."""
+        slot: int | None = getattr(self.local, "slot", None)
+        if slot is not None or self.observer or self.orphaned is not None:
+            return slot
+        block = self._claim()
+        with self.lock:
+            if not self.free:
+                return None
+            slot = self.free.pop()
+            self.threads[slot] = thread or threading.current_thread()
+            self.blocks[block, 1 + slot] = RUNNING
+        self.local.slot = slot
+        self.local.farewell = _Farewell(self, slot)
+        return slot
+
+    def release_slot(self, slot: int) -> None:
+        """Free a participant's slot (its thread ended)."""
+        with self.lock:
+            if self.threads.pop(slot, None) is not None and self.block is not None:
+                self.blocks[self.block, 1 + slot] = IDLE
+                self.free.append(slot)
+        self.poke()
+
+    def hold(self, slot: int, value: int) -> None:
+        """Set a participant's slot (``RUNNING``, or the time it waits for) and tell the master."""
+        with self.lock:
+            self._mark(slot, value)
+        self.poke()
+
+    def _mark(self, slot: int | None, value: int) -> None:
+        if slot is not None and self.block is not None:
+            self.blocks[self.block, 1 + slot] = value
+
+    def poke(self) -> None:
+        """Tell the master a slot changed (it may now advance)."""
+        if self.sock is not None:
+            with contextlib.suppress(OSError):
+                self.sock.sendto(b".", str(self.directory / "m"))
+
+    # ------------------------------------------------------------------ waits
+
+    def enter(self, waiter: Any, timeout: float | None) -> Entry:
+        """Register a wait on ``waiter`` (a locked lock) for ``timeout`` simulated seconds (None: untimed)."""
+        slot = self.participant() if timeout is not None else getattr(self.local, "slot", None)
+        self._claim()
+        deadline = IDLE if timeout is None else self.now() + to_ns(max(0.0, timeout)) + 1
+        entry = Entry(waiter, deadline, slot)
+        with self.lock:
+            self.entries[waiter] = entry
+            if deadline != IDLE:
+                heapq.heappush(self.heap, (deadline, next(self.order), entry))
+            self._mark(slot, deadline)
+            if self.now() >= deadline:  # the clock passed it already (an observer's wait)
+                self._fire(entry)
+        if slot is not None:
+            self.poke()
+        return entry
+
+    def leave(self, entry: Entry) -> bool:
+        """After the wait: True if a notify ended it (not its time)."""
+        with self.lock:
+            self.entries.pop(entry.waiter, None)
+            if entry.state == WAITING:  # woken some other way (never here): treat as a timeout
+                entry.state = FIRED
+            self._mark(entry.slot, RUNNING)
+        return entry.state == NOTIFIED
+
+    def _fire(self, entry: Entry) -> None:
+        """End a wait at its time (with ``lock`` held)."""
+        if entry.state != WAITING:
+            return
+        entry.state = FIRED
+        self._mark(entry.slot, RUNNING)  # before it wakes: the master must wait for it
+        with contextlib.suppress(RuntimeError):
+            entry.waiter.release()
+
+    def notified(self, waiter: Any) -> bool:
+        """A notify releases ``waiter``: False if its wait already ended at its time (skip it)."""
+        with self.lock:
+            entry = self.entries.get(waiter)
+            if entry is None:
+                return True
+            if entry.state != WAITING:
+                return False
+            entry.state = NOTIFIED
+            self._mark(entry.slot, RUNNING)
+            return True
+
+    # ------------------------------------------------------------------ the ticker
+
+    def _tick(self) -> None:
+        sock = self.sock
+        assert sock is not None
+        last, moved = -1, _REAL["monotonic"]()
+        while True:
+            try:
+                sock.recv(16)
+                sock.setblocking(False)
+                try:
+                    while True:
+                        sock.recv(16)
+                except OSError:
+                    pass
+                finally:
+                    sock.settimeout(POLL)
+            except TimeoutError:
+                if not _alive(self.master):
+                    self._orphan()
+                    return
+            except OSError:
+                return
+            now = self.now()
+            with self.lock:
+                while self.heap and self.heap[0][0] <= now:
+                    self._fire(heapq.heappop(self.heap)[2])
+                for slot, thread in list(self.threads.items()):
+                    if not thread.is_alive():
+                        self.threads.pop(slot)
+                        self._mark(slot, IDLE)
+                        self.free.append(slot)
+            wall = _REAL["monotonic"]()
+            if now != last:
+                last, moved = now, wall
+            elif wall - moved > STALL:
+                moved = wall
+                self._log_holders(now)
+
+    def _log_holders(self, now: int) -> None:
+        if self.block is None:
+            return
+        held = [t.name for s, t in self.threads.items() if int(self.blocks[self.block, 1 + s]) <= now]
+        if held:
+            LOG.warning("lock-step clock at %.3f s held for %g s by this process's %s", now * 1e-9, STALL,
+                        ", ".join(held))
+
+    def _orphan(self) -> None:
+        """The master is gone: the wall clock from here on; every wait ends."""
+        LOG.error("lock-step clock: the run's master %d is gone; this process runs on the wall clock", self.master)
+        with self.lock:
+            self.orphaned = (int(self.words[0]), _REAL["monotonic"]())
+            for _, _, entry in self.heap:
+                self._fire(entry)
+            self.heap.clear()
+
+    def after_fork(self) -> None:
+        """In a forked child: nothing of the parent's block is ours."""
+        self._reset()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
