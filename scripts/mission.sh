@@ -21,7 +21,7 @@ mkdir -p "$run"
 topics=/nav/pose,/nav/status,/base/odom,/base/path,/base/move_status,/arm/status,/recog/objects
 topics=$topics,/rgbd/rgb/objects,/rgbd/depth/objects,/pantilt/objects,/pantilt/target,/agent1/target
 topics=$topics,/sim/turtlebot/pose
-# the cameras at most every 2 s as JPEG CompressedImage (tens of kB, not 900 kB, a frame): the report's snapshots (D197)
+# the cameras at most every 2 s as JPEG CompressedImage (10-17 kB, not 900 kB, a frame): the report's snapshots (D197)
 topics=$topics,/turtlebot/~xtion_rgb_raw@0.5:jpeg,/nao/camera/image@0.5:jpeg
 status=0
 .venv/bin/ckm-run configs/usecase/lab.xml --plan "$plan" --time-scale "$scale" --duration 900 \
