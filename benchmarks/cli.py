@@ -29,13 +29,13 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "jitter": ("benchmarks.jitter", "run", "describe"),
     "localization": ("benchmarks.localization", "run", "describe"),
     "mission": ("benchmarks.mission", "run", "describe"),
-    "rates": ("benchmarks.rates", "run", "describe"),
+    "rates": ("benchmarks.rates_run", "run_cli", "describe"),
     "soak": ("benchmarks.soak", "run", "describe"),
     "sim": ("benchmarks.sim", "run", "describe"),
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
 # These take their own options: ckm-bench NAME --help lists them.
-TAKES_OPTIONS = {"adaptation", "fusion", "localization", "mission", "soak", "zoom"}
+TAKES_OPTIONS = {"adaptation", "fusion", "localization", "mission", "rates", "soak", "zoom"}
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:
