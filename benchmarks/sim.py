@@ -7,6 +7,11 @@
   resolution its Smart Resource's TCM starts with (resources.xml: ``camera_resolution``). The
   RGB and depth streams of the Xtion share a render when their resolutions agree.
 - ``per_resolution``: the same with every camera at VGA, QVGA and QQVGA, with the render cost.
+- ``lockstep``: the real-time factor of a whole system in processes (node, world server, network)
+  run by ``ckm-run --lockstep`` (:mod:`benchmarks.sim_lockstep`, D190, D192).
+
+The cameras grab at the periods of the use case's Sensors, 0.5 s (D126), like the services that
+consume them.
 
 Physics at 240 Hz; each device acts at its own period on simulated time (no sleeping), so a
 factor above 1 means the machine simulates faster than real time.
@@ -27,6 +32,8 @@ from plugins.sim.head import PanTiltHead
 from plugins.sim.robots import DiffDriveBase, OdometryNoise, Robot
 from plugins.sim.sensors import Camera, Lidar
 from plugins.sim.world import World
+
+from .sim_lockstep import lockstep_factor
 
 USECASE = Path(__file__).resolve().parent.parent / "configs" / "usecase"
 RESOLUTIONS = {"VGA": (640, 480), "QVGA": (320, 240), "QQVGA": (160, 120)}
@@ -128,8 +135,9 @@ def realtime(cameras: dict[str, tuple[int, int]], periods: dict[str, float], dur
     }
 
 
-def run(duration: float = 3.0) -> dict[str, Any]:
-    """The figures of the module docstring; ``duration`` simulated seconds per configuration."""
+def run(duration: float = 3.0, lockstep_s: float = 20.0) -> dict[str, Any]:
+    """The figures of the module docstring; ``duration`` simulated seconds per configuration, and
+    ``lockstep_s`` simulated seconds of the lock-step run of a whole system (0: none)."""
     system = ckmconf.load(USECASE / "lab.xml", strict=False).system
     assert system is not None
     periods = _periods(system)
@@ -147,6 +155,8 @@ def run(duration: float = 3.0) -> dict[str, Any]:
         for name, size in RESOLUTIONS.items()
     ]
     result["periods_s"] = {k: periods[k] for k in ("left_wheel", "lidar", "rgb_camera", "top_camera", "head_control")}
+    if lockstep_s > 0:
+        result["lockstep"] = lockstep_factor(duration=lockstep_s)
     return result
 
 
@@ -160,4 +170,9 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
     for row in result["per_resolution"]:
         cost = f"render {row['render_ms']} ms, {row['render_share']:.0%} of the time"
         rows.append((f"real-time factor, every camera {row['resolution']}", f"{row['realtime_factor']:.2f}× ({cost})"))
+    if "lockstep" in result:
+        run = result["lockstep"]
+        rows.append((f"ckm-run --lockstep {run['step_s']} of {run['system']} (processes, network, world server)",
+                     f"{run['factor']:.2f}× ({run['simulated_s']} s simulated in {run['wall_s']} s wall, "
+                     f"{run['startup_wall_s']} s of it start-up)"))
     return rows

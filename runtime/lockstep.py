@@ -194,7 +194,8 @@ def _patch(clock: SharedClock) -> None:
 
     def wait(self: Any, timeout: float | None = None) -> bool:
         participant = getattr(clock.local, "slot", None) is not None
-        untimed = timeout is None and not participant
+        # a participant starting a thread keeps the clock while it waits for it to boot (wall time)
+        untimed = timeout is None and (not participant or getattr(clock.local, "starting", False))
         if clock.orphaned is not None or untimed or (timeout is not None and timeout <= 0):
             return bool(wall_wait(self, timeout))
         if not self._is_owned():
@@ -248,6 +249,16 @@ def _patch(clock: SharedClock) -> None:
             clock.hold(slot, RUNNING)
 
     threading.Thread.join = join  # type: ignore[method-assign]
+    wall_start = threading.Thread.start
+
+    def start(self: threading.Thread) -> None:
+        clock.local.starting = True
+        try:
+            wall_start(self)
+        finally:
+            clock.local.starting = False
+
+    threading.Thread.start = start  # type: ignore[method-assign]
     # the standard library's own aliases of the monotonic clock, taken at its import
     for module, name in ((threading, "_time"), (queue, "time")):  # (subprocess's waits keep the wall clock)
         if getattr(module, name, None) is _REAL["monotonic"]:
