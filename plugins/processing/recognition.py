@@ -210,6 +210,9 @@ class KeypointMatching(ProcessingPlugin):
         P("reprojection", 4.0, "RANSAC reprojection threshold at 640 columns.", unit="px", above=0.0),
         P("support", 20.0, "Inliers at which an object's reliability is 0.5.", above=0.0),
         P("threads", 1, "OpenCV threads (0: OpenCV's default).", min=0),
+        P("matcher", "brute-force", "Nearest-descriptor search: exhaustive, or a FLANN LSH index of the model "
+          "(D200: 2.5x faster on the 9,000-keypoint lab model, nearly the same inliers).",
+          choices=("brute-force", "lsh")),
     )
     SAME_POINT = 0.04
     CUTS = 8
@@ -233,7 +236,7 @@ class KeypointMatching(ProcessingPlugin):
         base = Path(os.path.abspath(record.loc.file)).parent if record.loc is not None else Path.cwd()
         self.path = base / p["model"]
         self.model: Model | None = None
-        self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+        self._matcher: Any = cv2.BFMatcher(cv2.NORM_HAMMING)
 
     def setup(self) -> None:
         """Build the texture model from the model file.
@@ -249,6 +252,12 @@ class KeypointMatching(ProcessingPlugin):
             raise OSError(exc.errno, f"{self.owner}: cannot read model file {self.path}: {exc.strerror}") from exc
         except ValueError as exc:
             raise ValueError(f"{self.owner}: bad model file: {exc}") from exc
+        if self.params["matcher"] == "lsh":  # the index is built once, over the model's descriptors
+            lsh: dict[str, bool | int | float | str] = {"algorithm": 6, "table_number": 6, "key_size": 12,
+                                                        "multi_probe_level": 1}  # FLANN_INDEX_LSH
+            self._matcher = cv2.FlannBasedMatcher(lsh, {"checks": 64})
+            self._matcher.add([self.model.descriptors])
+            self._matcher.train()
 
     def stop(self) -> None:
         """Drop the texture model."""
@@ -277,10 +286,21 @@ class KeypointMatching(ProcessingPlugin):
     def _good(self, descriptors: Image) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.intp]]:
         """Which query keypoints pass the ratio test, and each one's nearest model descriptor."""
         assert self.model is not None
-        k = 3  # the model has at least 4 descriptors, so every row has k matches
-        flat = [match for row in self._matcher.knnMatch(descriptors, self.model.descriptors, k=k) for match in row]
-        dist = np.fromiter((m.distance for m in flat), np.float32, len(flat)).reshape(-1, k)
-        index = np.fromiter((m.trainIdx for m in flat), np.intp, len(flat)).reshape(-1, k)
+        k = 3  # the model has at least 4 descriptors: brute force gives k per row, LSH may give fewer
+        if self.params["matcher"] == "lsh":
+            rows = self._matcher.knnMatch(descriptors, k=k)
+        else:
+            rows = self._matcher.knnMatch(descriptors, self.model.descriptors, k=k)
+        dist = np.full((len(descriptors), k), np.inf, np.float32)
+        index = np.zeros((len(descriptors), k), np.intp)
+        for i, row in enumerate(rows):
+            for j, m in enumerate(row[:k]):
+                dist[i, j], index[i, j] = m.distance, m.trainIdx
+        # A query LSH found nothing near keeps distance inf: it fails the ratio test below. A shorter
+        # row's missing neighbours repeat its nearest (never "distinct": the ratio test has no second).
+        for j in range(1, k):
+            short = np.isinf(dist[:, j])
+            index[short, j] = index[short, 0]
         nearest = index[:, 0]
         labels, points = self.model.labels, self.model.points
         sizes = np.array([max(size) for size in self.model.sizes], np.float32)[labels[nearest]]

@@ -156,3 +156,29 @@ def test_the_turtlebot_does_not_take_the_other_cylinders_for_the_red_one(lab: La
         for around in (-0.3, 0.3):
             named = _turtlebot(lab, _front_of(lab, name, 0.6, around))
             assert name in named, (name, around, named)
+
+
+def test_the_lsh_index_finds_what_brute_force_finds(lab: Lab) -> None:
+    """The use case's matchers search a FLANN LSH index (D200): on the views of the NAV goal's poses
+    they name the same objects as the exhaustive search, with inliers within a fifth of its."""
+    import dataclasses
+
+    from ckmconf.model import Param
+    from plugins.processing.recognition import KeypointMatching
+
+    lsh = lab.rgb[-1]
+    assert lsh.params["matcher"] == "lsh"
+    record = dataclasses.replace(lsh.record, params=tuple(q for q in lsh.record.params if q.name != "matcher")
+                                 + (Param(name="matcher", value="brute-force"),))  # fmt: skip
+    exhaustive = KeypointMatching(record)
+    exhaustive.setup()
+    x, y, yaw = GOAL
+    for pose in ((x, y, yaw), (x + 0.1, y, yaw - 0.1), (x - 0.1, y - 0.05, yaw + 0.1)):
+        lab.place(*pose)
+        value: Any = lab.render()[0]
+        for step in lab.rgb[:-1]:
+            value = step.process(value, Context(frame=0, stamp=0.0, resource="RGBDCamera"))
+        fast = {o["name"]: o["inliers"] for o in lsh.process(value, Context(0, 0.0, "RGBDCamera"))["objects"]}
+        full = {o["name"]: o["inliers"] for o in exhaustive.process(value, Context(0, 0.0, "RGBDCamera"))["objects"]}
+        assert fast.keys() == full.keys() and RED in fast, (pose, fast, full)
+        assert all(abs(fast[n] - full[n]) <= 0.2 * full[n] + 2 for n in full), (pose, fast, full)
