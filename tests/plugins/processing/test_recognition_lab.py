@@ -168,8 +168,8 @@ def test_the_lsh_index_finds_what_brute_force_finds(lab: Lab) -> None:
 
     lsh = lab.rgb[-1]
     assert lsh.params["matcher"] == "lsh"
-    record = dataclasses.replace(lsh.record, params=tuple(q for q in lsh.record.params if q.name != "matcher")
-                                 + (Param(name="matcher", value="brute-force"),))  # fmt: skip
+    kept = tuple(q for q in lsh.record.params if q.name != "matcher")
+    record = dataclasses.replace(lsh.record, params=(*kept, Param(name="matcher", value="brute-force")))
     exhaustive = KeypointMatching(record)
     exhaustive.setup()
     x, y, yaw = GOAL
