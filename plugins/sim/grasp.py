@@ -100,10 +100,14 @@ class ChannelGrasp:
         self.gripper = Gripper(robot, left=joint, right=mirror, wrist=link, hold_force=hold_force)
         self.closing = False
         self.opening_held = 0.0
+        self.target = 0.0
         robot.world.hooks.append(self._after_advance)
 
     def _opening(self) -> float:
         return float(self.gripper.robot.joint_state(self.gripper.fingers[0])[0])
+
+    SQUEEZE = 0.001
+    """m the fingers press into a caught object (a servo stalled on it at its torque limit)."""
 
     def command(self, target: float) -> None:
         """The channel drove the fingers to ``target`` (joint units)."""
@@ -112,6 +116,16 @@ class ChannelGrasp:
             self.closing = True
         elif target > position + self.RELEASE_GAP:  # opening: nothing is caught on the way
             self.closing = False
+        self.target = target
+        if self.gripper.held is not None:
+            self._stall()
+
+    def _stall(self) -> None:
+        """Fingers on a caught object stop there, pressing lightly: squeezing a round object on
+        and on would wedge it out between them along the grasp constraint (D187)."""
+        at = max(self.target, self.opening_held - self.SQUEEZE)
+        for finger in self.gripper.fingers:
+            self.gripper.robot.command(finger, "position", at)
 
     def _after_advance(self, _world: object) -> None:
         if self.gripper.held is not None:
@@ -122,6 +136,7 @@ class ChannelGrasp:
                 self.closing = False
         elif self.closing and self.gripper.update() is not None:
             self.opening_held = self._opening()
+            self._stall()
             LOG.info("t=%.2f: caught body %s (fingers at %.4f m)", self.gripper.robot.world.time, self.gripper.held,
                      self.opening_held)
 

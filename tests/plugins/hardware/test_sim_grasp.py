@@ -43,11 +43,12 @@ def test_the_fingers_hold_what_they_close_on_until_they_open() -> None:
     clock.advance(0.5)
     gripper.write(CLOSED)
     assert device.grasp.held == part
-    standing = robot.joint_state(robot.joint("gripper_joint"))[0]
-    gripper.write(OFFSET + round(standing / SCALE + 0.5))  # hold where they stand, one servo step rounded up
-    clock.advance(0.5)
-    gripper.write(OFFSET + round(standing / SCALE + 0.5))
-    assert device.grasp.held == part  # a quantised hold command does not let it fall
+    caught = device.grasp.opening_held
+    for _ in range(6):  # closing on and on: the fingers stall on it, they do not wedge it out
+        clock.advance(0.5)
+        gripper.write(CLOSED)
+    assert device.grasp.held == part
+    assert caught - 0.002 < robot.joint_state(robot.joint("gripper_joint"))[0] <= caught + 1e-4
     gripper.write(OPEN)
     assert device.grasp.held == part  # a command alone does not: the fingers must open
     clock.advance(0.5)
