@@ -33,6 +33,7 @@ import os
 import queue
 import shutil
 import socket
+import subprocess
 import threading
 import time
 import types
@@ -45,9 +46,11 @@ import numpy as np
 from .lockstep_clock import (
     _REAL,
     BLOCKS,
+    HEADER,
     IDLE,
     IDLE_PACE,
     LOG,
+    PENDING,
     ROW,
     RUNNING,
     STALL,
@@ -56,6 +59,9 @@ from .lockstep_clock import (
     _alive,
     to_ns,
 )
+
+HOLD = "CKM_LOCKSTEP_HOLD"  # set for a ckm-run process the run starts: it holds the clock from its start
+START_WAIT = 60.0  # wall seconds the clock waits for a started ckm-run process to join it
 
 __all__ = ["VARIABLE", "SharedClock", "active", "create", "install", "observe", "real"]
 
@@ -89,7 +95,11 @@ class Master:
             live = blocks[:, 0] != 0
             now = int(words[0])
             due = int(blocks[live, 1:].min()) if live.any() else IDLE
-            if due > now:
+            pending = int(words[PENDING])
+            if pending and _REAL["monotonic"]() - moved > START_WAIT:  # a process that never came: go on
+                LOG.warning("lock-step clock: %d started process(es) not on the clock after %g s", pending, START_WAIT)
+                words[PENDING] = pending = 0
+            if due > now and not pending:
                 if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
                     _REAL["sleep"](IDLE_PACE)
                 words[0] = min(due, now + clock.step_ns)
@@ -138,7 +148,7 @@ def create(step: float, directory: Path) -> dict[str, str]:
     if not step > 0.0:
         raise ValueError(f"lock-step: the step {step!r} must be a positive number of seconds")
     directory.mkdir(parents=True, exist_ok=True)
-    (directory / "clock").write_bytes(bytes(8 * (1 + BLOCKS * ROW)))
+    (directory / "clock").write_bytes(bytes(8 * (HEADER + BLOCKS * ROW)))
     real = _REAL.get("monotonic", time.monotonic), _REAL.get("time", time.time)
     value = f"{directory} {to_ns(step)} {os.getpid()} {real[0]()!r} {real[1]()!r}"
     return {VARIABLE: value}
@@ -165,6 +175,10 @@ def install(env: MutableMapping[str, str]) -> SharedClock | None:
     _patch(clock)
     _clock = clock
     os.register_at_fork(after_in_child=clock.after_fork)
+    if env.get(HOLD) == "1":  # a ckm-run process started by the run (a partition): on the clock from now
+        os.environ.pop(HOLD, None)
+        clock.participant(threading.main_thread())
+        clock.expect(-1)
     if clock.master == os.getpid():
         clock.participant(threading.main_thread())  # building the run holds the clock (before the master runs)
         _master = Master(clock)
@@ -235,16 +249,16 @@ def _patch(clock: SharedClock) -> None:
     wall_join = threading.Thread.join
 
     def join(self: threading.Thread, timeout: float | None = None) -> None:
-        # a joining participant waits for another thread, which may need the clock to move
+        # a joining participant waits for another thread, which may need the clock to move: it does not
+        # hold the clock; the timeout (a stop step's bound, ckm-run's host.bounded) is on the wall clock,
+        # which a clock moving freely would otherwise exhaust at once
         slot = getattr(clock.local, "slot", None)
         if slot is None or clock.orphaned is not None:
             wall_join(self, timeout)
             return
-        deadline = IDLE if timeout is None else clock.now() + to_ns(max(0.0, timeout)) + 1
-        clock.hold(slot, deadline)
+        clock.hold(slot, IDLE)
         try:
-            while self.is_alive() and clock.now() < deadline and clock.orphaned is None:
-                wall_join(self, 0.02)
+            wall_join(self, timeout)
         finally:
             clock.hold(slot, RUNNING)
 
@@ -259,6 +273,24 @@ def _patch(clock: SharedClock) -> None:
             clock.local.starting = False
 
     threading.Thread.start = start  # type: ignore[method-assign]
+    wall_popen = subprocess.Popen.__init__
+
+    def popen(self: subprocess.Popen[Any], args: Any, *more: Any, **options: Any) -> None:
+        # a ckm-run process of this run (a partition) holds the clock from its start: it is counted
+        # until it is on the clock, so the run does not go on while its interpreter starts
+        words = [str(a) for a in args] if isinstance(args, list | tuple) else [str(args)]
+        ours = "runtime.cli" in words and clock.orphaned is None
+        if ours:
+            options["env"] = {**(options.get("env") or os.environ), HOLD: "1"}
+            clock.expect(+1)
+        try:
+            wall_popen(self, args, *more, **options)
+        except BaseException:
+            if ours:
+                clock.expect(-1)
+            raise
+
+    subprocess.Popen.__init__ = popen  # type: ignore[method-assign]
     # the standard library's own aliases of the monotonic clock, taken at its import
     for module, name in ((threading, "_time"), (queue, "time")):  # (subprocess's waits keep the wall clock)
         if getattr(module, name, None) is _REAL["monotonic"]:

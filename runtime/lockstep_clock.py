@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import fcntl
 import heapq
@@ -26,6 +27,8 @@ VARIABLE = "CKM_LOCKSTEP"  # "DIRECTORY STEP_NS MASTER_PID MONO0 WALL0"
 BLOCKS = 64  # processes of a run
 SLOTS = 255  # participating threads per process
 ROW = SLOTS + 1  # a block: pid, then the slots' wake-up times
+HEADER = 2  # words before the blocks: the time (ns), the run processes started but not yet on the clock
+PENDING = 1  # the header word counting them
 RUNNING = -1  # a slot's value: the thread works now (holds the clock)
 IDLE = 1 << 62  # an untimed wait, or a free slot
 POLL = 0.5  # wall seconds a ticker or the master waits for a datagram before looking around
@@ -70,9 +73,9 @@ class SharedClock:
         self.directory, self.step_ns, self.master = directory, step_ns, master
         self.mono0, self.wall0 = mono0, wall0
         self._file = os.open(directory / "clock", os.O_RDWR)
-        self._map = mmap.mmap(self._file, 8 * (1 + BLOCKS * ROW))
+        self._map = mmap.mmap(self._file, 8 * (HEADER + BLOCKS * ROW))
         self.words: npt.NDArray[np.int64] = np.frombuffer(self._map, dtype=np.int64)
-        self.blocks = self.words[1:].reshape(BLOCKS, ROW)
+        self.blocks = self.words[HEADER:].reshape(BLOCKS, ROW)
         self.observer = False
         self.orphaned: tuple[int, float] | None = None  # (clock ns, wall monotonic) when the master went
         self._reset()
@@ -121,6 +124,7 @@ class SharedClock:
         finally:
             fcntl.flock(self._file, fcntl.LOCK_UN)
         self.block = index
+        atexit.register(self.leave_clock)
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         path = self.directory / f"p{os.getpid()}"
         path.unlink(missing_ok=True)
@@ -128,6 +132,17 @@ class SharedClock:
         self.sock.settimeout(POLL)
         threading.Thread(target=self._tick, name="ckm-lockstep-ticker", daemon=True).start()
         return index
+
+    def expect(self, change: int) -> None:
+        """Count a ckm-run process started (+1) or on the clock (-1): the master waits for it."""
+        fcntl.flock(self._file, fcntl.LOCK_EX)
+        try:
+            self.words[PENDING] = max(0, int(self.words[PENDING]) + change)
+        finally:
+            fcntl.flock(self._file, fcntl.LOCK_UN)
+        if change < 0:
+            self._claim()
+            self.poke()
 
     def participant(self, thread: threading.Thread | None = None) -> int | None:
         """The calling thread's slot, made on its first call (None: an observer process, or full)."""
@@ -144,6 +159,16 @@ class SharedClock:
         self.local.slot = slot
         self.local.farewell = _Farewell(self, slot)
         return slot
+
+    def leave_clock(self) -> None:
+        """At this process's end: none of its threads holds the clock any more."""
+        block, self.block = self.block, None
+        if block is not None and int(self.blocks[block, 0]) == os.getpid():
+            self.blocks[block, 1:] = IDLE
+            self.blocks[block, 0] = 0
+            if self.sock is not None:
+                with contextlib.suppress(OSError):
+                    self.sock.sendto(b".", str(self.directory / "m"))
 
     def release_slot(self, slot: int) -> None:
         """Free a participant's slot (its thread ended)."""
@@ -280,12 +305,17 @@ class SharedClock:
 
 
 def _alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie, ended but not yet reaped by its parent, does not)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True
+    return stat[stat.rfind(")") + 2 :][:1] not in ("Z", "X")
 
 
