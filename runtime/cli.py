@@ -109,6 +109,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--name goes with --await-config")
     if args.lockstep is not None and args.time_scale is not None:
         parser.error("--lockstep and --time-scale exclude each other")
+    if args.lockstep is not None and args.node is not None and lockstep.active() is None:
+        parser.error("--lockstep runs every node in one ckm-run (their partitions share its clock); a --node run "
+                     "has no clock to share with the other nodes' processes")
     if args.lockstep is not None and lockstep.active() is None:  # start again on the run's clock (as below)
         try:
             os.environ.update(lockstep.create(args.lockstep, Path(tempfile.mkdtemp(prefix="ckm-lockstep-"))))

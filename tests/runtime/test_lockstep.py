@@ -74,9 +74,10 @@ def test_sleeps_waits_and_notifies_happen_at_exact_simulated_instants_faster_tha
     assert figures["wall"] < figures["simulated"]  # nothing held the clock: faster than real time
 
 
-def test_ckm_run_refuses_a_bad_step_and_lockstep_with_a_time_scale(tmp_path: Path) -> None:
+def test_ckm_run_refuses_a_bad_step_lockstep_with_a_time_scale_and_a_single_node_run(tmp_path: Path) -> None:
     for options, message in ((["--lockstep", "0"], "must be a positive"),
-                             (["--lockstep", "0.01", "--time-scale", "0.5"], "exclude each other")):  # fmt: skip
+                             (["--lockstep", "0.01", "--time-scale", "0.5"], "exclude each other"),
+                             (["--lockstep", "0.01", "--node", "cell"], "every node in one ckm-run")):  # fmt: skip
         command = [sys.executable, "-m", "runtime.cli", "configs/examples/sim_station.xml", *options,
                    "--log-dir", str(tmp_path)]  # fmt: skip
         done = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=60)
