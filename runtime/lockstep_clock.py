@@ -266,10 +266,8 @@ class SharedClock:
                     return
             except OSError:
                 return
-            now = self.now()
+            now = self.fire_due()
             with self.lock:
-                while self.heap and self.heap[0][0] <= now:
-                    self._fire(heapq.heappop(self.heap)[2])
                 for slot, thread in list(self.threads.items()):
                     if not thread.is_alive():
                         self.threads.pop(slot)
@@ -281,6 +279,14 @@ class SharedClock:
             elif wall - moved > STALL:
                 moved = wall
                 self._log_holders(now)
+
+    def fire_due(self) -> int:
+        """End every wait of this process whose time has come; the time now."""
+        now = self.now()
+        with self.lock:
+            while self.heap and self.heap[0][0] <= now:
+                self._fire(heapq.heappop(self.heap)[2])
+        return now
 
     def _log_holders(self, now: int) -> None:
         if self.block is None:
