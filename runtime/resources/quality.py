@@ -92,6 +92,8 @@ class MeasureWindow:
         if window < 1:
             raise ValueError(f"a window holds at least one sample, not {window}")
         self._samples: deque[float] = deque(maxlen=window)
+        self.pushed = 0
+        """Samples pushed since the window was made (a mark to count the samples after an instant)."""
 
     @property
     def window(self) -> int:
@@ -103,6 +105,7 @@ class MeasureWindow:
         value = float(value)
         if not math.isnan(value):
             self._samples.append(value)
+            self.pushed += 1
 
     def extend(self, values: Iterable[float]) -> None:
         """Push several samples, oldest first."""

@@ -83,7 +83,15 @@ from typing import Any
 from ckmconf.model.resources import TCM, Scenario, Service
 
 from .learning import ScenarioLearner
-from .quality import DEFAULT_WINDOW, Distribution, MeasureWindow, PolicyEvaluator, QualityBounds, combined_distribution
+from .quality import (
+    DEFAULT_WINDOW,
+    Distribution,
+    FloatArray,
+    MeasureWindow,
+    PolicyEvaluator,
+    QualityBounds,
+    combined_distribution,
+)
 from .selection import Alarm, ConditionResult, Decision, Reason, ScenarioEvaluation, ScenarioEvent
 from .threshold import ThresholdSelector, ThresholdSwitcher  # re-exported: they were defined here once
 
@@ -159,6 +167,7 @@ class TaskConfiguringModule:
         self._active = initial
         self._windows: dict[str, MeasureWindow] = {}
         self._requirements: tuple[PolicyEvaluator, ...] = ()
+        self._required_since: dict[str, int] = {}
         self._tick = 0
         self._alarm = False
         self._starting = True
@@ -236,6 +245,14 @@ class TaskConfiguringModule:
             return ()
         return combined_distribution(windows, self.resolutions[measure])
 
+    def _required_source(self, evaluator: PolicyEvaluator) -> MeasureWindow | Distribution | tuple[()] | FloatArray:
+        """A requirement's samples: those measured since it was set (D201), else its measure's window."""
+        source = self._source(evaluator.measure, evaluator.window)
+        since = self._required_since.get(evaluator.measure)
+        if since is None or not isinstance(source, MeasureWindow):
+            return source
+        return source.last(min(evaluator.window, source.pushed - since))
+
     # -- requirements ------------------------------------------------------------------------
 
     def _set_requirements(self, requirements: Iterable[QualityBounds]) -> None:
@@ -250,8 +267,18 @@ class TaskConfiguringModule:
             self._need(evaluator.measure, evaluator.window)
 
     def set_requirements(self, requirements: Iterable[QualityBounds], now: float | None = None) -> Decision:
-        """The client's new QR: reselect at once (eq. 4.9), without penalty."""
+        """The client's new QR: reselect at once (eq. 4.9), without penalty.
+
+        A requirement is judged on the samples measured after it was set (D201): those before came
+        under another client's configuration or none (a recognition's reliability while the robot
+        drove with nothing in view), and say nothing of whether it can be met now.
+        """
         self._set_requirements(requirements)
+        self._required_since = {
+            e.measure: window.pushed
+            for e in self._requirements
+            if isinstance(window := self._windows.get(e.measure), MeasureWindow)
+        }
         time = now if now is not None else self._tick * self.settings.period
         evaluations = self._evaluate_all()
         events: list[ScenarioEvent] = []
@@ -310,7 +337,7 @@ class TaskConfiguringModule:
             compatible = all(
                 _within(e.policy, evaluator.policy) for e in scenario.evaluators if e.measure == evaluator.measure
             )
-            result = evaluator.evaluate(self._source(evaluator.measure, evaluator.window))
+            result = evaluator.evaluate(self._required_source(evaluator))
             met = False if not compatible else result.met
             conditions.append(
                 ConditionResult(

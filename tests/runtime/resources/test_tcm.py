@@ -282,6 +282,24 @@ def test_requirements_no_scenario_can_promise_raise_an_alarm() -> None:
     assert [a.raised for a in decision.alarms] == [False]
 
 
+def test_a_new_requirement_is_judged_on_the_samples_measured_after_it() -> None:
+    """D201: a recognition's reliability was 0 while nothing was in view; a client then asks for
+    reliability ≥ 0.5: the old zeros do not fail it (no switch, no alarm), the new samples do judge it."""
+    module = tcm("VGA")
+    for _ in range(50):
+        module.observe_many({"deadline": 0.008, "reliability": 0.0})
+    decision = module.set_requirements([Require(measure="reliability", lower=0.5, probability=0.9)])
+    assert decision.active == "VGA" and not decision.events and not any(a.raised for a in decision.alarms)
+    requirement = decision.evaluations["VGA"].conditions[-1]
+    assert requirement.kind == "requirement" and requirement.met is None  # nothing measured under it yet
+    for _ in range(10):
+        module.observe_many({"deadline": 0.008, "reliability": 0.8})
+    assert module.evaluate().evaluations["VGA"].conditions[-1].met is True
+    for _ in range(50):
+        module.observe_many({"deadline": 0.008, "reliability": 0.1})
+    assert module.evaluate().evaluations["VGA"].conditions[-1].met is False  # and it fails on its own samples
+
+
 def test_a_measured_requirement_counts_in_f_ev() -> None:
     module = tcm("VGA", requirements=[Require(measure="reliability", lower=0.8, probability=0.9)])
     for _ in range(50):
