@@ -27,7 +27,6 @@ answered ``{"error": …, "type": …}`` naming the channel; it never stops the 
 from __future__ import annotations
 
 import argparse
-import functools
 import itertools
 import json
 import logging
@@ -54,10 +53,10 @@ from .devices import ChannelDevice, SimWorld, Spec
 from .disturbances import ENV_SCENARIO, DisturbedPlan, disturbed, fired, record_into
 from .evidence import Trace, watch_parent, write_final, write_ready
 from .plan import WorldPlan
-from .render import RenderWorker, job_of
+from .render import RenderWorker
 from .scenario import ScenarioError
-from .sensors import Frame
-from .serving import LARGE, Client, Flight, frame_reply
+from .server_renders import RenderDispatch
+from .serving import LARGE, Client, Flight
 
 LOG = logging.getLogger("ckm.sim.server")
 HOST = "127.0.0.1"
@@ -65,7 +64,7 @@ RENDER_WORKERS = 2  # the use case's two camera partitions rendered in parallel 
 MAX_REQUEST = 1 << 20  # bytes: a request is a small JSON object; anything larger is malformed
 
 
-class WorldServer:
+class WorldServer(RenderDispatch):
     """Serves ``sim``'s devices to authenticated clients (see the module docstring)."""
 
     def __init__(
@@ -235,71 +234,6 @@ class WorldServer:
                 text = f"sim channel {name!r}: {text}" if name else f"world server: bad request: {text}"
             LOG.warning("client %d: %s", client.number, text)
             return {"error": text, "type": type(exc).__name__, **({"silent": True} if silent else {})}
-
-    # ------------------------------------------------------------------ renders (D103)
-
-    def _dispatch(self) -> None:
-        """Hand the waiting camera reads to the idle render workers (each with the others asking for
-        the same frame), at the world's current step."""
-        idle = [worker for worker in self.renderers if not worker.busy]
-        while idle and self._cameras:
-            worker = idle.pop(0)
-            client, device = self._cameras.pop(0)
-            key = device.camera
-            assert key is not None
-            with self.sim.lock:
-                self.sim.sync()
-                world = self.sim.world
-                flight = Flight(key, world.steps, world.time, [(client, device)])
-                flight.waiters += [(c, d) for c, d in self._cameras if d.camera == key]
-                self._cameras = [(c, d) for c, d in self._cameras if d.camera != key]
-                try:
-                    worker.submit(world, job_of(device))
-                except (OSError, ValueError) as exc:
-                    self._lose(worker, f"{type(exc).__name__}: {exc}")
-                    self._finish(flight, None)
-                    continue
-            self._flights[worker] = flight
-
-    def _landed(self, worker: RenderWorker) -> None:
-        flight, result = self._flights.pop(worker), worker.result()
-        if isinstance(result, str):
-            LOG.warning("render worker: %s; this camera renders in the physics thread", result)
-            self._unmirrored.add(flight.key)
-            if not worker.alive():
-                self._lose(worker, result)
-        self._finish(flight, result if isinstance(result, Frame) else None)
-
-    def _finish(self, flight: Flight, frame: Frame | None) -> None:
-        client, device = flight.waiters[0]
-        try:
-            with self.sim.lock:
-                if frame is None:  # the worker could not: render here, now
-                    self.sim.sync()
-                    frame = self.sim.frame(device.device, *flight.key[3:])
-                else:
-                    self.sim.keep_frame(flight.key, flight.step, frame)
-            for client, device in flight.waiters:
-                if client in self.clients:
-                    client.later(functools.partial(frame_reply, device, frame, flight.time))
-        except Exception as exc:  # never the server's end
-            for client, device in flight.waiters:
-                self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
-
-    def _lose(self, worker: RenderWorker, why: str) -> None:
-        self.renderers.remove(worker)
-        worker.close()
-        LOG.error("render worker lost (%s); %d left", why, len(self.renderers))
-        if self.renderers:
-            return
-        waiting, self._cameras = self._cameras, []
-        for client, device in waiting:  # none left: served here, in order
-            try:
-                with self.sim.lock:
-                    self.sim.sync()
-                    self._reply(client, {"value": device.read(), "time": self.sim.world.time})
-            except Exception as exc:  # never the server's end
-                self._reply(client, {"error": f"sim channel {device.spec.name!r}: {exc}", "type": type(exc).__name__})
 
     def _open(self, client: Client, spec: Spec) -> int:
         world = spec.values.get("world")
