@@ -48,14 +48,14 @@ class Gripper:
             self.robot.command(joint, "position", 0.0, self.force)
 
     def touching(self) -> int | None:
-        """The body both fingers touch now, if any."""
+        """The movable body both fingers touch now, if any (a table or a wall is never grasped)."""
         cid = self.robot.world.client
         touched = [
             {c[2] for c in p.getContactPoints(bodyA=self.robot.body, linkIndexA=link, physicsClientId=cid)}
             - {self.robot.body, self.robot.world.floor}
             for link in self.finger_links
         ]
-        common = touched[0] & touched[1]
+        common = {b for b in touched[0] & touched[1] if p.getDynamicsInfo(b, -1, physicsClientId=cid)[0] > 0.0}
         return min(common) if common else None
 
     def update(self) -> int | None:
@@ -112,7 +112,7 @@ class ChannelGrasp:
     def command(self, target: float) -> None:
         """The channel drove the fingers to ``target`` (joint units)."""
         position = self._opening()
-        if target < position - 1e-4:
+        if target < position - self.RELEASE_GAP:  # closing (not a servo step's rounding)
             self.closing = True
         elif target > position + self.RELEASE_GAP:  # opening: nothing is caught on the way
             self.closing = False

@@ -74,3 +74,23 @@ def test_a_bad_grasp_is_refused_naming_the_channel(direction: str, params: dict[
         open_all(PlantScope(ManualClock(), name="grasp-bad"),
                  channel("gripper", direction, "bus", 1, body="turtlebot", grasp="arm_wrist_flex_link", **params))
     assert "sim channel 'gripper'" in str(caught.value)
+
+
+def test_a_static_body_between_the_fingers_is_never_grasped() -> None:
+    """The open fingers brushing the drop table while the arm folds must not fix the arm to the table."""
+    clock = ManualClock()
+    scope = PlantScope(clock, name="grasp-static")
+    (gripper,) = open_all(scope, channel("gripper", "out", "bus", 1, grasp="arm_wrist_flex_link", pose="1 1 0",
+                                         **GRIPPER))  # fmt: skip
+    gripper.write(OPEN)
+    clock.advance(1.0)
+    gripper.write(OPEN)
+    _, device = gripper._require()  # type: ignore[attr-defined]
+    robot = device.robot
+    tool, orientation = robot.link_pose(robot.link("gripper_tool_link"))
+    table = add_box(device.sim.world, tool, 0.012, [0.6, 0.4, 0.2, 1.0])  # mass 0: static
+    p.resetBasePositionAndOrientation(table, tool, orientation, physicsClientId=device.sim.world.client)
+    gripper.write(CLOSED)
+    clock.advance(2.0)
+    gripper.write(CLOSED)
+    assert device.grasp.held is None
