@@ -2,9 +2,9 @@
 # The two-robot group mission of the thesis (§7.3–7.5) in the simulated laboratory: validate it
 # off-line (§5.4), run it (every node, the world server, both agents), then write the run's HTML
 # report. Usage: bash scripts/mission.sh [individual|cooperative] [TIME_SCALE]
-# The individual mission (Fig. 7.12) is the default: it runs through every state, but its grasp
-# still misses the object, which the gripper's measure catches; the cooperative one (Fig. 7.13)
-# waits on the Nao, whose camera does not recognise the object from its side yet (issue K).
+# The individual mission (Fig. 7.12) is the default: it has succeeded doing the work (the cylinder
+# left on the drop table, sim-final.json), once so far; the cooperative one (Fig. 7.13) has not been
+# run since the Nao learnt to recognise the object (issue K).
 # The time scale (default 0.2) slows every clock of the run so that a two-core machine keeps up
 # with the simulation and the recognition meets Table 7.3's deadlines as on the thesis' machine
 # (runtime.simtime). Exits with ckm-run's code (0: every agent succeeded).
