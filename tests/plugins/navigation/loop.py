@@ -27,7 +27,7 @@ from typing import Any
 
 import ckmconf
 from ckmconf.model import Environment, MessageType, Param
-from ckmconf.model.kernel import HWChannel
+from ckmconf.model.kernel import HWChannel, Sensor
 from ckmconf.model.resources import Plugin
 from plugins.controllers.odometry import DiffDriveOdometry
 from plugins.navigation.amcl import AmclNavigation
@@ -82,6 +82,14 @@ def room(directory: Path) -> Path:
     return path
 
 
+LIDAR = Sensor(name="lidar", channel="hokuyo", topic="hokuyo_raw", period=0.1)
+"""nodes.xml's lidar sensor, whose reads the shaper turns into a LaserScan."""
+
+
+def _no_ros() -> Any:
+    raise AssertionError("the use case's LaserScan is a CKM type: no ROS type store is needed")
+
+
 @cache
 def _laser_types() -> dict[str, MessageType]:
     system = ckmconf.load(ROOT / "configs" / "usecase" / "network.xml")
@@ -125,7 +133,7 @@ class Bench:
         self.lidar = Lidar(self.robot, "hokuyo_link", noise=lidar_noise, seed=seed)
         channel = HWChannel(name="hokuyo", direction="in", kind="stream", backend="sim", units="m", min=0.0,
                             max=5.6, size=self.lidar.beams)
-        self.shape = shaper("LaserScan", channel, _laser_types(), "lidar")
+        self.shape = shaper(LIDAR, "LaserScan", channel, _laser_types(), _no_ros)
         inputs = [("left_speed", "measure"), ("right_speed", "measure")]
         self.odometer = DiffDriveOdometry(record("diff-drive-odometry", 0.02, inputs, ["/kobuki/wheel_odom"],
                                                  wheelBase=0.230))

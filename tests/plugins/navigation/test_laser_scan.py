@@ -17,7 +17,7 @@ from runtime.kernel.vectors import shaper
 from runtime.resources import codec
 from runtime.resources.spt import Context
 
-from .loop import _laser_types, plugin
+from .loop import LIDAR, _laser_types, _no_ros, plugin
 
 STEPS = 683
 FOV = 4.1888
@@ -26,7 +26,7 @@ FOV = 4.1888
 def raw(ranges: Any, stamp: float = 100.0) -> dict[str, Any]:
     """A sweep shaped as the hokuyo sensor publishes it on ``hokuyo_raw`` (runtime/kernel/vectors.py)."""
     channel = HWChannel(name="hokuyo", direction="in", kind="stream", backend="sim", units="m", size=STEPS)
-    message: dict[str, Any] = shaper("LaserScan", channel, _laser_types(), "lidar")(np.asarray(ranges), stamp)
+    message: dict[str, Any] = shaper(LIDAR, "LaserScan", channel, _laser_types(), _no_ros)(np.asarray(ranges), stamp)
     return message
 
 
