@@ -36,7 +36,8 @@ def test_the_first_episode_follows_the_success_path_of_fig_7_12(lab: System, tmp
     first = [p.split("/", 1)[1] for p in coverage.episodes[0].states]
     assert first == [
         "INIT", "Navigation/NAV", "Navigation/WAIT", "ObjectInteraction/SPOT", "ObjectInteraction/APPR",
-        "ObjectInteraction/PICK", "ObjectPlace/NAV", "ObjectPlace/WAIT", "ObjectPlace/PLACE", "ObjectPlace/BACK", "END",
+        "ObjectInteraction/PICK", "ObjectPlace/NAV", "ObjectPlace/WAIT", "ObjectPlace/DOCK", "ObjectPlace/PLACE",
+        "ObjectPlace/BACK", "END",
     ]  # fmt: skip
     run = read_run(tmp_path / "episode-1")
     assert [e.fields["outcome"] for e in run.events if e.kind == "end"] == ["succeeded"]
