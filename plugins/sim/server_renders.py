@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import logging
+from collections.abc import Callable
 from typing import Any
 
 from .devices import ChannelDevice, SimWorld
@@ -24,9 +25,8 @@ class RenderDispatch:
     _cameras: list[tuple[Client, ChannelDevice]]
     _flights: dict[RenderWorker, Flight]
     _unmirrored: set[tuple[int, int, float, int, int]]
-
-    def _reply(self, client: Client, reply: dict[str, Any]) -> None:
-        raise NotImplementedError  # the server's
+    _reply: Callable[[Client, dict[str, Any]], None]
+    """Answer one client (the server's)."""
 
     def _dispatch(self) -> None:
         """Hand the waiting camera reads to the idle render workers (each with the others asking for
