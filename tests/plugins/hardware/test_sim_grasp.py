@@ -5,6 +5,8 @@ drove home; with it the object both fingers touch is fixed to the wrist until a 
 
 from __future__ import annotations
 
+from typing import Any
+
 import pybullet as p
 import pytest
 
@@ -19,15 +21,20 @@ GRIPPER = {"joint": "gripper_joint", "mirror": "gripper_right_joint", "mode": "p
            "offset": str(OFFSET), "body": "turtlebot"}  # fmt: skip
 
 
-def test_the_fingers_hold_what_they_close_on_until_they_open() -> None:
+def _open_gripper(name: str) -> tuple[ManualClock, Any, Any, Any]:
+    """A gripper channel with ``grasp`` on a Turtlebot at (1, 1), its fingers opened; its world and device."""
     clock = ManualClock()
-    scope = PlantScope(clock, name="grasp-test")
-    (gripper,) = open_all(scope, channel("gripper", "out", "bus", 1, grasp="arm_wrist_flex_link", pose="1 1 0",
-                                         **GRIPPER))  # fmt: skip
+    (gripper,) = open_all(PlantScope(clock, name=name), channel("gripper", "out", "bus", 1,
+                          grasp="arm_wrist_flex_link", pose="1 1 0", **GRIPPER))  # fmt: skip
     gripper.write(OPEN)
     clock.advance(1.0)
     gripper.write(OPEN)  # a write advances the world to the clock first
     sim, device = gripper._require()  # type: ignore[attr-defined]
+    return clock, gripper, sim, device
+
+
+def test_the_fingers_hold_what_they_close_on_until_they_open() -> None:
+    clock, gripper, sim, device = _open_gripper("grasp-test")
     robot, world = device.robot, sim.world
     cid = world.client
     tool = robot.link_pose(robot.link("gripper_tool_link"))[0]
@@ -78,14 +85,7 @@ def test_a_bad_grasp_is_refused_naming_the_channel(direction: str, params: dict[
 
 def test_a_static_body_between_the_fingers_is_never_grasped() -> None:
     """The open fingers brushing the drop table while the arm folds must not fix the arm to the table."""
-    clock = ManualClock()
-    scope = PlantScope(clock, name="grasp-static")
-    (gripper,) = open_all(scope, channel("gripper", "out", "bus", 1, grasp="arm_wrist_flex_link", pose="1 1 0",
-                                         **GRIPPER))  # fmt: skip
-    gripper.write(OPEN)
-    clock.advance(1.0)
-    gripper.write(OPEN)
-    _, device = gripper._require()  # type: ignore[attr-defined]
+    clock, gripper, _, device = _open_gripper("grasp-static")
     robot = device.robot
     tool, orientation = robot.link_pose(robot.link("gripper_tool_link"))
     table = add_box(device.sim.world, tool, 0.012, [0.6, 0.4, 0.2, 1.0])  # mass 0: static

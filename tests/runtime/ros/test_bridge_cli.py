@@ -41,16 +41,22 @@ EXAMPLE = REPO / "configs" / "examples" / "sim_ros_types.xml"
 TOPICS = 8  # the example's external topics of a ROS 2 type
 
 
-@pytest.mark.timeout(90)
-def test_the_bridge_command_shows_ckm_topics_to_ros_and_brings_ros_samples_in(
-    tmp_path: Path, transports: Callable[..., Transport]  # noqa: F811
-) -> None:
+def _example_on_private_network(tmp_path: Path) -> tuple[Any, Path]:
+    """The ROS-typed example written to ``tmp_path`` on a private loopback network, and that network."""
     net = private_network("multipeer")
     element = (f'<Network interface="127.0.0.1" group="{net.group}" discoveryPort="{net.discovery_port}" '
                f'basePort="{net.base_port}"/>')
     config = tmp_path / EXAMPLE.name
     config.write_text(re.sub(r"(<System [^>]*>)", lambda m: m.group(1) + "\n  " + element, EXAMPLE.read_text(),
                              count=1))
+    return net, config
+
+
+@pytest.mark.timeout(90)
+def test_the_bridge_command_shows_ckm_topics_to_ros_and_brings_ros_samples_in(
+    tmp_path: Path, transports: Callable[..., Transport]  # noqa: F811
+) -> None:
+    net, config = _example_on_private_network(tmp_path)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     ros_side = zenoh.open(_config([endpoint], []))
     ckm = transports(net, "listener")
@@ -99,12 +105,7 @@ def test_the_bridge_command_shows_ckm_topics_to_ros_and_brings_ros_samples_in(
 
 @pytest.mark.timeout(120)
 def test_a_ros_node_receives_the_simulated_scan_through_the_bridge(tmp_path: Path) -> None:
-    net = private_network("multipeer")
-    element = (f'<Network interface="127.0.0.1" group="{net.group}" discoveryPort="{net.discovery_port}" '
-               f'basePort="{net.base_port}"/>')
-    config = tmp_path / EXAMPLE.name
-    config.write_text(re.sub(r"(<System [^>]*>)", lambda m: m.group(1) + "\n  " + element, EXAMPLE.read_text(),
-                             count=1))
+    _, config = _example_on_private_network(tmp_path)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     ros_side = zenoh.open(_config([endpoint], []))
     heard: list[zenoh.Sample] = []
