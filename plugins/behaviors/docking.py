@@ -13,8 +13,9 @@ import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
-from runtime.missions.behaviors import BehaviorStatus
+from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 from .usecase import _Goals, _share_done, _state, robot_pose
@@ -36,10 +37,13 @@ class Dock(_Goals):
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
+    def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
+        super().__init__(record, context)
+        self.goal = _map_pose(str(self.params["pose"]), self.owner)  # a bad pose is refused when built
+
     def start(self) -> None:
-        """Check the pose; the move is sent once a pose estimate is read."""
+        """Forget the last move; the next is sent once a pose estimate is read."""
         super().start()
-        self.goal = _map_pose(str(self.params["pose"]), self.owner)
         self.move_id: int | None = None
 
     def step(self) -> BehaviorStatus:

@@ -44,6 +44,5 @@ def test_a_bad_pose_is_refused_naming_the_behavior(lab: System) -> None:  # noqa
     assert record is not None
     broken = dataclasses.replace(record, params=(Param(name="pose", value="by the table"),))
     context = BehaviorContext(services={}, inputs={}, outputs={}, now=lambda: 0.0)
-    behavior = default_registry().resolve("behavior", "dock", broken)(broken, context)
     with pytest.raises(ParamError, match=r"behavior 'DOCK'.*'by the table' is not 'x y yaw'"):
-        behavior.start()
+        default_registry().resolve("behavior", "dock", broken)(broken, context)
