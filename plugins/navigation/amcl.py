@@ -13,7 +13,9 @@ MobileBase.Displacement). Each frame (0.8 s in the use case, Table 7.8):
    and the robot takes a new plan when that makes the way ``replanGain`` metres shorter;
 3. publish ``pose`` (PoseEstimate: pose, covariance, dispersion), ``status`` (NavStatus) and
    ``path`` (Path2D: the rest of the plan in the odom frame through the current map→odom
-   correction, which MobileBase.Displacement follows on odometry until the next frame).
+   correction, which MobileBase.Displacement follows on odometry until the next frame), and for the
+   live view and the recording ``particles`` (ParticleCloud: ≤ ``cloudSize`` particles) and ``zoom``
+   (ZoomArea: the ``<ZoomMap>`` area following the estimate), plugins/navigation/live.py, D215.
 
 The goal is the service Parameter ``goal`` (Table 7.1 "Goal", via :meth:`apply_service_parameters`):
 an Area of the Environment (its centroid, any heading) or ``"x y yaw"`` in the map frame. States:
@@ -63,6 +65,7 @@ from .frames import (
     transform_point,
     wrap,
 )
+from .live import NavigationZoom, particle_cloud
 from .localizer import FILTERS, Localizer
 from .obstacles import ScanObstacles
 from .routes import Routes, blocking
@@ -118,6 +121,7 @@ class AmclNavigation(ProcessingPlugin):
         P("escape", 0.6, "How far a start inside an inflated obstacle looks for free space.", unit="m", min=0.0),
         P("goalEscape", 0.3, "How far a goal inside an inflated obstacle may move to free space.", unit="m", min=0.0),
         P("seed", 0, "Random seed of the filter.", min=0),
+        P("cloudSize", 200, "Particles in each published ParticleCloud (0: none).", min=0),
     )
 
     def __init__(self, record: Plugin) -> None:
@@ -133,6 +137,7 @@ class AmclNavigation(ProcessingPlugin):
         self.environment_file = base / p["environment"] if p["environment"] else LAB
         self.env: Environment | None = None
         self.localizer: Localizer | None = None
+        self.zoom: NavigationZoom | None = None
         self.goal_text = ""
         self.goal: tuple[float, float, float | None] | None = None
         self._pending_goal: str | None = p["goal"] or None
@@ -158,6 +163,7 @@ class AmclNavigation(ProcessingPlugin):
         self.routes = Routes(env, footprint, p["planResolution"], p["escape"], p["goalEscape"],
                              ScanObstacles(margin=p["clearMargin"], timeout=p["obstacleTimeout"]))
         self.model = self.routes.model
+        self.zoom = None if env.zoom is None else NavigationZoom(self.model, env.zoom)
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
         self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
                                    range_max=RANGE_MAX, seed=p["seed"], owner=self.owner)
@@ -254,7 +260,7 @@ class AmclNavigation(ProcessingPlugin):
             "path_id": self.path_id, "plan_length": self.plan_length,
             "obstacles": self.routes.areas(),
             "unlocalized_since": self.unlocalized_since, "stopped": self.stopped, "settling": self.settling,
-            "localizer": self.localizer.state(),
+            "localizer": self.localizer.state(), "zoom": None if self.zoom is None else self.zoom.state(),
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -281,6 +287,8 @@ class AmclNavigation(ProcessingPlugin):
             self.settling = bool(state.get("settling", False))
             self.routes.restore(state["obstacles"])
             self.localizer.restore(state["localizer"])
+            if self.zoom is not None:
+                self.zoom.restore(state.get("zoom"))
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise ValueError(f"{self.owner}: not an amcl-navigation state ({exc})") from None
 
@@ -313,6 +321,11 @@ class AmclNavigation(ProcessingPlugin):
                               "covariance": [float(v) for v in np.asarray(estimate.covariance).ravel()],
                               "dispersion": float(estimate.dispersion)}
             result["dispersion"] = float(estimate.dispersion)
+            cloud = particle_cloud(self.localizer.filter, self.params["cloudSize"], now)
+            if cloud is not None:
+                result["particles"] = cloud
+            if self.zoom is not None:
+                result["zoom"] = self.zoom.update(pose[0], pose[1], now)
         if self.goal is None:
             if self.path_id:  # a cancelled goal: keep the base stopped
                 result["path"] = {"id": self.path_id, "goal": "", "frame": "odom", "points": [], "yaw": None,
