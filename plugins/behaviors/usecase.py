@@ -165,7 +165,9 @@ class SetNavGoal(Behavior):
     """
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("approachDistance", 0.0, "Stop this far short of a position received on the input.", unit="m")
+        P("approachDistance", 0.0, "Stop this far short of a position received on the input.", unit="m"),
+        P("approachHeading", None, "Reach a received position along this map heading (the free side of the "
+          "table it stands on); unset: straight from the robot.", type=float, unit="rad"),
     )
     PORTS = Ports(inputs={"*": MAPPING})
 
@@ -189,6 +191,10 @@ class SetNavGoal(Behavior):
             if pose is None:
                 return None
             ox, oy = pose[0], pose[1]
+        heading = self.params["approachHeading"]
+        if heading is not None:  # along the table's free side: a diagonal way in meets its legs (D204)
+            back = self.params["approachDistance"]
+            return f"{x - back * math.cos(heading):.3f} {y - back * math.sin(heading):.3f} {heading:.3f}"
         dx, dy = x - ox, y - oy
         distance = math.hypot(dx, dy)
         keep = max(0.0, distance - self.params["approachDistance"]) / distance if distance > 0 else 0.0

@@ -3,6 +3,7 @@ configure, what goals they send, how their progress follows the services, when t
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Mapping
@@ -51,9 +52,12 @@ class Service:
 class Rig:
     """One behavior of the use case with its services, inputs, outputs and a clock."""
 
-    def __init__(self, system: System, name: str, inputs: dict[str, Any] | None = None) -> None:
+    def __init__(self, system: System, name: str, inputs: dict[str, Any] | None = None,
+                 drop: tuple[str, ...] = ()) -> None:
         record = system.behavior(name)
         assert record is not None
+        if drop:  # the behavior without these Params (their defaults)
+            record = dataclasses.replace(record, params=tuple(p for p in record.params if p.name not in drop))
         self.time = 0.0
         self.services = {u.alias: Service(u.service) for u in record.uses}
         self.inputs = inputs or {}
@@ -92,14 +96,17 @@ def test_nav_configures_amcl_and_ends_when_the_path_exists(lab: System) -> None:
     assert rig.behavior.step().failed
 
 
+STRAIGHT = ("approachHeading",)  # NAV_COOP aiming straight from the robot
+
+
 def test_nav_coop_waits_for_the_signal_and_aims_short_of_the_object(lab: System) -> None:
-    rig = Rig(lab, "NAV_COOP")
+    rig = Rig(lab, "NAV_COOP", drop=STRAIGHT)
     assert rig.behavior.step().progress == 0.0  # untraceable until the Nao's position arrives
     rig.inputs["spotted"] = {"position": {"x": 3.0, "y": 4.0, "z": 0.0}}
     rig.behavior.step()
     parameters, _ = rig.services["nav"].configured[-1]
     x, y, _yaw = map(float, parameters["goal"].split())
-    assert (x, y) == pytest.approx((3.0 * 4.2 / 5, 4.0 * 4.2 / 5), abs=1e-3)  # 0.8 m short of 5 m
+    assert (x, y) == pytest.approx((3.0 * 4.37 / 5, 4.0 * 4.37 / 5), abs=1e-3)  # 0.63 m short of 5 m
     rig.services["nav"].outputs["status"] = {"goal": parameters["goal"], "state": "active"}
     assert rig.behavior.step().done
 
@@ -185,15 +192,25 @@ def test_fix_holds_a_reliable_recognition_then_signals_the_position(lab: System)
 
 
 def test_nav_coop_aims_short_of_a_map_position_from_where_the_robot_is(lab: System) -> None:
-    rig = Rig(lab, "NAV_COOP")
+    rig = Rig(lab, "NAV_COOP", drop=STRAIGHT)
     rig.inputs["spotted"] = {"frame": "map", "x": 4.0, "y": 5.0, "z": 0.8}
     assert rig.behavior.step().progress == 0.0  # no pose estimate yet: it cannot aim
     rig.services["nav"].outputs["pose"] = {"pose": {"x": 1.0, "y": 1.0, "yaw": 2.0}, "dispersion": 0.1}
     rig.behavior.step()
     parameters, _ = rig.services["nav"].configured[-1]
     x, y, yaw = map(float, parameters["goal"].split())
-    assert (x, y) == pytest.approx((1.0 + 3.0 * 4.2 / 5, 1.0 + 4.0 * 4.2 / 5), abs=1e-3)  # 0.8 m short
+    assert (x, y) == pytest.approx((1.0 + 3.0 * 4.37 / 5, 1.0 + 4.0 * 4.37 / 5), abs=1e-3)  # 0.63 m short
     assert yaw == pytest.approx(math.atan2(4.0, 3.0), abs=1e-3)  # facing the object
+
+
+def test_nav_coop_reaches_the_object_square_on_to_the_workbench(lab: System) -> None:
+    """D204: along approachHeading (the workbench's free side), whatever side the robot comes from."""
+    rig = Rig(lab, "NAV_COOP")
+    rig.inputs["spotted"] = {"frame": "map", "x": 7.6, "y": 6.13, "z": 0.36}
+    rig.services["nav"].outputs["pose"] = {"pose": {"x": 1.5, "y": 1.5, "yaw": 0.0}, "dispersion": 0.1}
+    rig.behavior.step()
+    parameters, _ = rig.services["nav"].configured[-1]
+    assert tuple(map(float, parameters["goal"].split())) == pytest.approx((7.6, 5.5, math.pi / 2), abs=1e-3)
 
 
 def test_approach_places_a_map_target_relative_to_the_robot(lab: System) -> None:
