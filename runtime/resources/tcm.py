@@ -2,29 +2,14 @@
 
 A scenario is an SPT profile with the quality policies it must meet (eq. 4.6); the TCM keeps one
 active and switches when it must. Every ``period`` the service layer calls :meth:`evaluate`,
-which rates every scenario on the current measure windows:
-
-- **Conditions** of a scenario: its policies, then the client's quality requirements QR (a list
-  of Require-like bounds per measure, changed at run time with :meth:`set_requirements`).
-- **Combined measures** (``<CombinedMeasure>``, eq. 4.5; :meth:`from_service` takes them): a
-  condition on one is evaluated on the convolution of its components' last ``window`` samples,
-  each component observed under its own name (docs/decisions.md D72).
-- **f_ev** (Algorithm 1, eq. 4.8): ``acc`` counts the conditions that hold — the line
-  ``if Q_i = RQ_i`` is read as "the condition's probability condition holds",
-  ``P(lower ≤ Q ≤ upper) ≥ probability`` over its window (eq. 4.4); ``suit = acc / n``;
-  ``f_ev = suit · (1 − ξ)``. Conditions on a measure without samples yet are unknown and left
-  out of both ``acc`` and ``n`` (no condition known: ``suit = 1``), so a fresh TCM stays in its
-  initial scenario and raises no alarm before evidence arrives. A requirement holds for a
-  scenario when it holds on the measured window *and* the scenario's own policies on that
-  measure lie within the requirement's bounds: a scenario that tolerates values the client
-  forbids cannot promise the requirement. That is what lets a changed QR select another profile.
-- **State** (eq. 4.7): ``S_state = w_i · c_i · f_ev − th``; ``fy`` is read as the decision
-  function of the soft-margin classifier, positive meaning usable. ``c_i`` is 1 unless
-  ``learning="svm"`` has trained the scenario's model, see :mod:`runtime.resources.learning`;
-  it is applied to the candidates only — the active scenario is judged by its conditions.
-- **Usable** (eq. 4.9, ``F(Q_x) ≠ 0`` for all of its policies): no known condition fails and
-  ``S_state > 0``. Whenever the TCM switches, it goes to the argmax of ``S_state`` among the
-  scenarios it may switch to (eq. 4.9); it does not re-run the argmax at every evaluation.
+which rates every scenario on the current measure windows: the conditions (its policies, then
+the client's quality requirements QR, changed at run time with :meth:`set_requirements`), f_ev
+(Algorithm 1, eq. 4.8), S_state (eq. 4.7), usable and eligible — see
+:mod:`runtime.resources.tcm_rating`. The windows, and the convolution a condition on a
+``<CombinedMeasure>`` (eq. 4.5; :meth:`from_service` takes them) is evaluated on, are kept by
+:mod:`runtime.resources.tcm_windows`. Whenever the TCM switches, it goes to the argmax of
+``S_state`` among the scenarios it may switch to (eq. 4.9); it does not re-run the argmax at
+every evaluation.
 
 Switching (the thesis: "active scenario will remain selected while the quality requirements
 (QR) are maintained and the implied quality measures remain between the expected ranges"):
@@ -77,43 +62,16 @@ measures look like those it held with.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 from ckmconf.model.resources import TCM, Scenario, Service
 
 from .learning import ScenarioLearner
-from .quality import (
-    DEFAULT_WINDOW,
-    Distribution,
-    FloatArray,
-    MeasureWindow,
-    PolicyEvaluator,
-    QualityBounds,
-    combined_distribution,
-)
+from .quality import DEFAULT_WINDOW, PolicyEvaluator, QualityBounds
 from .selection import Alarm, ConditionResult, Decision, Reason, ScenarioEvaluation, ScenarioEvent
+from .tcm_rating import MAX_PENALTY, ScenarioState, rate
+from .tcm_windows import MeasureWindows
 from .threshold import ThresholdSelector, ThresholdSwitcher  # re-exported: they were defined here once
-
-MAX_PENALTY = 0.99
-"""Upper cap of ξ: a scenario's evaluation is scaled by 1 − ξ, which must stay positive."""
-
-
-@dataclass
-class _Scenario:
-    record: Scenario
-    evaluators: tuple[PolicyEvaluator, ...]
-    penalty: float
-    learner: ScenarioLearner | None
-    streak: int = 0
-    pending: tuple[int, tuple[float, ...]] | None = None
-
-
-def _within(policy: QualityBounds, requirement: QualityBounds) -> bool:
-    """The policy's interval lies inside the requirement's (None = unbounded)."""
-    low = requirement.lower is None or (policy.lower is not None and policy.lower >= requirement.lower)
-    high = requirement.upper is None or (policy.upper is not None and policy.upper <= requirement.upper)
-    return low and high
 
 
 class TaskConfiguringModule:
@@ -142,8 +100,7 @@ class TaskConfiguringModule:
         self.alarm_after = max(1, alarm_after)
         self._unheld = 0
         self.settings = settings if settings is not None else TCM()
-        self.combined = {name: tuple(parts) for name, parts in (combined or {}).items()}
-        self.resolutions = {name: (resolutions or {}).get(name) or resolution for name in self.combined}
+        self.windows = MeasureWindows(combined, resolutions, resolution)
         self.resolution, self.band, self.margin, self.dwell = resolution, band, margin, max(1, dwell)
         self.decay = self.settings.penalty_step / decay_evaluations if decay_evaluations else 0.0
         self.horizon = max(1, horizon)
@@ -151,7 +108,7 @@ class TaskConfiguringModule:
         learning = self.settings.learning == "svm"
         initial_penalty = min(MAX_PENALTY, max(0.0, self.settings.penalty))
         self._scenarios = {
-            s.name: _Scenario(
+            s.name: ScenarioState(
                 s,
                 tuple(PolicyEvaluator(p) for p in s.policies),
                 initial_penalty,
@@ -165,9 +122,7 @@ class TaskConfiguringModule:
         if initial not in self._scenarios:
             raise ValueError(f"initial scenario {initial!r} is not one of {sorted(self._scenarios)}")
         self._active = initial
-        self._windows: dict[str, MeasureWindow] = {}
         self._requirements: tuple[PolicyEvaluator, ...] = ()
-        self._required_since: dict[str, int] = {}
         self._tick = 0
         self._alarm = False
         self._starting = True
@@ -196,6 +151,16 @@ class TaskConfiguringModule:
         return self._scenarios[self._active].record.profile
 
     @property
+    def combined(self) -> dict[str, tuple[str, ...]]:
+        """Each combined measure's components (``<CombinedMeasure>``, eq. 4.5)."""
+        return self.windows.combined
+
+    @property
+    def resolutions(self) -> dict[str, float | None]:
+        """Each combined measure's resolution (the bin of its convolution, D72)."""
+        return self.windows.resolutions
+
+    @property
     def penalties(self) -> dict[str, float]:
         """Each scenario's penalty ξ (eq. 4.7)."""
         return {name: s.penalty for name, s in self._scenarios.items()}
@@ -216,42 +181,14 @@ class TaskConfiguringModule:
 
     # -- measures ----------------------------------------------------------------------------
 
-    def _need(self, measure: str, window: int) -> None:
-        for name in self.combined.get(measure, (measure,)):
-            current = self._windows.get(name)
-            if current is None or current.window < window:
-                grown = MeasureWindow(window)
-                if current is not None:
-                    grown.extend(current.last())
-                self._windows[name] = grown
-
     def observe(self, measure: str, value: float) -> None:
         """A new sample of a measure (a component of a combined measure feeds the sum)."""
-        if measure not in self._windows:
-            self._need(measure, DEFAULT_WINDOW)
-        self._windows[measure].push(value)
+        self.windows.observe(measure, value)
 
     def observe_many(self, samples: Mapping[str, float]) -> None:
         """Feed one sample of each measure (:meth:`observe`)."""
         for measure, value in samples.items():
             self.observe(measure, value)
-
-    def _source(self, measure: str, window: int) -> MeasureWindow | Distribution | tuple[()]:
-        parts = self.combined.get(measure)
-        if parts is None:
-            return self._windows[measure]
-        windows = [self._windows[p].last(window) for p in parts]
-        if any(w.size == 0 for w in windows):
-            return ()
-        return combined_distribution(windows, self.resolutions[measure])
-
-    def _required_source(self, evaluator: PolicyEvaluator) -> MeasureWindow | Distribution | tuple[()] | FloatArray:
-        """A requirement's samples: those measured since it was set (D201), else its measure's window."""
-        source = self._source(evaluator.measure, evaluator.window)
-        since = self._required_since.get(evaluator.measure)
-        if since is None or not isinstance(source, MeasureWindow):
-            return source
-        return source.last(min(evaluator.window, source.pushed - since))
 
     # -- requirements ------------------------------------------------------------------------
 
@@ -264,7 +201,7 @@ class TaskConfiguringModule:
             evaluators.append(PolicyEvaluator(requirement, max(windows, default=DEFAULT_WINDOW)))
         self._requirements = tuple(evaluators)
         for evaluator in (*self._requirements, *(e for s in self._scenarios.values() for e in s.evaluators)):
-            self._need(evaluator.measure, evaluator.window)
+            self.windows.need(evaluator.measure, evaluator.window)
 
     def set_requirements(self, requirements: Iterable[QualityBounds], now: float | None = None) -> Decision:
         """The client's new QR: reselect at once (eq. 4.9), without penalty.
@@ -274,11 +211,7 @@ class TaskConfiguringModule:
         drove with nothing in view), and say nothing of whether it can be met now.
         """
         self._set_requirements(requirements)
-        self._required_since = {
-            e.measure: window.pushed
-            for e in self._requirements
-            if isinstance(window := self._windows.get(e.measure), MeasureWindow)
-        }
+        self.windows.requirements_set(e.measure for e in self._requirements)
         time = now if now is not None else self._tick * self.settings.period
         evaluations = self._evaluate_all()
         events: list[ScenarioEvent] = []
@@ -320,65 +253,18 @@ class TaskConfiguringModule:
 
     # -- evaluation --------------------------------------------------------------------------
 
-    def _evaluate(self, scenario: _Scenario) -> ScenarioEvaluation:
-        is_active = scenario.record.name == self._active
-        conditions: list[ConditionResult] = []
-        entry_ok = True
-        for evaluator in scenario.evaluators:
-            source = self._source(evaluator.measure, evaluator.window)
-            result = evaluator.evaluate(source)
-            conditions.append(
-                ConditionResult(
-                    "policy", result.measure, result.probability, result.required, result.met, result.margin
-                )
-            )
-            entry_ok = entry_ok and evaluator.evaluate(source, band=self.band).met is True
-        for evaluator in self._requirements:
-            compatible = all(
-                _within(e.policy, evaluator.policy) for e in scenario.evaluators if e.measure == evaluator.measure
-            )
-            result = evaluator.evaluate(self._required_source(evaluator))
-            met = False if not compatible else result.met
-            conditions.append(
-                ConditionResult(
-                    "requirement", result.measure, result.probability, result.required, met, result.margin, compatible
-                )
-            )
-        known = [c for c in conditions if c.met is not None]
-        accepted = sum(1 for c in known if c.met)
-        suit = accepted / len(known) if known else 1.0
-        fev = suit * (1.0 - scenario.penalty)
-        policies = conditions[: len(scenario.evaluators)]
-        features = None
-        if all(c.probability is not None and c.margin is not None for c in policies):
-            features = tuple(v for c in policies for v in (c.probability or 0.0, c.margin or 0.0))
-        confidence = 1.0
-        if scenario.learner is not None and not is_active:
-            confidence = scenario.learner.confidence(features)
-        state = scenario.record.weight * confidence * fev - self.settings.threshold
-        holds = all(c.met is not False for c in conditions)
-        satisfied = len(known) == len(conditions) and accepted == len(conditions)
-        margins = [c.margin for c in policies if c.margin is not None]
-        return ScenarioEvaluation(
-            name=scenario.record.name,
-            profile=scenario.record.profile,
-            conditions=tuple(conditions),
-            accepted=accepted,
-            known=len(known),
-            suit=suit,
-            penalty=scenario.penalty,
-            fev=fev,
-            confidence=confidence,
-            state=state,
-            usable=holds and state > 0.0,
-            satisfied=satisfied,
-            eligible=satisfied and entry_ok and state > 0.0,
-            margin=min(margins) if margins else float("-inf"),
-            features=features,
-        )
-
     def _evaluate_all(self) -> dict[str, ScenarioEvaluation]:
-        return {name: self._evaluate(s) for name, s in self._scenarios.items()}
+        return {
+            name: rate(
+                s,
+                active=name == self._active,
+                windows=self.windows,
+                requirements=self._requirements,
+                band=self.band,
+                threshold=self.settings.threshold,
+            )
+            for name, s in self._scenarios.items()
+        }
 
     def evaluate(self, now: float | None = None) -> Decision:
         """One TCM period: rate every scenario, switch if the active one is neglected or a better one has recovered."""
