@@ -18,8 +18,10 @@ Fig. 7.16 picture of §7.4.1, drawn as the run goes).
   name ``/NODE/~NAME``) of a node that publishes none: the Turtlebot's Xtion frames are internal to
   its node, the Nao's are on the network as ``/nao/camera/image``;
 - **zoom-map areas** and **particles**: topics whose name or type says ``zoom`` or ``particle``,
-  and a ``particles`` field of a pose estimate. The use case publishes neither: the view then
-  replays the zoom-map area from the estimate with the ``<ZoomMap>`` rules (D160).
+  and a ``particles`` field of a pose estimate. The use case's Navigation.AMCL publishes both
+  (``/nav/zoom`` ZoomArea, ``/nav/particles`` ParticleCloud: D215); until an area arrives (or in a
+  system without one) the view replays it from the estimate with the ``<ZoomMap>`` rules (D160).
+  A malformed cloud or area (other shapes, NaN, another frame) is refused with a FeedError, not drawn.
 
 Values arrive as the runtime's codec leaves them on the wire (arrays and numpy scalars as tagged
 one-key dicts, runtime/resources/codec.py); :func:`plain` rebuilds them with the same checks. The
@@ -38,6 +40,7 @@ import numpy as np
 from ckmconf.model import HWChannel, System, Topic
 
 MAX_BYTES = 16 * 1024 * 1024  # the CKMultiPeer frame limit, as the codec's
+MAX_PARTICLES = 100_000  # AMCL's clouds are a few thousand particles at most; Navigation.AMCL sends 200
 DTYPES = frozenset(["|b1", "|i1", "|u1", "<i2", "<u2", "<i4", "<u4", "<i8", "<u8", "<f2", "<f4", "<f8"])
 """The codec's numeric dtypes (its complex ones have no place on a map)."""
 
@@ -120,33 +123,74 @@ def covariance_of(payload: Any) -> np.ndarray | None:
 
 
 def particles_of(payload: Any) -> np.ndarray | None:
-    """The (N, 2) positions of a particle cloud: an (N, ≥2) array or list, alone or as ``particles``."""
+    """The (N, 2) positions of a particle cloud: a ParticleCloud's parallel ``x`` and ``y`` arrays (what
+    Navigation.AMCL publishes, D215), or an (N, ≥2) array or list, alone or as a ``particles`` field.
+
+    None when ``payload`` carries no cloud (a pose estimate without one); FeedError, naming what is
+    wrong, for a cloud that is not one: arrays of other shapes or lengths, values that are not finite
+    numbers, more than :data:`MAX_PARTICLES`, or a frame other than the map's."""
     if isinstance(payload, Mapping):
-        payload = payload.get("particles")
+        _in_map(payload, "a particle cloud")
+        if "particles" in payload:
+            payload = payload["particles"]
+        elif "x" in payload and "y" in payload:
+            x, y = (_numbers(payload[k], f"a particle cloud's {k}") for k in ("x", "y"))
+            if x.ndim != 1 or x.shape != y.shape:
+                raise FeedError(f"a particle cloud's x and y must be two arrays of one length, got shapes "
+                                f"{x.shape} and {y.shape}")  # fmt: skip
+            payload = np.stack([x, y], axis=1)
+        else:
+            return None
     if payload is None:
         return None
-    try:
-        cloud = np.asarray(payload, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
+    cloud = _numbers(payload, "a particle cloud")
     if cloud.ndim != 2 or cloud.shape[1] < 2:
-        return None
-    return cloud[np.all(np.isfinite(cloud[:, :2]), axis=1), :2]
+        raise FeedError(f"a particle cloud must be N rows of x, y[, yaw, weight], got an array of shape {cloud.shape}")
+    if len(cloud) > MAX_PARTICLES:
+        raise FeedError(f"a particle cloud of {len(cloud)} particles is more than the {MAX_PARTICLES} drawn")
+    bad = int(np.count_nonzero(~np.all(np.isfinite(cloud[:, :2]), axis=1)))
+    if bad:
+        raise FeedError(f"a particle cloud holds {bad} of {len(cloud)} positions that are not finite (NaN or inf)")
+    return cloud[:, :2]
 
 
-def zoom_of(payload: Any) -> tuple[float, float, float, float] | None:
-    """``(x, y, width, depth)`` of a zoom-map area ``{x, y, width, depth}`` or ``{xmin, ymin, xmax, ymax}``."""
+def _numbers(value: Any, what: str) -> np.ndarray:
+    """``value`` as a float64 array; FeedError naming ``what`` when it is not numbers."""
+    if isinstance(value, str | bytes | Mapping):
+        raise FeedError(f"{what} must be numbers, got {type(value).__name__}")
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise FeedError(f"{what} must be numbers, got {str(value)[:60]!r}") from None
+
+
+def _in_map(payload: Mapping[str, Any], what: str) -> None:
+    frame = payload.get("frame")
+    if frame not in (None, "", "map"):
+        raise FeedError(f"{what} in frame {frame!r}, not the map's: it has no place on the map")
+
+
+def zoom_of(payload: Any) -> tuple[float, float, float, float]:
+    """``(x, y, width, depth)`` of a zoom-map area ``{x, y, width, depth}`` (a ZoomArea, D215) or
+    ``{xmin, ymin, xmax, ymax}``; FeedError naming what is missing or wrong (not finite, an empty size,
+    another frame than the map's)."""
     if not isinstance(payload, Mapping):
-        return None
-    values = [number(payload.get(k)) for k in ("x", "y", "width", "depth")]
-    if all(v is not None for v in values):
-        x, y, w, d = (float(v) for v in values)  # type: ignore[arg-type]
-        return x, y, w, d
-    bounds = [number(payload.get(k)) for k in ("xmin", "ymin", "xmax", "ymax")]
-    if all(v is not None for v in bounds):
-        x0, y0, x1, y1 = (float(v) for v in bounds)  # type: ignore[arg-type]
-        return (x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0
-    return None
+        raise FeedError(f"a zoom-map area must be a message, got {type(payload).__name__}")
+    _in_map(payload, "a zoom-map area")
+    for keys in (("x", "y", "width", "depth"), ("xmin", "ymin", "xmax", "ymax")):
+        if not all(k in payload for k in keys):
+            continue
+        values = [number(payload[k]) for k in keys]
+        bad = [k for k, v in zip(keys, values, strict=True) if v is None]
+        if bad:
+            raise FeedError(f"a zoom-map area's {', '.join(bad)} must be finite numbers, got "
+                            f"{', '.join(repr(payload[k]) for k in bad)}")  # fmt: skip
+        a, b, c, d = (float(v) for v in values)  # type: ignore[arg-type]
+        x, y, width, depth = (a, b, c, d) if keys[0] == "x" else ((a + c) / 2, (b + d) / 2, c - a, d - b)
+        if not (width > 0 and depth > 0):
+            raise FeedError(f"a zoom-map area of {width:g} × {depth:g} m is empty")
+        return x, y, width, depth
+    raise FeedError("a zoom-map area needs x, y, width and depth (or xmin, ymin, xmax and ymax)")
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,7 @@ from runtime.network import Subscription, TopicQoS, Transport
 
 from .camera import CameraPanel
 from .sim_feeds import Robot, feeds_of
-from .sim_state import LiveState, Snapshot
+from .sim_state import LiveState, Snapshot, zoom_text
 
 SCALE = 100.0  # scene units per metre
 RAY = 2.0  # m of an unplaced sighting's ray drawn from its camera
@@ -264,7 +264,7 @@ class SimMapView(QGraphicsView):
             z = now.zoom
             self.zoom.setRect(QRectF(to_scene(z.x - z.width / 2, z.y + z.depth / 2),
                                      to_scene(z.x + z.width / 2, z.y - z.depth / 2)))  # fmt: skip
-            self.zoom_label.setText("zoom map (replayed)" if z.replayed else "zoom map")
+            self.zoom_label.setText(zoom_text(z))
             self.zoom_label.setPos(to_scene(z.x - z.width / 2, z.y + z.depth / 2) + QPointF(4, 2))
             self.zoom.setVisible(True)
             self.zoom_label.setVisible(True)

@@ -6,10 +6,14 @@ they arrived and turned into pixels at most once each, on the GUI thread. A reco
 shown for its topic's ``lifespan`` after it arrived (``/recog/objects``: 2.4 s), so objects no
 longer recognised leave the map.
 
-The zoom-map area (§6.1.3) is the newest one a zoom topic carried; when the system publishes none
-(the use case), it is replayed from the pose estimate with the ``<ZoomMap>`` triggers of
-plugins/environment/zoom.py — centred on the robot at the first estimate, again when the robot comes
-within ``border`` × the size of the area's edge, and after ``timeout`` s — at its fixed size (D160).
+The zoom-map area (§6.1.3) is the newest one a zoom topic carried (the use case's ``/nav/zoom``, the
+area Navigation.AMCL holds: D215); until one has arrived, or when the system publishes none, it is
+replayed from the pose estimate with the ``<ZoomMap>`` triggers of plugins/environment/zoom.py —
+centred on the robot at the first estimate, again when the robot comes within ``border`` × the size
+of the area's edge, and after ``timeout`` s — at its fixed size (D160). The particle cloud is the
+newest one a particle topic (``/nav/particles``) or an estimate's ``particles`` field carried. A
+malformed cloud or area is not drawn: its FeedError is the topic's entry in ``errors`` until a good
+message arrives there.
 """
 
 from __future__ import annotations
@@ -53,6 +57,18 @@ class Zoom:
     width: float
     depth: float
     replayed: bool
+    reason: str = ""  # why a published area last moved (start, border, timeout)
+    objects: int | None = None  # the objects a published area manages
+
+
+def zoom_text(zoom: Zoom) -> str:
+    """The map's label of a zoom-map area: replayed, or why it last moved and how many objects it holds."""
+    if zoom.replayed:
+        return "zoom map (replayed)"
+    words = [zoom.reason] if zoom.reason else []
+    if zoom.objects is not None:
+        words.append(f"{zoom.objects} object{'' if zoom.objects == 1 else 's'}")
+    return f"zoom map ({', '.join(words)})" if words else "zoom map"
 
 
 @dataclass
@@ -81,6 +97,7 @@ class LiveState:
         self._lock = threading.Lock()
         self._now = Snapshot()
         self._zoom_stamp = 0.0
+        self._zoom_heard = False  # a zoom topic has carried an area: no more replaying
         self._by_topic: dict[str, tuple[float, list[Seen]]] = {}  # topic → (arrival, objects)
         self._frames: dict[str, int] = {}
         self._tracks: dict[tuple[str, str], collections.deque[tuple[float, float]]] = {}
@@ -138,19 +155,28 @@ class LiveState:
         return take
 
     def _estimate(self, robot: str) -> Callable[[str, Any, float], None]:
-        def take(_: str, value: Any, stamp: float) -> None:
+        def take(topic: str, value: Any, stamp: float) -> None:
             pose = pose_of(value)
             if pose is None:
                 return
-            covariance, cloud = covariance_of(value), particles_of(value)
+            covariance, cloud, refused = covariance_of(value), None, None
+            carried = value.get("particles") if isinstance(value, Mapping) else None
+            try:
+                cloud = None if carried is None else particles_of(carried)
+            except FeedError as exc:  # the pose stays good; its cloud is not drawn
+                refused = str(exc)
             with self._lock:
+                if refused is not None:
+                    self._now.errors[topic] = refused
+                else:
+                    self._now.errors.pop(topic, None)
                 self._now.estimate[robot] = pose
                 self._track(robot, "estimate", pose)
                 if covariance is not None:
                     self._now.covariance[robot] = covariance
                 if cloud is not None:
                     self._now.particles = cloud
-                if not self.feeds.zoom:
+                if not self._zoom_heard:
                     self._replay_zoom(pose, stamp)
 
         return take
@@ -190,17 +216,36 @@ class LiveState:
                 count = self._frames[topic] = self._frames.get(topic, 0) + 1
                 self._now.images[topic] = (count, value)
 
-    def _zoom(self, _: str, value: Any, __: float) -> None:
-        area = zoom_of(value)
-        if area is not None:
-            with self._lock:
-                self._now.zoom = Zoom(*area, replayed=False)
+    def _zoom(self, topic: str, value: Any, __: float) -> None:
+        try:
+            x, y, width, depth = zoom_of(value)
+        except FeedError as exc:
+            self._refuse(topic, exc)
+            return
+        reason = value.get("reason")
+        objects = value.get("objects")
+        area = Zoom(x, y, width, depth, False, reason if isinstance(reason, str) else "",
+                    len(objects) if isinstance(objects, list | tuple) else None)  # fmt: skip
+        with self._lock:
+            self._now.zoom, self._zoom_heard = area, True
+            self._now.errors.pop(topic, None)
 
-    def _particles(self, _: str, value: Any, __: float) -> None:
-        cloud = particles_of(value)
-        if cloud is not None:
-            with self._lock:
-                self._now.particles = cloud
+    def _particles(self, topic: str, value: Any, __: float) -> None:
+        try:
+            cloud = particles_of(value)
+            if cloud is None:
+                raise FeedError("a particle cloud needs x and y arrays (or N rows of x, y)")
+        except FeedError as exc:
+            self._refuse(topic, exc)
+            return
+        with self._lock:
+            self._now.particles = cloud
+            self._now.errors.pop(topic, None)
+
+    def _refuse(self, topic: str, error: FeedError) -> None:
+        """A message not drawn: its reason is the topic's error until a good one arrives."""
+        with self._lock:
+            self._now.errors[topic] = str(error)
 
     def snapshot(self) -> Snapshot:
         """A copy of the newest values (the arrays and payloads are shared: they are never changed)."""

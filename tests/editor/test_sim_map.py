@@ -66,7 +66,7 @@ def test_the_use_case_topics_are_found_in_its_configuration(lab: System) -> None
     assert "/recog/objects" in feeds.objects and "/pantilt/target" in feeds.objects
     # the Nao's frames are on the network; the Xtion's only under their node-internal wire name
     assert feeds.cameras == ("/nao/camera/image", "/turtlebot/~xtion_rgb_raw")
-    assert feeds.zoom == () and feeds.particles == ()  # the use case publishes neither
+    assert feeds.zoom == ("/nav/zoom",) and feeds.particles == ("/nav/particles",)  # Navigation.AMCL's (D215)
 
 
 def test_robots_objects_and_the_zoom_area_are_drawn_where_the_messages_put_them(qtbot: QtBot, lab: System) -> None:
@@ -214,6 +214,12 @@ def test_the_monitor_tab_draws_what_arrives_on_the_network(qtbot: QtBot, lab: Sy
             "/nav/pose": estimate(4.2, 2.4, 0.9),
             "/recog/objects": recognised(("mug", 8.0, 6.1, 0.87)),
             "/nao/camera/image": frame,
+            "/nav/particles": codec.encode({"stamp": 1.0, "frame": "map", "total": 500, "x": np.array([4.0, 4.4]),
+                                            "y": np.array([2.3, 2.5]), "yaw": np.zeros(2),
+                                            "weight": np.full(2, 0.002)}),
+            "/nav/zoom": codec.encode({"stamp": 1.0, "frame": "map", "mode": "2.5D", "x": 4.2, "y": 2.4, "width": 4.0,
+                                       "depth": 4.0, "height": 2.0, "reason": "border", "since": 0.5,
+                                       "objects": ["desk", "chair"], "avoided": []}),
         }
         publishers = {t: sim_side.publisher(TopicQoS(t, feeds.types[t])) for t in sent}
         for topic in sent:
@@ -224,8 +230,10 @@ def test_the_monitor_tab_draws_what_arrives_on_the_network(qtbot: QtBot, lab: Sy
             for topic, value in sent.items():  # best-effort streams: keep sending, as the simulation does
                 publishers[topic].publish(value)
             panel.refresh()
+            zoom = panel.live.map.zoom_label.text() == "zoom map (border, 2 objects)"  # the published, not replayed
             return (turtlebot["truth"].isVisible() and turtlebot["estimate"].isVisible() and bool(panel.live.map.labels)
-                    and "/nao/camera/image" in panel.live.cameras.images)  # fmt: skip
+                    and "/nao/camera/image" in panel.live.cameras.images and panel.live.map.particles.isVisible()
+                    and zoom)  # fmt: skip
 
         deadline = time.monotonic() + 20.0
         while not drawn() and time.monotonic() < deadline:
@@ -240,8 +248,9 @@ def test_the_monitor_tab_draws_what_arrives_on_the_network(qtbot: QtBot, lab: Sy
         table = panel.topics_table  # the nodes' topics are counted too, not only the system's own
         counted = {cell(table, r, 0) for r in range(table.rowCount())}
         assert {"/sim/turtlebot/pose", "/nav/pose", "/recog/objects"} <= counted
-        assert "Particles: not published by this system" in panel.live.notes.text()
-        assert "replayed from the estimate with <ZoomMap> (4×4 m)" in panel.live.notes.text()
+        assert panel.live.map.particles.path().boundingRect().center() == to_scene(4.2, 2.4)
+        assert close(panel.live.map.zoom.rect().center(), to_scene(4.2, 2.4))
+        assert "Particles" not in panel.live.notes.text() and "Zoom map" not in panel.live.notes.text()
     finally:
         panel.timer.stop()
         panel.live.stop()
