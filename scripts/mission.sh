@@ -21,6 +21,8 @@ mkdir -p "$run"
 topics=/nav/pose,/nav/status,/base/odom,/base/path,/base/move_status,/arm/status,/recog/objects
 topics=$topics,/rgbd/rgb/objects,/rgbd/depth/objects,/pantilt/objects,/pantilt/target,/agent1/target
 topics=$topics,/sim/turtlebot/pose
+# Navigation's own zoom-map areas (the report's Fig. 7.16) and its particle cloud every 4 s (6.4 kB each, D217)
+topics=$topics,/nav/zoom,/nav/particles@0.25
 # the cameras at most every 2 s as JPEG CompressedImage (10-17 kB, not 900 kB, a frame): the report's snapshots (D197)
 topics=$topics,/turtlebot/~xtion_rgb_raw@0.5:jpeg,/nao/camera/image@0.5:jpeg
 status=0
