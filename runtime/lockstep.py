@@ -17,8 +17,13 @@ releases the waits now due — marking their slots ``RUNNING`` *before* they wak
 cannot move on meanwhile. A notify marks the woken participant ``RUNNING`` the same way. So a job
 of a periodic task, a world server request it waits for, and what it notifies all happen at one
 simulated instant, however long they take on the wall clock: the run is as fast as the machine
-allows and its simulated result does not depend on the load (apart from messages between
-processes, which the clock does not wait for: D190).
+allows and its simulated result does not depend on the load.
+
+Messages between the processes (D220, :mod:`runtime.lockstep_frames`): the master also waits until
+every TOPICDATA and TOPICLINKS frame one process sent another has arrived, and an arrived frame is
+handed to its subscribers at the next instant (1 ns later), so whether a task of another process
+sees it never depends on the wall clock; a thread a participant starts holds the clock until its
+first wait, and a process's transport until it heard every other transport of the run.
 
 A process whose master is gone (ckm-run killed) falls back to the wall clock from the last
 simulated time, so its own watchdogs still end it.
@@ -37,7 +42,7 @@ import subprocess
 import threading
 import time
 import types
-from collections.abc import Callable, MutableMapping
+from collections.abc import Callable, Iterator, MutableMapping
 from pathlib import Path
 from typing import Any
 
@@ -45,25 +50,25 @@ import numpy as np
 
 from .lockstep_clock import (
     _REAL,
-    BLOCKS,
-    HEADER,
     IDLE,
     IDLE_PACE,
     LOG,
     PENDING,
-    ROW,
     RUNNING,
     STALL,
     VARIABLE,
+    WORDS,
     SharedClock,
     _alive,
     to_ns,
+    unheld,
 )
+from .lockstep_frames import Settling
 
 HOLD = "CKM_LOCKSTEP_HOLD"  # set for a ckm-run process the run starts: it holds the clock from its start
 START_WAIT = 60.0  # wall seconds the clock waits for a started ckm-run process to join it
 
-__all__ = ["VARIABLE", "SharedClock", "active", "create", "install", "observe", "real"]
+__all__ = ["VARIABLE", "SharedClock", "active", "create", "install", "observe", "real", "unclocked", "unheld_children"]
 
 
 def real(name: str) -> Callable[..., Any]:
@@ -81,14 +86,16 @@ class Master:
     def __init__(self, clock: SharedClock) -> None:
         self.clock = clock
         self.moves = 0
+        self.settling = Settling(clock)
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         path = clock.directory / "m"
         path.unlink(missing_ok=True)
         self.sock.bind(str(path))
-        threading.Thread(target=self._run, name="ckm-lockstep-master", daemon=True).start()
+        unheld(threading.Thread(target=self._run, name="ckm-lockstep-master", daemon=True)).start()
 
     def _run(self) -> None:
         clock, blocks, words = self.clock, self.clock.blocks, self.clock.words
+        clock.local.unclocked = True  # the frames it hands over in this process may sleep: on the wall clock
         checked = moved = _REAL["monotonic"]()
         self.sock.settimeout(0.02)
         while True:
@@ -99,7 +106,8 @@ class Master:
             if pending and _REAL["monotonic"]() - moved > START_WAIT:  # a process that never came: go on
                 LOG.warning("lock-step clock: %d started process(es) not on the clock after %g s", pending, START_WAIT)
                 words[PENDING] = pending = 0
-            if due > now and not pending:
+            # frames between the processes still in flight hold it too (D220: forgiven after a wall timeout)
+            if due > now and not pending and self.settling.settled(live):
                 if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
                     _REAL["sleep"](IDLE_PACE)
                 words[0] = min(due, now + clock.step_ns)
@@ -152,7 +160,7 @@ def create(step: float, directory: Path) -> dict[str, str]:
     if not step > 0.0:
         raise ValueError(f"lock-step: the step {step!r} must be a positive number of seconds")
     directory.mkdir(parents=True, exist_ok=True)
-    (directory / "clock").write_bytes(bytes(8 * (HEADER + BLOCKS * ROW)))
+    (directory / "clock").write_bytes(bytes(8 * WORDS))
     real = _REAL.get("monotonic", time.monotonic), _REAL.get("time", time.time)
     value = f"{directory} {to_ns(step)} {os.getpid()} {real[0]()!r} {real[1]()!r}"
     return {VARIABLE: value}
@@ -194,13 +202,19 @@ def _patch(clock: SharedClock) -> None:
     real_sleep, mono0, wall0 = _REAL["sleep"], clock.mono0, clock.wall0
     allocate = threading.Lock
 
+    def born() -> None:  # a newborn's first wait: from here its own slot (or none) says what it needs
+        if clock.newborns:
+            clock.born(threading.current_thread())
+
     def sleep(seconds: float) -> None:
-        if seconds <= 0 or clock.orphaned is not None:
+        if seconds <= 0 or clock.orphaned is not None or getattr(clock.local, "unclocked", False):
+            born()
             real_sleep(max(0.0, seconds))
             return
         waiter = allocate()
         waiter.acquire()
         entry = clock.enter(waiter, seconds)
+        born()  # after its wait is registered: the clock cannot move in between
         waiter.acquire()
         clock.leave(entry)
 
@@ -214,7 +228,10 @@ def _patch(clock: SharedClock) -> None:
         participant = getattr(clock.local, "slot", None) is not None
         # a participant starting a thread keeps the clock while it waits for it to boot (wall time)
         untimed = timeout is None and (not participant or getattr(clock.local, "starting", False))
-        if clock.orphaned is not None or untimed or (timeout is not None and timeout <= 0):
+        unclocked = getattr(clock.local, "unclocked", False)
+        if clock.orphaned is not None or untimed or unclocked or (timeout is not None and timeout <= 0):
+            if timeout is None or timeout > 0:
+                born()
             return bool(wall_wait(self, timeout))
         if not self._is_owned():
             raise RuntimeError("cannot wait on un-acquired lock")
@@ -223,6 +240,7 @@ def _patch(clock: SharedClock) -> None:
         self._waiters.append(waiter)
         saved = self._release_save()
         entry = clock.enter(waiter, timeout)
+        born()
         try:
             waiter.acquire()
         finally:
@@ -258,6 +276,7 @@ def _patch(clock: SharedClock) -> None:
         # which a clock moving freely would otherwise exhaust at once
         slot = getattr(clock.local, "slot", None)
         if slot is None or clock.orphaned is not None:
+            born()
             wall_join(self, timeout)
             return
         clock.hold(slot, IDLE)
@@ -270,11 +289,31 @@ def _patch(clock: SharedClock) -> None:
     wall_start = threading.Thread.start
 
     def start(self: threading.Thread) -> None:
-        clock.local.starting = True
+        # a participant's new thread holds the clock until its first wait (D220): until then it may be a
+        # supervisor about to start a partition, or a task about to wait for its first release
+        local = clock.local
+        held = (getattr(local, "slot", None) is not None and not getattr(local, "unclocked", False)
+                and not getattr(local, "unheld", False) and not getattr(self, "ckm_unheld", False))  # fmt: skip
+        if held:
+            run = self.run
+
+            def run_then_born() -> None:
+                try:
+                    run()
+                finally:
+                    clock.born(self)
+
+            self.run = run_then_born  # type: ignore[method-assign]
+            clock.newborn(self)
+        local.starting = True
         try:
             wall_start(self)
+        except BaseException:
+            if held:
+                clock.born(self)
+            raise
         finally:
-            clock.local.starting = False
+            local.starting = False
 
     threading.Thread.start = start  # type: ignore[method-assign]
     wall_popen = subprocess.Popen.__init__
@@ -299,6 +338,28 @@ def _patch(clock: SharedClock) -> None:
     for module, name in ((threading, "_time"), (queue, "time")):  # (subprocess's waits keep the wall clock)
         if getattr(module, name, None) is _REAL["monotonic"]:
             setattr(module, name, time.monotonic)
+
+
+def unclocked() -> None:
+    """The calling thread's waits are on the wall clock and it never holds the run's clock (D220): a
+    network thread polling for links, which must form while the clock is held for them."""
+    if _clock is not None:
+        _clock.local.unclocked = True
+
+
+@contextlib.contextmanager
+def unheld_children() -> Iterator[None]:
+    """Threads the calling thread starts in this block do not hold the clock until their first wait
+    (D220): the network's threads, which wait in socket calls, not on the clock."""
+    if _clock is None:
+        yield
+        return
+    before = getattr(_clock.local, "unheld", False)
+    _clock.local.unheld = True
+    try:
+        yield
+    finally:
+        _clock.local.unheld = before
 
 
 def active() -> SharedClock | None:

@@ -1,6 +1,6 @@
-"""The shared clock of a lock-step run, as one process sees it (issue J point 5, D190;
-:mod:`runtime.lockstep` installs it and documents the protocol)."""
-
+"""The shared clock of a lock-step run, as one process sees it (issue J point 5, D190, D220;
+:mod:`runtime.lockstep` installs it and documents the protocol, :mod:`runtime.lockstep_frames` counts
+the frames between its processes in the file's last two regions)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,13 @@ POLL = 0.5  # wall seconds a ticker or the master waits for a datagram before lo
 STALL = 10.0  # wall seconds without a move of the clock before the holders are logged
 IDLE_PACE = 0.001  # wall seconds per STEP while no participant waits for a time
 WAITING, FIRED, NOTIFIED = 0, 1, 2
-
+GUIDS = 4  # network identities (transports) a process registers in the file (D220)
+FIELDS = 3  # a process's count of frames with one peer process: its pid, frames sent to it, arrived from it
+WORDS = HEADER + BLOCKS * ROW + BLOCKS * GUIDS + BLOCKS * BLOCKS * FIELDS  # the clock file, in int64 words
+# slots of no thread (D220): frames arrived, handed to their subscribers at the next instant; threads started
+# by a participant, until their first wait; transports waiting for the run's other transports
+DELIVERY, NEWBORN, LINKS = SLOTS - 1, SLOTS - 2, SLOTS - 3
+NEWBORN_WAIT = 0.5  # wall seconds a thread started by a participant holds the clock before its first wait at most
 
 
 _REAL: dict[str, Callable[..., Any]] = {}  # the wall clocks, kept before any patch
@@ -73,9 +79,12 @@ class SharedClock:
         self.directory, self.step_ns, self.master = directory, step_ns, master
         self.mono0, self.wall0 = mono0, wall0
         self._file = os.open(directory / "clock", os.O_RDWR)
-        self._map = mmap.mmap(self._file, 8 * (HEADER + BLOCKS * ROW))
+        self._map = mmap.mmap(self._file, 8 * WORDS)
         self.words: npt.NDArray[np.int64] = np.frombuffer(self._map, dtype=np.int64)
-        self.blocks = self.words[HEADER:].reshape(BLOCKS, ROW)
+        self.blocks = self.words[HEADER : HEADER + BLOCKS * ROW].reshape(BLOCKS, ROW)
+        start = HEADER + BLOCKS * ROW
+        self.guids = self.words[start : start + BLOCKS * GUIDS].reshape(BLOCKS, GUIDS)
+        self.counts = self.words[start + BLOCKS * GUIDS :].reshape(BLOCKS, BLOCKS, FIELDS)
         self.observer = False
         self.orphaned: tuple[int, float] | None = None  # (clock ns, wall monotonic) when the master went
         self._reset()
@@ -87,10 +96,13 @@ class SharedClock:
         self.heap: list[tuple[int, int, Entry]] = []
         self.entries: dict[Any, Entry] = {}
         self.order = itertools.count()
-        self.free = list(range(SLOTS - 1, -1, -1))
+        self.free = list(range(LINKS - 1, -1, -1))
+        self.newborns: dict[threading.Thread, float] = {}  # started by a participant: wall time their hold lapses
+        self.reserved = {DELIVERY: IDLE, NEWBORN: IDLE, LINKS: IDLE}
         self.threads: dict[int, threading.Thread] = {}
         self.local = threading.local()
         self.sock: socket.socket | None = None
+        self.before_fire: Callable[[int], None] | None = None  # frames handed over at a move (lockstep_frames)
 
     # ------------------------------------------------------------------ time
 
@@ -117,6 +129,8 @@ class SharedClock:
                 pid = int(self.blocks[index, 0])
                 if pid == 0 or not _alive(pid):
                     self.blocks[index, 1:] = IDLE
+                    self.guids[index] = 0  # a dead process's transports and counts are not ours
+                    self.counts[index] = 0
                     self.blocks[index, 0] = os.getpid()
                     break
             else:
@@ -130,7 +144,7 @@ class SharedClock:
         path.unlink(missing_ok=True)
         self.sock.bind(str(path))
         self.sock.settimeout(POLL)
-        threading.Thread(target=self._tick, name="ckm-lockstep-ticker", daemon=True).start()
+        unheld(threading.Thread(target=self._tick, name="ckm-lockstep-ticker", daemon=True)).start()
         return index
 
     def expect(self, change: int) -> None:
@@ -147,7 +161,7 @@ class SharedClock:
     def participant(self, thread: threading.Thread | None = None) -> int | None:
         """The calling thread's slot, made on its first call (None: an observer process, or full)."""
         slot: int | None = getattr(self.local, "slot", None)
-        if slot is not None or self.observer or self.orphaned is not None:
+        if slot is not None or self.observer or self.orphaned is not None or getattr(self.local, "unclocked", False):
             return slot
         block = self._claim()
         with self.lock:
@@ -187,6 +201,54 @@ class SharedClock:
     def _mark(self, slot: int | None, value: int) -> None:
         if slot is not None and self.block is not None:
             self.blocks[self.block, 1 + slot] = value
+
+    def reserve(self, slot: int, value: int) -> None:
+        """Set one of the slots of no thread (``DELIVERY``, ``NEWBORN``, ``LINKS``: D220) and tell the master."""
+        self._claim()
+        with self.lock:
+            self.reserved[slot] = value
+            self._mark(slot, value)
+        self.poke()
+
+    # ------------------------------------------------------------------ threads started by a participant
+
+    def newborn(self, thread: threading.Thread) -> None:
+        """``thread``, started by a participant, holds the clock until its first wait or its end (D220):
+        a thread's first steps take wall time the clock must not move in (a supervisor before its first
+        poll), but one blocked in a socket call never waits on the clock, so the hold lapses after
+        ``NEWBORN_WAIT`` wall seconds."""
+        with self.lock:
+            first = not self.newborns
+            self.newborns[thread] = _REAL["monotonic"]() + NEWBORN_WAIT
+        if first:
+            self.reserve(NEWBORN, RUNNING)
+
+    def born(self, thread: threading.Thread, lapsed: bool = False) -> None:
+        """``thread`` waits (or ended, or its hold lapsed): it no longer holds the clock as a newborn."""
+        with self.lock:
+            if self.newborns.pop(thread, None) is None:
+                return
+            last = not self.newborns
+        if lapsed:
+            LOG.debug(
+                "lock-step clock: thread %s did not wait in %g s (a socket call?): the clock goes on",
+                thread.name,
+                NEWBORN_WAIT,
+            )
+        if last:
+            self.reserve(NEWBORN, IDLE)
+
+    def _lapse(self) -> float:
+        """End the newborns' holds that lapsed; the wall seconds until the next one lapses (or ``POLL``)."""
+        wall: float = _REAL["monotonic"]()
+        with self.lock:
+            items = list(self.newborns.items())
+        for thread, until in items:
+            if until <= wall or not thread.is_alive():
+                self.born(thread, lapsed=thread.is_alive())
+        with self.lock:
+            soonest = min(self.newborns.values(), default=wall + POLL)
+        return min(POLL, max(0.01, soonest - wall))
 
     def poke(self) -> None:
         """Tell the master a slot changed (it may now advance)."""
@@ -248,6 +310,7 @@ class SharedClock:
     def _tick(self) -> None:
         sock = self.sock
         assert sock is not None
+        self.local.unclocked = True  # what it hands over (frames: D220) may sleep: on the wall clock here
         last, moved = -1, _REAL["monotonic"]()
         while True:
             try:
@@ -259,8 +322,10 @@ class SharedClock:
                 except OSError:
                     pass
                 finally:
-                    sock.settimeout(POLL)
+                    sock.settimeout(self._lapse() if self.newborns else POLL)
             except TimeoutError:
+                if self.newborns:
+                    sock.settimeout(self._lapse())
                 if not _alive(self.master):
                     self._orphan()
                     return
@@ -281,8 +346,11 @@ class SharedClock:
                 self._log_holders(now)
 
     def fire_due(self) -> int:
-        """End every wait of this process whose time has come; the time now."""
+        """End every wait of this process whose time has come (after handing over the frames that
+        arrived before the move: D220); the time now."""
         now = self.now()
+        if self.before_fire is not None:
+            self.before_fire(now)
         with self.lock:
             while self.heap and self.heap[0][0] <= now:
                 self._fire(heapq.heappop(self.heap)[2])
@@ -292,15 +360,19 @@ class SharedClock:
         if self.block is None:
             return
         held = [t.name for s, t in self.threads.items() if int(self.blocks[self.block, 1 + s]) <= now]
+        names = {DELIVERY: "frames to hand over", NEWBORN: "threads not yet waiting", LINKS: "transports linking"}
+        held += [names[s] for s, value in self.reserved.items() if value <= now]
         if held:
-            LOG.warning("lock-step clock at %.3f s held for %g s by this process's %s", now * 1e-9, STALL,
-                        ", ".join(held))
+            LOG.warning(
+                "lock-step clock at %.3f s held for %g s by this process's %s", now * 1e-9, STALL, ", ".join(held)
+            )
 
     def _orphan(self) -> None:
         """The master is gone: the wall clock from here on; every wait ends."""
         LOG.error("lock-step clock: the run's master %d is gone; this process runs on the wall clock", self.master)
         with self.lock:
             self.orphaned = (int(self.words[0]), _REAL["monotonic"]())
+            self.newborns.clear()
             for _, _, entry in self.heap:
                 self._fire(entry)
             self.heap.clear()
@@ -325,3 +397,7 @@ def _alive(pid: int) -> bool:
     return stat[stat.rfind(")") + 2 :][:1] not in ("Z", "X")
 
 
+def unheld(thread: threading.Thread) -> threading.Thread:
+    """``thread`` does not hold the clock as a newborn when started (the clock's own threads: D220)."""
+    thread.ckm_unheld = True  # type: ignore[attr-defined]
+    return thread

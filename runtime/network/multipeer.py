@@ -20,6 +20,7 @@ from typing import Any
 
 from ckmconf.model import Network
 
+from .. import lockstep
 from .clock import ClockSync
 from .discovery import Discovery
 from .frames import Frame, FrameType, encode
@@ -384,6 +385,7 @@ class MultiPeer:
     # ------------------------------------------------------------------ timer: reconnects, clock sync
 
     def _timer_loop(self) -> None:
+        lockstep.unclocked()  # a 5 ms poll on the wall clock: links form while a lock-step clock waits for them (D220)
         next_sync = time.monotonic() + self.network.clock_sync
         while not self._stop.wait(0.005):
             now = time.monotonic()

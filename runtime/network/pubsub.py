@@ -4,6 +4,12 @@ Local subscribers get the very object published, with no serialization. Remote p
 TOPICDATA frame per sample — ``[topic, seq, stamp, value]``, or ``[topic, seq, stamp, cdr,
 "cdr", type]`` for a topic type the transport's codec serialises (:mod:`.wire`) — encoded once for
 all links when there is no group key. Best-effort topics drop a sample rather than wait for a busy link.
+
+In a lock-step run (``ckm-run --lockstep``, D190, D220) every TOPICDATA and TOPICLINKS frame between
+two transports of the run is counted where it is sent and where it arrives (:mod:`runtime.lockstep_frames`),
+so the run's clock never moves with one in flight, and an arrived one is handed over at the clock's
+next instant; the transport holds the clock from its set-up until it heard every other transport of
+the run. Off lock-step none of this runs.
 """
 
 from __future__ import annotations
@@ -16,6 +22,8 @@ from typing import Any
 
 from ckmconf.model import Network
 
+from .. import lockstep
+from ..lockstep_frames import Ledger, ledger
 from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import Frame, FrameType, encode
 from .multipeer import MultiPeer, PeerEvent
@@ -39,6 +47,8 @@ class MultiPeerTransport(SubscriptionTable, Transport):
         self._deadlines = DeadlineWatchdog(self._watched, self._emit, "ckm-deadlines")
         self.dropped_stale = 0
         self.dropped_busy = 0
+        self._ledger: Ledger | None = None  # lock-step only (D220)
+        self._heard: set[int] = set()  # peers whose TOPICLINKS arrived (lock-step: the clock waits for them)
         self.peer.add_listener(FrameType.TOPICDATA, self._on_data)
         self.peer.add_listener(FrameType.TOPICLINKS, self._on_links)
         self.peer.on_event(self._on_peer_event)
@@ -51,17 +61,24 @@ class MultiPeerTransport(SubscriptionTable, Transport):
     # ------------------------------------------------------------------ lifecycle
 
     def setup(self) -> None:
-        """Bind the peer's sockets (:meth:`MultiPeer.setup`)."""
+        """Bind the peer's sockets (:meth:`MultiPeer.setup`); in lock-step, join the run's ledger (D220)."""
         self.peer.setup()
+        self._ledger = ledger(lockstep.active())
+        if self._ledger is not None:
+            self._ledger.register(self.guid)
+            self._ledger.hold_links(self.guid, lambda: self._heard)
 
     def start(self) -> None:
         """Start the peer and the deadline watchdog."""
-        self.peer.start()
+        with lockstep.unheld_children():  # its threads wait in socket calls, never on a lock-step clock
+            self.peer.start()
         self._deadlines.start()
 
     def stop(self) -> None:
         """Stop the deadline watchdog and the peer."""
         self._deadlines.stop()
+        if self._ledger is not None:
+            self._ledger.unregister(self.guid)
         self.peer.stop()
 
     # ------------------------------------------------------------------ API
@@ -111,27 +128,47 @@ class MultiPeerTransport(SubscriptionTable, Transport):
         body = [qos.name, seq, stamp, *outgoing(self.codec, qos.name, qos.type, value)]  # value or cdr, 'cdr', type
         links = [self.peer.links.get(g) for g in remote]
         routed = sum(
-            self.peer.send(g, FrameType.TOPICDATA, body) for g, link in zip(remote, links, strict=True) if link is None
+            self._send(g, FrameType.TOPICDATA, body) for g, link in zip(remote, links, strict=True) if link is None
         )
         return routed + self._send_links([link for link in links if link is not None], qos, body)
 
+    def _send(self, guid: int, kind: FrameType, body: list[Any]) -> bool:
+        """One frame to one peer, directly or routed; counted in lock-step (D220)."""
+        counted = self._ledger is not None and self._ledger.sending(guid)
+        sent = self.peer.send(guid, kind, body)
+        if counted and not sent:
+            self._ledger.unsent(guid)  # type: ignore[union-attr]
+        return sent
+
     def _send_links(self, links: list[Any], qos: TopicQoS, body: list[Any]) -> int:
+        counts = self._ledger
         if self.peer.key is None:
             data = encode(FrameType.TOPICDATA, body)
             sent = 0
             wait = BEST_EFFORT_WAIT if qos.reliability == "best-effort" else None
             for link in links:
+                counted = counts is not None and counts.sending(link.remote_guid)
                 if link.send_encoded(data, wait=wait):
                     sent += 1
-                elif wait is not None:
+                    continue
+                if counted:
+                    counts.unsent(link.remote_guid)  # type: ignore[union-attr]
+                if wait is not None:
                     self.dropped_busy += 1
             return sent
+        if counts is not None:
+            return sum(self._send(link.remote_guid, FrameType.TOPICDATA, body) for link in links)
         return sum(link.send(FrameType.TOPICDATA, body) for link in links)
 
     # ------------------------------------------------------------------ receiving
 
     def _on_data(self, guid: int, frame: Frame) -> None:
         body = frame.body
+        if self._ledger is not None and self._ledger.arrived(guid, lambda: self._data(guid, body)):
+            return  # lock-step: handed over at the clock's next instant (D220)
+        self._data(guid, body)
+
+    def _data(self, guid: int, body: list[Any]) -> None:
         if (
             len(body) not in (4, 6)
             or not isinstance(body[0], str)
@@ -157,6 +194,13 @@ class MultiPeerTransport(SubscriptionTable, Transport):
 
     def _on_links(self, guid: int, frame: Frame) -> None:
         body = frame.body
+        if self._ledger is not None:
+            self._heard.add(guid)  # on arrival: the clock waits for it (its effect comes at the next instant)
+            if self._ledger.arrived(guid, lambda: self._links(guid, body)):
+                return
+        self._links(guid, body)
+
+    def _links(self, guid: int, body: list[Any]) -> None:
         if len(body) != 2 or body[0] != "subs" or not isinstance(body[1], list):
             LOG.warning("ignoring a malformed TOPICLINKS frame from %s", guid)
             return
@@ -171,7 +215,11 @@ class MultiPeerTransport(SubscriptionTable, Transport):
     def _announce_links(self, guids: list[int] | None = None) -> None:
         with self._lock:
             topics = sorted(name for name, subs in self._subs.items() if subs and name != EVENTS_TOPIC)
-        self.peer.broadcast(FrameType.TOPICLINKS, ["subs", topics], guids)
+        if self._ledger is None:
+            self.peer.broadcast(FrameType.TOPICLINKS, ["subs", topics], guids)
+            return
+        for guid in guids if guids is not None else self.peer.reachable():  # one by one: each is counted
+            self._send(guid, FrameType.TOPICLINKS, ["subs", topics])
 
     def _unsubscribe(self, subscription: Subscription) -> None:
         with self._lock:
