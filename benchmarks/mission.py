@@ -7,12 +7,18 @@ per plan — the same copy for every plan, so the plans are compared on the same
 process group, bounded by a wall timeout (``D / S`` plus a margin: SIGINT, then SIGKILL). Its
 output goes to ``OUT/runs/PLAN-seedK.log``.
 
-A run succeeds when ``ckm-run`` exits 0 and every agent of the plan recorded the first
-``<Final>`` of its mission as its outcome (the missions list the success final first). Its mission
+A run succeeds when ``ckm-run`` exits 0, every agent of the plan recorded the first
+``<Final>`` of its mission as its outcome (the missions list the success final first), and, when
+the run had a simulated world, the world's own final record (``sim-final.json``) has the target
+on the drop table (``object_home``: the robots did the work, not only the missions' bookkeeping). Its mission
 time and per-state figures come from the recording (:mod:`benchmarks.mission_report`). The
 summary (``OUT/summary.json``, the ``--json`` line) and a box plot of each state's time per plan
 (``OUT/mission-states.png``) follow. ``--no-randomise`` runs the configuration as it is (any
 configuration with plans: the tests use ``configs/examples/plan_two_agents.xml``).
+
+``--layout compact`` runs the compact copy of the lab (:mod:`benchmarks.mission_compact`: the
+drop table and the start next to the workbench; the same system, a shorter fetch) under the
+randomisation; ``--lockstep STEP`` passes ``ckm-run --lockstep STEP`` (D190).
 
 ``--scenario NAME`` disturbs every run on purpose — a box in the corridor, the target moved during
 the approach, the object dropped on the way home, the humanoid's process killed — and records in
@@ -34,9 +40,10 @@ from pathlib import Path
 from typing import Any
 
 import ckmconf
+from benchmarks.mission_compact import compact
 from benchmarks.mission_random import Jitter, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
-from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, run_split
+from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, object_home, run_split
 from runtime.missions.recording import RunError, read_run
 from runtime.missions.report import build_report
 
@@ -100,6 +107,7 @@ def run_once(
     log: Path,
     timeout: float | None = None,
     env: Mapping[str, str] | None = None,
+    lockstep: float | None = None,
 ) -> tuple[int | None, float]:
     """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s).
 
@@ -110,6 +118,8 @@ def run_once(
     command += ["--log-dir", str(run_dir)]
     if time_scale is not None:
         command += ["--time-scale", f"{time_scale:g}"]
+    if lockstep is not None:
+        command += ["--lockstep", f"{lockstep:g}"]
     if timeout is None:
         timeout = duration / (time_scale or 1.0) + MARGIN_S
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -132,12 +142,14 @@ def run_once(
 
 
 def _run(
-    config: Path, plan: str, run_dir: Path, scenario: Scenario | None, duration: float, scale: float | None, logs: Path
+    config: Path, plan: str, run_dir: Path, scenario: Scenario | None, duration: float, scale: float | None, logs: Path,
+    lockstep: float | None = None,
 ) -> tuple[int | None, float]:
     """One run of the benchmark, disturbed as ``scenario`` says: split over processes to kill an agent."""
     log = logs / f"{run_dir.name}.log"
     if scenario is None or scenario.kill_agent is None:
-        return run_once(config, plan, run_dir, duration=duration, time_scale=scale, log=log, env=environment(scenario))
+        return run_once(config, plan, run_dir, duration=duration, time_scale=scale, log=log, env=environment(scenario),
+                        lockstep=lockstep)  # fmt: skip
     started = time.monotonic()
     log.parent.mkdir(parents=True, exist_ok=True)
     code = run_split(config, plan, run_dir, scenario, duration=duration, time_scale=scale, log=log,
@@ -168,6 +180,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--time-scale", type=float, default=0.2, help="ckm-run --time-scale (0 for none)")
     parser.add_argument("--out", type=Path, default=Path("runs/bench-mission"), help="copies, runs, summary, plot")
     parser.add_argument("--no-randomise", action="store_true", help="run the configuration as it is")
+    parser.add_argument("--layout", choices=("lab", "compact"), default="lab",
+                        help="compact: the drop table and the start next to the workbench (a short fetch)")
+    parser.add_argument("--lockstep", type=float, help="ckm-run --lockstep STEP (simulated s): lock-step time")
     parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the sensor noise (0: none)")
     parser.add_argument(
         "--scenario",
@@ -189,6 +204,8 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         parser.error(f"--duration must be positive, not {args.duration}")
     if not 0 <= args.time_scale <= 1:
         parser.error(f"--time-scale must be in (0, 1] (0: none), not {args.time_scale}")
+    if args.lockstep is not None and not args.lockstep > 0:
+        parser.error(f"--lockstep must be positive, not {args.lockstep}")
     if args.noise_scale < 0:
         parser.error(f"--noise-scale must not be negative, not {args.noise_scale}")
     try:
@@ -196,22 +213,31 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         scenario = choose(args.scenario, args.kill_agent, args.kill_after)
         if scenario is not None:
             check(scenario, args.config, args.plans)
+            if args.lockstep is not None and scenario.kill_agent is not None:
+                raise ValueError("--lockstep cannot run a split run (a killed agent): its processes share no clock")
     except (ckmconf.ConfigError, ValueError, OSError) as error:
         parser.error(str(error))
     scale = args.time_scale or None
     out: Path = args.out
     results: dict[str, list[dict[str, Any]]] = {plan: [] for plan in args.plans}
+    base = args.config
+    if args.layout == "compact":
+        try:
+            base = compact(args.config, out / "configs" / "compact")
+        except (ckmconf.ConfigError, ValueError, OSError) as error:
+            parser.error(str(error))
     for seed in range(args.first_seed, args.first_seed + args.runs):
-        config, changed = args.config, None
+        config, changed = base, None
         if not args.no_randomise:
-            randomised = randomise(
-                args.config, seed, out / "configs" / f"seed{seed}", Jitter(noise_scale=args.noise_scale)
-            )
+            randomised = randomise(base, seed, out / "configs" / f"seed{seed}", Jitter(noise_scale=args.noise_scale))
             config, changed = randomised.config, randomised.to_json()
         for plan in args.plans:
             name = f"{plan}-seed{seed}"
-            code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs")
+            code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs",
+                              args.lockstep)  # fmt: skip
             record = collect(out / "runs" / name, code, finals[plan])
+            record["object_home"] = object_home(config, out / "runs" / name)
+            record["success"] = record["success"] and record["object_home"] is not False
             record.update(plan=plan, seed=seed, wall_s=round(wall, 3), randomised=changed)
             if scenario is not None:
                 judge(scenario, out / "runs" / name, record, config, finals[plan])

@@ -246,7 +246,7 @@ def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Pat
     record["disturbances"] = fired
     record["killed"] = killed
     record["disturbed"] = bool(fired) or killed is not None
-    record["object_home"] = _object_home(config, run_dir)
+    record["object_home"] = object_home(config, run_dir)
     if scenario.expect == "success":
         record["handled"] = bool(record["success"]) and record["object_home"] is not False
     else:
@@ -263,7 +263,7 @@ def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Pat
         ))  # fmt: skip
 
 
-def _object_home(config: Path, run_dir: Path) -> bool | None:
+def object_home(config: Path, run_dir: Path) -> bool | None:
     """Whether the world's final state has the lab's target on the drop table (None: not known)."""
     target, table, radius = HOME
     try:
