@@ -47,9 +47,10 @@ from ..network.api import Sample, TopicQoS, Transport
 from ..registry import Registry, default_registry
 from ..resources import codec
 from .behaviors import Behavior, BehaviorContext
-from .hfsm import MissionEngine, Signals
+from .hfsm import MissionEngine
 from .recording import RunRecorder
 from .services import NetworkServiceHandle
+from .signals import Signals
 
 LOG = logging.getLogger("ckm.missions")
 

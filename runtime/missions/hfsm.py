@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from ckmconf.expressions import Condition, Environment, evaluate
@@ -36,7 +35,8 @@ from ckmconf.model.missions import Mission, State, Transition
 
 from .behaviors import Behavior, BehaviorStatus, ServiceHandle
 from .composition import behavior_performance
-from .payloads import check_payload
+from .hfsm_conditions import state_environment
+from .signals import Signals, SignalSender
 
 
 class Recorder(Protocol):
@@ -48,43 +48,6 @@ class Recorder(Protocol):
 
 BehaviorFactory = Callable[[str, str, Callable[[], float]], Behavior]
 """(behavior name, state path, seconds-in-state clock) → the behavior to start for that state."""
-
-
-@dataclass
-class Signals:
-    """Plan signals received so far (latched: once received, ``signal()`` stays true).
-
-    A signal travels as an envelope ``{"agent", "state", "time", "data"}``; ``data`` is the payload
-    the emitting state's behavior wrote on its ``<Output signal=…>`` (:meth:`supply`), None for a
-    signal that carries none. A behavior's ``<Input signal=…>`` reads :meth:`data`.
-    """
-
-    values: dict[str, Any] = field(default_factory=dict)
-    payloads: dict[str, Any] = field(default_factory=dict)
-    """Outgoing: what this agent's behaviors supplied for the signals it will emit."""
-
-    def received(self, name: str) -> bool:
-        """True once plan signal ``name`` arrived (the ``signal('name')`` condition, §5.3)."""
-        return name in self.values
-
-    def set(self, name: str, value: Any) -> None:
-        """Latch the envelope ``value`` of incoming signal ``name``."""
-        self.values[name] = value
-
-    def supply(self, name: str, value: Any) -> None:
-        """A behavior's ``<Output signal=name>``: the payload of the next emission of ``name``."""
-        self.payloads[name] = value
-
-    def data(self, name: str) -> Any:
-        """What an ``<Input signal=name>`` reads: the payload, or the envelope of a signal without one."""
-        envelope = self.values.get(name)
-        if isinstance(envelope, dict) and envelope.get("data") is not None:
-            return envelope["data"]
-        return envelope
-
-
-class SignalError(RuntimeError):
-    """A signal whose payload does not match its ``type`` (raised in the emitting agent)."""
 
 
 class MissionError(RuntimeError):
@@ -286,12 +249,17 @@ class MissionEngine:
         self.system, self.record_mission, self.agent = system, record, agent
         self.factory, self.clock, self.recorder = factory, clock, recorder
         self.signals = signals or Signals()
-        self.emitters = dict(emitters or {})  # (state path below the top, "entry"|"done"|"exit") → signal
-        self.on_signal = on_signal
+        self._sender = SignalSender(
+            self.signals,
+            agent,
+            emitters=emitters,
+            signal_types=signal_types,
+            types={t.name: t for t in system.message_types},
+            on_signal=on_signal,
+            record=self.record,
+        )
         self.progress_period = progress_period
         self.plan = plan
-        self.signal_types = dict(signal_types or {})  # signal → its <Signal type> (None: no payload required)
-        self._types = {t.name: t for t in system.message_types}
         self._related = related  # the services eq. 5.1 weighs that a behavior does not use itself
         self._lost = lost  # lost('agent'): the plan agent's runner knows (None: no plan, never lost)
         self._stopping = False
@@ -327,52 +295,11 @@ class MissionEngine:
 
     def emit(self, path: str, when: str) -> None:
         """Send the plan signal declared on ``path`` for ``when`` (entry/done/exit), payload type-checked (§5.3)."""
-        relative = path.split("/", 1)[1] if "/" in path else path
-        name = self.emitters.get((relative, when))
-        if name is not None:
-            data = self.signals.payloads.pop(name, None)
-            kind = self.signal_types.get(name)
-            if kind is not None:
-                problem = check_payload(data, kind, self._types, "payload")
-                if data is None:
-                    problem = f"no payload: the behavior of {relative} wrote nothing on an <Output signal={name!r}>"
-                if problem is not None:
-                    error = f"signal {name!r} (type {kind}) sent by {self.agent} at {relative}: {problem}"
-                    if self._stopping:  # stopping after a crash: record it, do not raise a second time
-                        self.record("error", error=f"SignalError: {error}", where=relative)
-                        return
-                    raise SignalError(error)
-            value = {"agent": self.agent, "state": relative, "time": self.now(), "data": data}
-            self.signals.set(name, value)
-            self.record("signal", name=name, direction="sent", value=value)
-            if self.on_signal is not None:
-                self.on_signal(name, value)
+        self._sender.emit(path, when, self.now(), self._stopping)
 
     def environment(self, run: MissionRun) -> Environment | None:
         """What ``run``'s transitions are evaluated against (None: try none this step)."""
-        child = run.child
-
-        def attribute(alias: str, name: str) -> Any:
-            if run.behavior is None:
-                return None
-            handle = run.behavior.context.services.get(alias)
-            if handle is None:
-                return None
-            value = handle.output(name)
-            return value if value is not None else handle.measures().get(name)
-
-        return Environment(
-            functions={
-                "done": lambda: run.status.done or (child is not None and child.outcome is not None),
-                "failed": lambda: run.status.failed,
-                "timeout": run.timed_out,
-                "outcome": lambda name: child is not None and child.outcome == name,
-                "signal": self.signals.received,
-                "lost": self.agent_lost,
-            },
-            names={"progress": run.own_progress(), "elapsed": run.elapsed(), "performance": run.performance()},
-            attributes=attribute,
-        )
+        return state_environment(run, self.signals.received, self.agent_lost)
 
     # ------------------------------------------------------------------ driving
 

@@ -11,8 +11,8 @@ import pytest
 
 from ckmconf.loader import load
 from runtime.missions.agent import AgentRunner
-from runtime.missions.hfsm import SignalError
 from runtime.missions.recording import read_run
+from runtime.missions.signals import SignalError
 from runtime.network import open_transport
 from tests.runtime.network.conftest import private_network
 

@@ -13,8 +13,9 @@ import pytest
 import ckmconf
 from ckmconf.model import System
 from runtime.missions.behaviors import Behavior, BehaviorContext
-from runtime.missions.hfsm import MissionEngine, MissionError, Signals, distances_to_success
+from runtime.missions.hfsm import MissionEngine, MissionError, distances_to_success
 from runtime.missions.recording import RunRecorder, read_run
+from runtime.missions.signals import Signals
 from runtime.registry import default_registry
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "missions"
