@@ -279,13 +279,20 @@ def _patch(clock: SharedClock) -> None:
             born()
             wall_join(self, timeout)
             return
-        clock.hold(slot, IDLE)
+        with clock.lock:  # the thread's end marks it RUNNING again (D220): the clock cannot move before it returns
+            if self.is_alive() and self in joiners:
+                joiners[self].append(slot)
+            clock._mark(slot, IDLE)
+        clock.poke()
         try:
             wall_join(self, timeout)
         finally:
+            with clock.lock, contextlib.suppress(KeyError, ValueError):
+                joiners[self].remove(slot)
             clock.hold(slot, RUNNING)
 
     threading.Thread.join = join  # type: ignore[method-assign]
+    joiners: dict[threading.Thread, list[int]] = {}  # a thread started here → the slots of the participants joining it
     wall_start = threading.Thread.start
 
     def start(self: threading.Thread) -> None:
@@ -294,23 +301,29 @@ def _patch(clock: SharedClock) -> None:
         local = clock.local
         held = (getattr(local, "slot", None) is not None and not getattr(local, "unclocked", False)
                 and not getattr(local, "unheld", False) and not getattr(self, "ckm_unheld", False))  # fmt: skip
+        run = self.run
+
+        def run_then_end() -> None:
+            try:
+                run()
+            finally:
+                clock.born(self)
+                with clock.lock:
+                    for slot in joiners.pop(self, []):
+                        clock._mark(slot, RUNNING)
+
+        self.run = run_then_end  # type: ignore[method-assign]
+        with clock.lock:
+            joiners[self] = []
         if held:
-            run = self.run
-
-            def run_then_born() -> None:
-                try:
-                    run()
-                finally:
-                    clock.born(self)
-
-            self.run = run_then_born  # type: ignore[method-assign]
             clock.newborn(self)
         local.starting = True
         try:
             wall_start(self)
         except BaseException:
-            if held:
-                clock.born(self)
+            clock.born(self)
+            with clock.lock:
+                joiners.pop(self, None)
             raise
         finally:
             local.starting = False
