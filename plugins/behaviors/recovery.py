@@ -1,0 +1,121 @@
+"""Behaviors of the dropped-object recovery (issue K point 3d; ours: the thesis draws only the
+success path of Fig. 7.12, §5.2 leaves failure handling to the mission designer).
+
+When the gripper's holding measure (RoboticArm.MoveIt, D169) drops while the Turtlebot drives
+home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/usecase/missions.xml):
+
+- ``stop-nav`` (HALT): cancels the Navigation goal (the ``nav`` service's ``goal`` Parameter set
+  empty by its ``<Configure>``) and sends the base a move of zero length, which preempts the path
+  being followed for good (plugins/navigation/displacement.py); done when the base reports it done.
+- ``search-object`` (LOOK): looks for the target with the fused recognition, standing still at
+  each view — the fusion places what it sees with the robot's pose (D172), so a sighting made
+  while turning would be misplaced — and turning ``turn`` radians between views; after a full
+  round of ``views`` it backs ``shift`` metres (an object too near the base is under the camera's
+  view, about 0.45 m, issue K.3d feasibility) and looks round again, up to ``rounds`` rounds.
+  Writes the target's position (an ``ObjectPosition``) like SPOT, so APPR can approach it.
+
+Messages are those of :mod:`plugins.behaviors.usecase` (``/base/move_goal``, ``/base/move_status``,
+the fused recognition's objects).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from ckmconf.model.missions import Behavior as BehaviorRecord
+from runtime.kernel.interfaces import ParamError
+from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
+from runtime.verification.manifest import MAPPING, P, Params, Ports
+
+from .usecase import _TARGET, _Goals, _share_done, _state, find_target, object_position
+
+
+class StopNavigation(_Goals):
+    """HALT: the Navigation goal cancelled (its ``<Configure>``) and the base stopped by a zero move."""
+
+    PORTS = Ports(outputs={"*": MAPPING})
+
+    def start(self) -> None:
+        """Configure the services (the empty goal cancels the navigation), then send the zero move."""
+        super().start()
+        self.move_id = self._send("move", {"frame": "robot", "x": 0.0, "y": 0.0, "yaw": 0.0})
+
+    def step(self) -> BehaviorStatus:
+        """Done once the base has carried out the zero move (it no longer follows the path)."""
+        state = _state(self.service("base").output("move_status"), self.move_id)
+        if state == "failed":
+            return BehaviorStatus(progress=0.0, failed=True, detail="the base did not stop")
+        return BehaviorStatus(progress=1.0 if state == "done" else 0.0, done=state == "done")
+
+
+class SearchObject(_Goals):
+    """LOOK: views round the robot until the fused recognition holds the target (module docstring)."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        *_TARGET,
+        P("minSources", 1, "Fewest recognition sources that must have seen the object."),
+        P("minReliability", 0.0, "Least fused reliability a sighting must have.", min=0.0, max=1.0),
+        P("turn", 0.6, "Turn between two views (positive: to the left).", unit="rad"),
+        P("views", 11, "Views in one round (with the first, views × turn should cover a full turn).", min=1),
+        P("settle", 2.5, "Wait at a view before a sighting counts: the camera, recognition and fusion "
+          "latencies after the robot stopped.", unit="s", min=0.0),
+        P("dwell", 2.0, "How long a view is watched after it settled.", unit="s", min=0.0),
+        P("shift", 0.4, "Backward move between two rounds.", unit="m", min=0.0),
+        P("rounds", 2, "Rounds of views at most.", min=1),
+    )
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+
+    def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
+        super().__init__(record, context)
+        if self.params["turn"] == 0.0 and self.params["views"] > 1:
+            raise ParamError(f"{self.owner}: parameter 'turn' must not be 0 (the views would all be the same)")
+
+    def start(self) -> None:
+        """Look from where the robot stands first."""
+        super().start()
+        self.view, self.round = 0, 0
+        self.looking_since: float | None = self.context.now()
+        self.move_id: int | None = None
+
+    def _total(self) -> int:
+        return int(self.params["views"]) * int(self.params["rounds"])
+
+    def step(self) -> BehaviorStatus:
+        """Watch the view once settled; turn (or back off, after a round) when it shows nothing."""
+        p = self.params
+        now = self.context.now()
+        done_views = self.round * int(p["views"]) + self.view
+        if self.looking_since is None:  # moving to the next view
+            move = self.service("base").output("move_status")
+            state = _state(move, self.move_id)
+            if state == "failed":
+                return BehaviorStatus(progress=done_views / self._total(), failed=True,
+                                      detail="the base could not move to the next view")
+            if state != "done":
+                return BehaviorStatus(progress=(done_views + 0.5 * _share_done(move)) / self._total())
+            self.looking_since = now
+        watched = now - self.looking_since
+        if watched >= p["settle"]:
+            result = self.read("objects") if "objects" in self.context.inputs else self.service("fusion").output(
+                "objects")
+            found = find_target(result, p["target"], p["targetTexture"], p["minSources"])
+            if found is not None and float(found.get("reliability", 0.0)) >= p["minReliability"]:
+                self.write("target", object_position(found, now))
+                self.context.log("target found", view=done_views, name=found.get("name"),
+                                 reliability=found.get("reliability"))
+                return BehaviorStatus(progress=1.0, done=True, detail=f"{found.get('name')} at view {done_views}")
+        if watched < p["settle"] + p["dwell"]:
+            return BehaviorStatus(progress=done_views / self._total(), detail=f"view {done_views}")
+        self.view += 1
+        if self.view < int(p["views"]):
+            goal = {"frame": "robot", "x": 0.0, "y": 0.0, "yaw": math.remainder(float(p["turn"]), 2 * math.pi)}
+        else:
+            self.view, self.round = 0, self.round + 1
+            if self.round >= int(p["rounds"]):
+                return BehaviorStatus(progress=1.0, failed=True, detail=f"not found in {self._total()} views")
+            goal = {"frame": "robot", "x": -abs(float(p["shift"])), "y": 0.0, "yaw": 0.0}
+        self.move_id = self._send("move", goal)
+        self.looking_since = None
+        return BehaviorStatus(progress=(done_views + 1) / self._total(), detail="moving to the next view")
