@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections.abc import Callable, Collection
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +37,12 @@ from .lockstep_clock import _REAL, DELIVERY, GUIDS, IDLE, LINKS, LOG, RUNNING, S
 FRAME_WAIT = 2.0  # wall seconds the master waits for a frame sent but not arrived before forgiving it
 LINK_WAIT = 20.0  # wall seconds a new transport holds the clock for the run's other transports at most
 LINK_POLL = 0.005  # wall seconds between its looks at what it heard
+
+
+def _wall(name: str) -> Callable[..., Any]:
+    """The wall clock's ``time.NAME`` (the patched one is the run's clock once installed)."""
+    function: Callable[..., Any] = _REAL.get(name) or getattr(time, name)
+    return function
 
 
 class Settling:
@@ -53,10 +61,14 @@ class Settling:
         rows = self.clock.counts[live]
         known = np.isin(rows[:, :, 0], pids) & (rows[:, :, 0] != 0)
         in_flight = int(rows[:, :, 1][known].sum()) - int(rows[:, :, 2][known].sum())
-        if in_flight <= 0 or (self.forgiven and self._forgiven(pids, rows, known) >= in_flight):
+        if in_flight <= 0:  # (never below: a frame is counted sent before it can arrive)
+            self.since = None
+            self.forgiven.clear()  # a forgiven frame that arrived after all is not forgiven twice
+            return True
+        if self.forgiven and self._forgiven(pids, rows, known) >= in_flight:
             self.since = None
             return True
-        wall = _REAL["monotonic"]()
+        wall = _wall("monotonic")()
         if self.since is None:
             self.since = wall
         elif wall - self.since > FRAME_WAIT:
@@ -229,15 +241,15 @@ class Ledger:
 
     def _await_links(self, guid: int, heard: Callable[[], Collection[int]]) -> None:
         self.clock.local.unclocked = True
-        end = _REAL["monotonic"]() + LINK_WAIT
+        end = _wall("monotonic")() + LINK_WAIT
         try:
             while not self.peers(guid) <= set(heard()):
-                if _REAL["monotonic"]() > end:
+                if _wall("monotonic")() > end:
                     missing = sorted(self.peers(guid) - set(heard()))
                     LOG.warning("lock-step clock: transport %d did not hear the run's transports %s in %g s: "
                                 "the clock goes on", guid, missing, LINK_WAIT)  # fmt: skip
                     return
-                _REAL["sleep"](LINK_POLL)
+                _wall("sleep")(LINK_POLL)
         finally:
             with self.lock:
                 self.holding -= 1
