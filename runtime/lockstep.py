@@ -347,6 +347,9 @@ def _patch(clock: SharedClock) -> None:
             raise
 
     subprocess.Popen.__init__ = popen  # type: ignore[method-assign]
+    # the C SimpleQueue's timed get waits in C, unseen by the clock (a partition supervisor's poll): the
+    # standard library's Python one waits on a Condition like Queue (D220)
+    queue.SimpleQueue = queue._PySimpleQueue  # type: ignore[misc, attr-defined]
     # the standard library's own aliases of the monotonic clock, taken at its import
     for module, name in ((threading, "_time"), (queue, "time")):  # (subprocess's waits keep the wall clock)
         if getattr(module, name, None) is _REAL["monotonic"]:

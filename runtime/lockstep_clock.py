@@ -230,7 +230,7 @@ class SharedClock:
                 return
             last = not self.newborns
         if lapsed:
-            LOG.debug(
+            LOG.info(
                 "lock-step clock: thread %s did not wait in %g s (a socket call?): the clock goes on",
                 thread.name,
                 NEWBORN_WAIT,
