@@ -17,8 +17,7 @@ from pathlib import Path
 from ckmconf.model import Network
 
 from .network import NetworkEvent, Transport, open_transport, read_group_key
-from .network.api import GroupKeyError
-from .network.multipeer import NetworkError
+from .network.api import GroupKeyError, NetworkError
 
 
 class JoinError(Exception):

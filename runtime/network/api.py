@@ -181,6 +181,10 @@ class Transport(abc.ABC):
         self.stop()
 
 
+class NetworkError(RuntimeError):
+    """A transport cannot start (``setup()``): no free port, no multicast, no Zenoh session…"""
+
+
 class GroupKeyError(ValueError):
     """The group key file named by the configuration cannot be used."""
 

@@ -1,19 +1,18 @@
 """CKMultiPeer (§3.1.4): discovery, the full mesh of TCP links, listeners and clock sync.
 
 Lifecycle: ``MultiPeer(network, name=…)`` does no I/O; ``setup()`` binds the listening port
-(trying the next ones when busy) and the discovery socket; ``start()`` starts the threads;
-``stop()`` says goodbye and closes everything.
+(trying the next ones when busy, :func:`runtime.network.ports.bind_listener`) and the discovery
+socket; ``start()`` starts the threads; ``stop()`` says goodbye and closes everything. The clock
+sync exchange is :class:`runtime.network.clock.SyncTimeExchange`, the reconnect back-off
+:class:`runtime.network.reconnect.ReconnectSchedule`.
 """
 
 from __future__ import annotations
 
-import errno
 import logging
-import math
 import socket
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -21,12 +20,15 @@ from typing import Any
 from ckmconf.model import Network
 
 from .. import lockstep
-from .clock import ClockSync
+from .api import NetworkError
+from .clock import ClockSync, SyncTimeExchange
 from .discovery import Discovery
 from .frames import Frame, FrameType, encode
 from .guid import guid_address, guid_text, make_guid
 from .link import Link
+from .ports import bind_listener
 from .proxy import Router
+from .reconnect import ReconnectSchedule
 
 LOG = logging.getLogger("ckm.multipeer")
 
@@ -44,10 +46,6 @@ class PeerEvent:
     reason: str = ""
 
 
-class NetworkError(RuntimeError):
-    """A peer cannot start: no free port, no multicast, unreadable key…"""
-
-
 class MultiPeer:
     """One member of a CKMultiPeer group (§3.1.4), configured by ``<Network>``."""
 
@@ -61,6 +59,7 @@ class MultiPeer:
         self.rejected_links = 0
         self.evicted_links = 0  # pending handshakes closed to make room for a new connection
         self.clock = ClockSync()
+        self.sync = SyncTimeExchange(self.clock, self.send)
         self._listeners: dict[FrameType, list[Listener]] = {}
         self._event_callbacks: list[Callable[[PeerEvent], None]] = []
         self._lock = threading.RLock()
@@ -68,12 +67,8 @@ class MultiPeer:
         self._server: socket.socket | None = None
         self._discovery: Discovery | None = None
         self._threads: list[threading.Thread] = []
-        self._retry_at: dict[int, float] = {}
-        self._backoff: dict[int, float] = {}
-        self._connecting: set[int] = set()
+        self._reconnects = ReconnectSchedule(network.reconnect_min, network.reconnect_max)
         self._all_links: list[Link] = []
-        self._sync_burst: dict[int, int] = {}  # guid → exchanges left in the opening burst
-        self._asked: dict[int, deque[float]] = {}  # SYNCTIME requests awaiting their reply
         self.router = Router(
             local=lambda: self.guid,
             linked=self.linked,
@@ -82,7 +77,7 @@ class MultiPeer:
             on_route=self._route_changed,
             proxy_after=max(1.0, 2 * network.reconnect_max),
         )
-        self.add_listener(FrameType.SYNCTIME, self._on_synctime)
+        self.add_listener(FrameType.SYNCTIME, self.sync.handle)
         self.add_listener(FrameType.PROXYWRAPPER, self.router.handle)
 
     # ------------------------------------------------------------------ lifecycle
@@ -90,7 +85,7 @@ class MultiPeer:
     def setup(self) -> None:
         """Bind the listening port (next ones if busy), derive the GUID and open discovery."""
         net = self.network
-        self._server = self._bind(net.interface, net.base_port, net.port_tries)
+        self._server = bind_listener(net.interface, net.base_port, net.port_tries)
         self.guid = make_guid(net.interface, self._server.getsockname()[1])
         self._discovery = Discovery(
             guid=self.guid,
@@ -145,27 +140,6 @@ class MultiPeer:
 
     def __exit__(self, *_: object) -> None:
         self.stop()
-
-    @staticmethod
-    def _bind(interface: str, base: int, tries: int) -> socket.socket:
-        last: OSError | None = None
-        for port in range(base, min(base + tries, 65536)):
-            server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-            # A port held only by TIME_WAIT connections of an earlier run is free: a restarted
-            # peer keeps its GUID. (Two live listeners still cannot share it.)
-            server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                server.bind((interface, port))
-            except OSError as exc:
-                server.close()
-                if exc.errno not in (errno.EADDRINUSE, errno.EACCES):
-                    raise NetworkError(f"cannot listen on {interface}:{port}: {exc}") from exc
-                last = exc
-                continue
-            server.listen(64)
-            server.settimeout(0.1)
-            return server
-        raise NetworkError(f"no free port on {interface} in {base}…{base + tries - 1}: {last}")
 
     # ------------------------------------------------------------------ API
 
@@ -226,12 +200,11 @@ class MultiPeer:
         self._emit(PeerEvent("found", guid, name))
         if guid > self.guid:  # the mandala: the lower GUID connects to the higher one
             with self._lock:
-                self._retry_at[guid] = 0.0
-                self._backoff[guid] = self.network.reconnect_min
+                self._reconnects.found(guid)
 
     def _lost(self, guid: int, name: str, reason: str) -> None:
         with self._lock:
-            self._retry_at.pop(guid, None)
+            self._reconnects.forget(guid)
             link = self.links.get(guid)
         self._emit(PeerEvent("lost", guid, name, reason))
         if link is not None:
@@ -293,7 +266,7 @@ class MultiPeer:
             return
         finally:
             with self._lock:
-                self._connecting.discard(guid)
+                self._reconnects.attempted(guid)
         self._start_link(sock, outgoing=True, expected=guid)
 
     def _opened(self, link: Link) -> bool:
@@ -310,14 +283,13 @@ class MultiPeer:
                 self.rejected_links += 1
                 return False  # the current link is alive: a second HELLO for it is an intruder or a ghost
             self.links[guid] = link
-            self._retry_at.pop(guid, None)
-            self._backoff[guid] = self.network.reconnect_min
+            self._reconnects.linked(guid)
         if old is not None and old is not link:
             old.close("replaced by a new connection")
         self.names.setdefault(guid, link.remote_name)
         self.router.link_up(guid)
         self._emit(PeerEvent("linked", guid, link.remote_name))
-        self._sync_burst[guid] = 8  # the least-delay exchange of a burst gives a good first offset
+        self.sync.linked(guid)
         threading.Thread(target=self.router.announce, args=(self.names,), daemon=True).start()
         return True
 
@@ -356,9 +328,7 @@ class MultiPeer:
         if self._stop.is_set() or guid < self.guid or self._discovery is None or guid not in self._discovery.known:
             return
         with self._lock:
-            delay = self._backoff.get(guid, self.network.reconnect_min)
-            self._retry_at[guid] = time.monotonic() + delay
-            self._backoff[guid] = min(delay * 2, self.network.reconnect_max)
+            self._reconnects.retry(guid, time.monotonic())
 
     def _frame(self, link: Link, frame: Frame) -> None:
         assert link.remote_guid is not None
@@ -390,43 +360,12 @@ class MultiPeer:
         while not self._stop.wait(0.005):
             now = time.monotonic()
             with self._lock:
-                due = [g for g, at in self._retry_at.items() if at <= now and g not in self.links]
-                due = [g for g in due if g not in self._connecting]
-                for guid in due:
-                    self._retry_at.pop(guid, None)
-                    self._connecting.add(guid)
+                due = self._reconnects.due(now, self.links)
             for guid in due:
                 threading.Thread(target=self._connect, args=(guid,), name="ckm-connect", daemon=True).start()
             self.router.tick()
-            for guid, left in list(self._sync_burst.items()):
-                self._sync_clock(guid)
-                if left <= 1:
-                    self._sync_burst.pop(guid, None)
-                else:
-                    self._sync_burst[guid] = left - 1
+            self.sync.tick()
             if now >= next_sync:
                 next_sync = now + self.network.clock_sync
                 for guid in self.linked():
-                    self._sync_clock(guid)
-
-    def _sync_clock(self, guid: int) -> None:
-        sent = time.time()
-        with self._lock:
-            asked = self._asked.setdefault(guid, deque(maxlen=16))
-            asked.append(sent)
-        self.send(guid, FrameType.SYNCTIME, ["req", sent])
-
-    def _on_synctime(self, guid: int, frame: Frame) -> None:
-        received = time.time()
-        body = frame.body
-        if len(body) == 2 and body[0] == "req" and isinstance(body[1], float):
-            self.send(guid, FrameType.SYNCTIME, ["rep", body[1], received, time.time()])
-        elif len(body) == 4 and body[0] == "rep" and all(type(v) is float and math.isfinite(v) for v in body[1:]):
-            t1, t2, t3 = body[1], body[2], body[3]
-            with self._lock:
-                asked = self._asked.get(guid)
-                if asked is None or t1 not in asked:
-                    return  # an answer to nothing we asked: ignored
-                asked.remove(t1)
-            if t3 >= t2 and received >= t1:
-                self.clock.add(guid, t1, t2, t3, received)
+                    self.sync.ask(guid)

@@ -40,9 +40,8 @@ import zenoh
 
 from ckmconf.model import Network
 
-from .api import EVENTS_TOPIC, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
+from .api import EVENTS_TOPIC, NetworkError, NetworkEvent, Publisher, Sample, Subscription, TopicQoS, Transport
 from .frames import FrameError, unpack_body
-from .multipeer import NetworkError
 from .qos import DeadlineWatchdog, SubscriptionTable, deliver
 from .wire import WireError, incoming, outgoing, undecodable
 

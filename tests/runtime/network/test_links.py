@@ -20,14 +20,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ckmconf.model import Network
-from runtime.network.api import Sample, TopicQoS
+from runtime.network.api import NetworkError, Sample, TopicQoS
 from runtime.network.discovery import HEARTBEAT
 from runtime.network.discovery import HELLO as DISCOVERY_HELLO
 from runtime.network.discovery import MAGIC as DISCOVERY_MAGIC
 from runtime.network.frames import MAGIC, PROLOGUE, VERSION, Decoder, FrameType, encode
 from runtime.network.guid import make_guid
 from runtime.network.link import HANDSHAKE_TIMEOUT
-from runtime.network.multipeer import NetworkError
 from runtime.network.pubsub import MultiPeerTransport
 from tests.runtime.network.conftest import private_network
 from tests.runtime.network.peers import (

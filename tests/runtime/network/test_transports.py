@@ -21,7 +21,7 @@ import pytest
 
 from ckmconf.model import Connect, Listen, Network, Zenoh
 from runtime.network import EVENTS_TOPIC, NetworkEvent, Sample, TopicQoS, Transport, open_transport
-from runtime.network.multipeer import NetworkError
+from runtime.network.api import NetworkError
 
 from .conftest import TRANSPORTS, private_network
 
