@@ -1,5 +1,18 @@
 """Typed, immutable records of every element kind of the CKM model (schemas/*.xsd, §3.1.5.1; one class per element)."""
 
+from .adaptation import (
+    Adaptation,
+    Clamp,
+    Deadband,
+    Function,
+    Linear,
+    Lookup,
+    LowPass,
+    Median,
+    MovingAverage,
+    Point,
+    Polynomial,
+)
 from .environment import (
     Affordance,
     Area,
@@ -24,38 +37,21 @@ from .kernel import (
     BUILTIN_TYPES,
     Action,
     Actuator,
-    Adaptation,
     Alarm,
-    Clamp,
-    Connect,
     Controller,
     ControllerInput,
     ControllerOutput,
-    Deadband,
     Fallback,
     Field,
-    Function,
     HWChannel,
-    Linear,
-    Listen,
-    Lookup,
-    LowPass,
-    Median,
     MessageType,
     Monitor,
-    MovingAverage,
-    Network,
     Node,
     OptionalPart,
-    Param,
     Partition,
-    Point,
-    Polynomial,
     Sensor,
     Switch,
     Topic,
-    Zenoh,
-    params_dict,
 )
 from .missions import (
     Agent,
@@ -77,6 +73,8 @@ from .missions import (
     Uses,
     Validation,
 )
+from .network import Connect, Listen, Network, Zenoh
+from .params import Param, params_dict
 from .resources import (
     TCM,
     CombinedMeasure,

@@ -1,4 +1,9 @@
-"""Records of the Control Kernel layer (schemas/kernel.xsd): network, topics, nodes."""
+"""Records of the Control Kernel layer (schemas/kernel.xsd): message types, topics, nodes (§3.1).
+
+A node's parts: partitions, hardware channels, sensors, controllers, actuators and its monitor.
+The transport settings are in :mod:`ckmconf.model.network`, the adaptation chain in
+:mod:`ckmconf.model.adaptation`, ``<Param>`` in :mod:`ckmconf.model.params`.
+"""
 
 from __future__ import annotations
 
@@ -7,77 +12,12 @@ from typing import ClassVar, Literal
 
 from ..binding import Record, attr, child, children
 from ..expressions import SWITCH, Vocabulary
+from .adaptation import Adaptation
 from .conditions import ConditionRecord
+from .params import Param
 
 Scope = Literal["internal", "external"]
 Reliability = Literal["reliable", "best-effort"]
-
-
-@dataclass(frozen=True, kw_only=True)
-class Param(Record):
-    """<Param>: a named setting handed to a plugin, backend, controller or behavior."""
-
-    TAG = "Param"
-    name: str = attr()
-    value: str = attr()
-
-
-def params_dict(params: tuple[Param, ...]) -> dict[str, str]:
-    """``<Param name value>`` elements as {name: value text} (conversion is the kind's manifest's job)."""
-    return {p.name: p.value for p in params}
-
-
-@dataclass(frozen=True, kw_only=True)
-class Endpoint(Record):
-    """<Connect> or <Listen>: a Zenoh endpoint."""
-
-    endpoint: str = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Connect(Endpoint):
-    """<Connect>: a Zenoh endpoint to connect to."""
-
-    TAG = "Connect"
-
-
-@dataclass(frozen=True, kw_only=True)
-class Listen(Endpoint):
-    """<Listen>: a Zenoh endpoint to listen on."""
-
-    TAG = "Listen"
-
-
-@dataclass(frozen=True, kw_only=True)
-class Zenoh(Record):
-    """<Zenoh>: Zenoh session settings."""
-
-    TAG = "Zenoh"
-    mode: Literal["peer", "client", "router"] = attr(default="peer")
-    multicast_scouting: bool = attr(default=True)
-    connect: tuple[Connect, ...] = children()
-    listen: tuple[Listen, ...] = children()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Network(Record):
-    """<Network>: CKMultiPeer or Zenoh transport settings (§3.1.4)."""
-
-    TAG = "Network"
-    transport: Literal["multipeer", "zenoh"] = attr(default="multipeer")
-    group: str = attr(default="239.255.42.99")
-    discovery_port: int = attr(default=7400)
-    interface: str = attr(default="127.0.0.1")
-    base_port: int = attr(default=7410)
-    port_tries: int = attr(default=32)
-    heartbeat: float = attr(default=0.5)
-    lost_after: int = attr(default=3)
-    max_frame: int = attr(default=16777216)
-    reconnect_min: float = attr(default=0.05)
-    reconnect_max: float = attr(default=2.0)
-    clock_sync: float = attr(default=1.0)
-    group_key_file: str | None = attr(default=None)
-    zenoh: Zenoh | None = child(default=None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -150,104 +90,6 @@ class HWChannel(Record):
     max: float | None = attr(default=None)
     size: int = attr(default=1)
     params: tuple[Param, ...] = children()
-
-
-# ----------------------------------------------------------------- adaptation chain
-
-
-@dataclass(frozen=True, kw_only=True)
-class Linear(Record):
-    """<Linear>: y = gain * x + offset."""
-
-    TAG = "Linear"
-    gain: float = attr(default=1.0)
-    offset: float = attr(default=0.0)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Polynomial(Record):
-    """<Polynomial>: y = c0 + c1 x + c2 x² + …"""
-
-    TAG = "Polynomial"
-    coefficients: tuple[float, ...] = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class LowPass(Record):
-    """<LowPass>: first-order low-pass filter, cut-off in Hz."""
-
-    TAG = "LowPass"
-    cutoff: float = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class MovingAverage(Record):
-    """<MovingAverage>: mean of the last window samples."""
-
-    TAG = "MovingAverage"
-    window: int = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Median(Record):
-    """<Median>: median of the last window samples."""
-
-    TAG = "Median"
-    window: int = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Clamp(Record):
-    """<Clamp>: limit to [min, max]."""
-
-    TAG = "Clamp"
-    min: float = attr()
-    max: float = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Deadband(Record):
-    """<Deadband>: values within ±width of zero become zero."""
-
-    TAG = "Deadband"
-    width: float = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Point(Record):
-    """<Point>: one x, y pair of a lookup table."""
-
-    TAG = "Point"
-    x: float = attr()
-    y: float = attr()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Lookup(Record):
-    """<Lookup>: piece-wise linear table."""
-
-    TAG = "Lookup"
-    points: tuple[Point, ...] = children()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Function(Record):
-    """<Function>: a registered processing-function plugin."""
-
-    TAG = "Function"
-    plugin: str = attr()
-    params: tuple[Param, ...] = children()
-
-
-AdaptationStep = Linear | Polynomial | LowPass | MovingAverage | Median | Clamp | Deadband | Lookup | Function
-
-
-@dataclass(frozen=True, kw_only=True)
-class Adaptation(Record):
-    """<Adaptation>: functions applied in order (raw→engineering for sensors, inverse for actuators)."""
-
-    TAG = "Adaptation"
-    steps: tuple[AdaptationStep, ...] = children()
 
 
 # ----------------------------------------------------------------- components

@@ -8,7 +8,7 @@ from typing import ClassVar, Literal
 from ..binding import Record, attr, children, text
 from ..expressions import TRANSITION, Vocabulary
 from .conditions import ConditionRecord
-from .kernel import Param
+from .params import Param
 
 
 @dataclass(frozen=True, kw_only=True)

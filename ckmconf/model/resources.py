@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from ..binding import Record, attr, child, children
-from .kernel import Param
+from .params import Param
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -6,8 +6,9 @@ from dataclasses import dataclass
 
 from ..binding import Record, attr, child, children
 from .environment import Environment
-from .kernel import MessageType, Network, Node, Topic
+from .kernel import MessageType, Node, Topic
 from .missions import Behavior, CompositionMatrix, Mission, Plan, Validation
+from .network import Network
 from .resources import Service, SmartResource
 
 

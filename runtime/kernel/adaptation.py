@@ -36,7 +36,7 @@ from collections.abc import Sequence
 
 from ckmconf.binding import Record
 from ckmconf.errors import ConfigError
-from ckmconf.model import kernel as model
+from ckmconf.model import adaptation as model
 from runtime.kernel.interfaces import AdaptationFunction
 from runtime.registry import Registry
 

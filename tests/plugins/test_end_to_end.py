@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+from ckmconf import model
 from ckmconf.model import HWChannel, Param
-from ckmconf.model import kernel as model
 from plugins.hardware.loopback import ManualClock, PlantScope, plant_scope
 from runtime.kernel.adaptation import build_chain
 from runtime.kernel.interfaces import Backend, Controller

@@ -10,7 +10,7 @@ import pytest
 from ckmconf.errors import ConfigError, Loc
 from ckmconf.loader import load
 from ckmconf.model import Param
-from ckmconf.model import kernel as model
+from ckmconf.model import adaptation as model
 from plugins.functions.processing import OutlierReject, WrapAngle
 from runtime.kernel import adaptation as ad
 from runtime.kernel.interfaces import AdaptationFunction
