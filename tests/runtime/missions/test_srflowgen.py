@@ -120,7 +120,12 @@ MOBILE = 0.95  # AMCL's, Scan's and Displacement's policies
 ARM = 0.99  # MoveIt's "active" policy
 PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("ObjectPlace", "DOCK"): MOBILE,
          ("ObjectPlace", "PLACE"): ARM,
-         ("ObjectPlace", "BACK"): MOBILE}  # fmt: skip
+         ("ObjectPlace", "BACK"): MOBILE,
+         # the dropped-object recovery (issue K.3d): the drive home again, and ObjectRecovery
+         ("ObjectPlace", "RENAV"): MOBILE, ("ObjectPlace", "REWAIT"): MOBILE, ("ObjectPlace", "REDOCK"): MOBILE,
+         ("ObjectRecovery", "HALT"): MOBILE, ("ObjectRecovery", "STOW"): ARM, ("ObjectRecovery", "LOOK"): QUALITY,
+         ("ObjectRecovery", "APPR"): MOBILE, ("ObjectRecovery", "PICK"): ARM, ("ObjectRecovery", "RELEASE"): ARM,
+         ("ObjectRecovery", "BACK"): MOBILE, ("ObjectRecovery", "RESTOW"): ARM}  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -131,13 +136,13 @@ PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("Obje
           ("ObjectInteraction", "APPR"): MOBILE, ("ObjectInteraction", "PICK"): ARM,
           ("ObjectInteraction", "RELEASE"): ARM, ("ObjectInteraction", "BACK"): MOBILE,
           ("ObjectInteraction", "STOW"): ARM, **PLACE},
-         {("ObjectInteraction", "SPOT")}),
+         {("ObjectInteraction", "SPOT"), ("ObjectRecovery", "LOOK")}),
         ("Agent1FetchCoop",
          {("NavigationCoop", "NAV"): QUALITY, ("NavigationCoop", "WAIT"): MOBILE,
           ("ObjectInteractionCoop", "SPOT"): QUALITY, ("ObjectInteractionCoop", "APPR"): MOBILE,
           ("ObjectInteractionCoop", "PICK"): ARM, ("ObjectInteractionCoop", "RELEASE"): ARM,
           ("ObjectInteractionCoop", "BACK"): MOBILE, ("ObjectInteractionCoop", "STOW"): ARM, **PLACE},
-         {("NavigationCoop", "NAV"), ("ObjectInteractionCoop", "SPOT")}),
+         {("NavigationCoop", "NAV"), ("ObjectInteractionCoop", "SPOT"), ("ObjectRecovery", "LOOK")}),
         ("Agent2Spot", {("Agent2Spot", "OBJ_TRACK"): QUALITY, ("Agent2Spot", "OBJ_FIX"): QUALITY},
          {("Agent2Spot", "OBJ_TRACK"), ("Agent2Spot", "OBJ_FIX")}),
     ],
