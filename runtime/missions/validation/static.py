@@ -15,9 +15,9 @@ that can fire is an edge. The rules (docs/decisions.md):
   they lead to is unreachable. A transition with no other way to fire is an error
   (``never-true``, ``unreachable-outcome``); a dead part of a condition, a warning. A condition
   that does not parse is reported and otherwise assumed able to fire (no cascade).
-- **Graph.** A state not reachable from the initial one is an error, a final one a warning; a
-  reachable state with no transition that can fire is a ``dead-end``; one from which no final is
-  reachable (a loop with no exit, or a path into a dead end) is ``non-terminating``.
+- **Graph** (:mod:`.termination`). A state not reachable from the initial one is an error, a final
+  one a warning; a reachable state with no transition that can fire is a ``dead-end``; one from
+  which no final is reachable (a loop with no exit, or a path into a dead end) is ``non-terminating``.
 - **Endings.** A behavior ends done or failed (never both), a nested mission in one of its
   reachable finals (and then ``done()`` holds for the parent, as the runtime does). For each way
   a state can end, some transition should be *sure* to fire afterwards — made only of literals
@@ -36,9 +36,10 @@ import networkx as nx  # type: ignore[import-untyped]
 
 from ckmconf.model import Final, Mission, State, System, Transition
 
-from .conditions import Atom, Conjunction, Interval, Literal, contradictory, describe, dnf, implies
+from .conditions import Atom, Conjunction, contradictory, describe, dnf, implies
 from .findings import Finding, arrow, finding, ordered
 from .requirements import check_behavior, check_fields
+from .termination import check_graph
 
 
 def check_mission(system: System, mission_name: str, *, strict: bool = False) -> list[Finding]:
@@ -112,7 +113,7 @@ class _Checker:
                 opaque.add(state.name)
             if (live is None or live) and transition.to in graph:
                 graph.add_edge(transition.from_, transition.to)
-        self._check_graph(mission, graph, states, finals, by_source, opaque)
+        check_graph(self, mission, graph, states, finals, by_source, opaque)
         self.active.discard(mission.name)
 
     # ------------------------------------------------------------------ states and references
@@ -298,104 +299,3 @@ class _Checker:
             )
             self.add(finding("redundant-condition", "warning", message, transition, **where))
         return kept
-
-    # ------------------------------------------------------------------ graph
-
-    def _check_graph(
-        self,
-        mission: Mission,
-        graph: nx.DiGraph,
-        states: dict[str, State],
-        finals: dict[str, Final],
-        by_source: dict[str, list[tuple[Transition, list[Conjunction]]]],
-        opaque: set[str],
-    ) -> None:
-        name = mission.name
-        if not finals:
-            message = f"mission {name!r} has no final state, so it can never end; add a <Final>"
-            self.add(finding("no-final", "error", message, mission, mission=name))
-        if mission.initial not in states:
-            known = ", ".join(states) or "none"
-            message = f"mission {name!r} starts in {mission.initial!r}, which is not one of its states ({known})"
-            self.add(finding("missing-initial", "error", message, mission, mission=name))
-            self.reached[name] = set()
-            return
-        reachable = nx.descendants(graph, mission.initial) | {mission.initial}
-        self.reached[name] = {f for f in finals if f in reachable}
-        finishing = set(finals).union(*(nx.ancestors(graph, f) for f in finals))
-        for state in mission.states:
-            if state.name not in reachable:
-                message = (
-                    f"state {state.name!r} can never be reached from the initial state {mission.initial!r}:"
-                    " add a transition into it, or remove it"
-                )
-                self.add(finding("unreachable-state", "error", message, state, mission=name, state=state.name))
-            elif graph.out_degree(state.name) == 0:
-                why = "has no transition" if state.name not in by_source else "has no transition that can ever fire"
-                message = f"state {state.name!r} {why}: once entered, mission {name!r} never ends; add a way out"
-                self.add(finding("dead-end", "error", message, state, mission=name, state=state.name))
-            elif state.name not in finishing and finals:
-                self.add(self._non_terminating(mission, graph, state, finishing))
-            elif state.name not in opaque:
-                self._check_endings(mission, state, [c for _, conds in by_source[state.name] for c in conds])
-        for final in mission.finals:
-            if final.name not in reachable:
-                message = f"final state {final.name!r} of mission {name!r} can never be reached; add a transition to it"
-                self.add(finding("unreachable-final", "warning", message, final, mission=name))
-
-    def _non_terminating(self, mission: Mission, graph: nx.DiGraph, state: State, finishing: set[str]) -> Finding:
-        loop = next((c for c in nx.strongly_connected_components(graph) if state.name in c), {state.name})
-        if len(loop) > 1 or graph.has_edge(state.name, state.name):
-            members = ", ".join(sorted(loop))
-            detail = f"it loops through {members} and no transition leaves that loop towards a final state"
-        else:
-            ahead = sorted(nx.descendants(graph, state.name) - finishing)
-            detail = f"every way on leads to states that cannot finish ({', '.join(ahead)})"
-        message = f"no final state of mission {mission.name!r} can be reached from state {state.name!r}: {detail}"
-        return finding("non-terminating", "error", message, state, mission=mission.name, state=state.name)
-
-    def _check_endings(self, mission: Mission, state: State, conjunctions: list[Conjunction]) -> None:
-        timeout = state.timeout is not None
-        if state.behavior is not None:
-            behavior = self.system.behavior(state.behavior)
-            timeout = timeout or (behavior is not None and behavior.timeout is not None)
-            endings: list[tuple[str, str | None]] = [("done", None), ("failed", None)]
-        elif state.mission is not None and self.system.mission(state.mission) is not None:
-            endings = [("outcome", x) for x in sorted(self.outcomes(state.mission))]
-        else:
-            return
-        for ending, outcome in endings:
-            if any(all(_sure(lit, ending, outcome, timeout) for lit in c) for c in conjunctions):
-                continue
-            if ending == "outcome":
-                kind, what, fix = (
-                    "unhandled-outcome",
-                    f"mission {state.mission!r} ends in {outcome!r}",
-                    f"outcome('{outcome}')",
-                )
-            elif ending == "done":
-                kind, what, fix = "unhandled-done", f"behavior {state.behavior!r} is done", "done()"
-            else:
-                kind, what, fix = "unhandled-failure", f"behavior {state.behavior!r} fails", "failed()"
-            message = (
-                f"when {what}, no transition out of state {state.name!r} is sure to fire, so mission"
-                f" {mission.name!r} may hang there; add a transition on {fix} or timeout()"
-            )
-            self.add(finding(kind, "warning", message, state, mission=mission.name, state=state.name))
-
-
-def _sure(literal: Literal, ending: str, outcome: str | None, timeout: bool) -> bool:
-    """Whether a literal is bound to hold, sooner or later, once a state has ended this way."""
-    atom = literal.atom
-    if atom == ("call", "timeout"):
-        return literal.positive and timeout
-    if atom[0] == "cmp" and atom[1] == "elapsed" and isinstance(atom[2], Interval):
-        return literal.positive and atom[2].high == float("inf")  # time only grows
-    if atom[0] != "call":
-        return False
-    holds = {
-        "done": ending in ("done", "outcome"),
-        "failed": ending == "failed",
-        "outcome": ending == "outcome" and atom[2:] == (outcome,),
-    }.get(str(atom[1]))
-    return holds is not None and holds == literal.positive
