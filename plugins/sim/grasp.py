@@ -80,9 +80,15 @@ class Gripper:
 
     def release(self) -> None:
         """Remove the grasp constraint."""
-        if self._constraint is not None:
+        if self._constraint is not None and self.attached():
             p.removeConstraint(self._constraint, physicsClientId=self.robot.world.client)
         self._constraint, self.held = None, None
+
+    def attached(self) -> bool:
+        """Whether the grasp constraint still exists (a world disturbance may have removed it)."""
+        cid = self.robot.world.client
+        count = p.getNumConstraints(physicsClientId=cid)
+        return self._constraint in {p.getConstraintUniqueId(i, physicsClientId=cid) for i in range(count)}
 
 
 class ChannelGrasp:
@@ -129,7 +135,13 @@ class ChannelGrasp:
 
     def _after_advance(self, _world: object) -> None:
         if self.gripper.held is not None:
-            if self._opening() > self.opening_held + self.RELEASE_GAP:
+            if not self.gripper.attached():  # taken out of the fingers (a disturbance, issue K.3d)
+                LOG.info("t=%.2f: body %s was taken out of the fingers", self.gripper.robot.world.time,
+                         self.gripper.held)
+                self.gripper.release()
+                for finger in self.gripper.fingers:  # the stalled servos close on nothing, to their target
+                    self.gripper.robot.command(finger, "position", self.target)
+            elif self._opening() > self.opening_held + self.RELEASE_GAP:
                 LOG.info("t=%.2f: let go of body %s (fingers opened to %.4f m)", self.gripper.robot.world.time,
                          self.gripper.held, self._opening())
                 self.gripper.release()
