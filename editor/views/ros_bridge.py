@@ -22,7 +22,7 @@ from PySide6.QtWidgets import QLabel, QTableWidget, QTableWidgetItem, QVBoxLayou
 
 from ckmconf.model import Connect, Network, Zenoh
 from runtime.network.rmw_graph import GraphTopic, RosGraph
-from runtime.network.zenoh_transport import zenoh_config
+from runtime.network.zenoh_session import zenoh_config
 
 HEADERS = ["name", "type", "kind", "publishers / servers", "subscribers / clients", "nodes"]
 ROUTER = "tcp/localhost:7447"

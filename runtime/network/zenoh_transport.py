@@ -1,19 +1,14 @@
 """Publish/subscribe over Zenoh (``<Network transport="zenoh">``), with CKMultiPeer's semantics.
 
-Naming — every CKM name lives under the ``ckm`` prefix:
-
-    topic "/a/b" (or "a/b")      → key expression "ckm/a/b" (leading slash removed)
-    ckm/@peer/<guid>             liveliness token of every transport: discovery, found / lost
-    ckm/@sub/<guid>/a/b          liveliness token per subscribed topic: wait_for_subscribers
+Naming (topics as key expressions under ``ckm/``, liveliness tokens of peers and subscribers)
+and the session configuration are in :mod:`.zenoh_session`.
 
 Because the leading slash is dropped, "/a/b" and "a/b" are one topic here (two in CKMultiPeer).
-``@`` chunks are verbatim in Zenoh, so the token spaces never match a data key expression.
 
 Wire format: the payload is msgpack ``[seq, stamp, value]`` as in CKMultiPeer's TOPICDATA
 (``[seq, stamp, cdr, "cdr", type]`` for a type the transport's codec serialises: :mod:`.wire`)
 (the topic is the key expression); the attachment is the publisher's GUID (8 bytes,
-big-endian). The GUID is the low 48 bits of the session's random 128-bit ZenohId, so it has
-the width of a CKMultiPeer GUID. There is no SYNCTIME: ``Sample.offset`` is 0, clocks are
+big-endian). There is no SYNCTIME: ``Sample.offset`` is 0, clocks are
 assumed synchronised (NTP) for lifespan checks.
 
 A CKM group key is refused: Zenoh has no shared-key authentication, and an HMAC over the
@@ -25,9 +20,7 @@ from __future__ import annotations
 
 import atexit
 import functools
-import json
 import logging
-import re
 import struct
 import threading
 import time
@@ -44,16 +37,20 @@ from .api import EVENTS_TOPIC, NetworkError, NetworkEvent, Publisher, Sample, Su
 from .frames import FrameError, unpack_body
 from .qos import DeadlineWatchdog, SubscriptionTable, deliver
 from .wire import WireError, incoming, outgoing, undecodable
+from .zenoh_session import (
+    PEER_TOKENS,
+    PREFIX,
+    SOURCE,
+    SUB_TOKENS,
+    guid_after,
+    guid_of,
+    key_expr,
+    topic_path,
+    zenoh_config,
+    zenoh_reason,
+)
 
 LOG = logging.getLogger("ckm.zenoh")
-
-PREFIX = "ckm"
-PEER_TOKENS = f"{PREFIX}/@peer"
-SUB_TOKENS = f"{PREFIX}/@sub"
-GUID_MASK = (1 << 48) - 1
-SOURCE = struct.Struct("!Q")
-MIN_LEASE_MS = 1000  # a shorter lease lets a busy machine close healthy links (and lose data)
-FORBIDDEN = set("*$?#")
 
 # Sessions still open at interpreter exit make the process hang (DESIGN.md, "Pitfalls"):
 # whatever the caller forgot to stop is stopped at exit (see _stop_forgotten).
@@ -63,65 +60,6 @@ KEYED_CONFIG_ERROR = (
     "the Zenoh transport cannot use a CKM group key (group_key_file): Zenoh has no shared-key "
     "authentication; configure TLS or user-password authentication in Zenoh instead"
 )
-
-
-@functools.lru_cache(maxsize=4096)
-def topic_path(topic: str) -> str:
-    """The key expression of ``topic`` without the prefix: "/a/b" → "a/b"; rejects wildcards."""
-    path = topic.removeprefix("/")
-    chunks = path.split("/")
-    if not path or any(not c or c.startswith("@") or FORBIDDEN & set(c) for c in chunks):
-        raise ValueError(f"topic {topic!r} cannot be a Zenoh key expression (empty, wildcard or '@' part)")
-    return path
-
-
-@functools.lru_cache(maxsize=4096)
-def key_expr(topic: str) -> str:
-    """The Zenoh key expression of a CKM topic: "/a/b" → "ckm/a/b"."""
-    key = f"{PREFIX}/{topic_path(topic)}"
-    try:
-        zenoh.KeyExpr(key)
-    except zenoh.ZError as exc:
-        raise ValueError(f"topic {topic!r} cannot be a Zenoh key expression: {exc}") from None
-    return key
-
-
-def guid_of(zid: zenoh.ZenohId) -> int:
-    """A transport's GUID: the low 48 bits of its session's ZenohId (random unless configured)."""
-    return int(str(zid), 16) & GUID_MASK or 1
-
-
-def zenoh_config(network: Network) -> zenoh.Config:
-    """The session configuration for ``network``: peer mode with multicast scouting by default.
-
-    Scouting uses the network's own multicast group, port and interface (so separate CKM
-    systems, and tests, never hear each other); the link lease is heartbeat × lost_after.
-    """
-    settings = network.zenoh
-    mode = settings.mode if settings is not None else "peer"
-    scouting = settings.multicast_scouting if settings is not None else True
-    listen = [e.endpoint for e in settings.listen] if settings is not None else []
-    connect = [e.endpoint for e in settings.connect] if settings is not None else []
-    wildcard = network.interface == "0.0.0.0"  # an IPv4 address (schema), or every interface
-    if not listen and mode != "client":
-        listen = [f"tcp/{network.interface}:{7447 if mode == 'router' else 0}"]  # a router needs a known port
-    values: dict[str, Any] = {
-        "mode": mode,
-        "scouting/multicast/enabled": scouting,
-        "scouting/multicast/address": f"{network.group}:{network.discovery_port}",
-        "scouting/multicast/interface": "auto" if wildcard else network.interface,
-        "listen/endpoints": listen,
-        "connect/endpoints": connect,
-        "transport/link/tx/lease": max(MIN_LEASE_MS, round(network.heartbeat * network.lost_after * 1000)),
-        "transport/link/tx/keep_alive": max(1, network.lost_after),
-    }
-    config = zenoh.Config()
-    for key, value in values.items():
-        try:
-            config.insert_json5(key, json.dumps(value))
-        except zenoh.ZError as exc:  # e.g. a malformed <Connect>/<Listen> endpoint
-            raise NetworkError(f"invalid Zenoh setting {key} = {value!r}: {_reason(exc)}") from None
-    return config
 
 
 class ZenohTransport(SubscriptionTable, Transport):
@@ -158,7 +96,7 @@ class ZenohTransport(SubscriptionTable, Transport):
         try:
             session = zenoh.open(zenoh_config(self.network))
         except zenoh.ZError as exc:  # no router to connect to, port taken…
-            raise NetworkError(f"cannot open the Zenoh session: {_reason(exc)}") from None
+            raise NetworkError(f"cannot open the Zenoh session: {zenoh_reason(exc)}") from None
         _OPEN.add(self)
         self.guid = guid_of(session.zid())
         self._attachment = SOURCE.pack(self.guid)
@@ -341,7 +279,7 @@ class ZenohTransport(SubscriptionTable, Transport):
     # ------------------------------------------------------------------ discovery and events
 
     def _on_peer_token(self, zsample: zenoh.Sample) -> None:
-        guid = _guid_after(str(zsample.key_expr), PEER_TOKENS)
+        guid = guid_after(str(zsample.key_expr), PEER_TOKENS)
         if guid is None or guid == self.guid or self._stopped:
             return
         alive = zsample.kind == zenoh.SampleKind.PUT
@@ -362,7 +300,7 @@ class ZenohTransport(SubscriptionTable, Transport):
 
     def _on_sub_token(self, zsample: zenoh.Sample) -> None:
         key = str(zsample.key_expr)
-        guid = _guid_after(key, SUB_TOKENS)
+        guid = guid_after(key, SUB_TOKENS)
         if guid is None or guid == self.guid or self._stopped:
             return
         topic_key = f"{PREFIX}/{key.removeprefix(SUB_TOKENS + '/').partition('/')[2]}"
@@ -375,25 +313,12 @@ class ZenohTransport(SubscriptionTable, Transport):
             self._changed.notify_all()
 
 
-def _guid_after(key: str, prefix: str) -> int | None:
-    """The GUID chunk right after ``prefix`` in a token's key expression, if well formed."""
-    chunk = key.removeprefix(prefix + "/").partition("/")[0] if key.startswith(prefix + "/") else ""
-    return int(chunk) if chunk.isdigit() else None
-
-
 def _release(undeclare: Callable[[], Any]) -> None:
     """Undeclare a Zenoh entity or close a session; a failure only matters to the logs."""
     try:
         undeclare()
     except zenoh.ZError as exc:
         LOG.debug("releasing a Zenoh entity failed: %s", exc)
-
-
-def _reason(exc: Exception) -> str:
-    """Zenoh's message, without the Rust wrapper and source location around it."""
-    text = str(exc)
-    wrapped = re.search(r'msg: "(.*?)"', text)
-    return (wrapped.group(1) if wrapped else text).split(" at /", 1)[0].strip()
 
 
 def _stop_forgotten() -> None:

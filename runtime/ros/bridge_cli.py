@@ -27,7 +27,7 @@ from ckmconf import ConfigError, load
 from ckmconf.model import Connect, Network, Zenoh
 
 from ..host_network import JoinError, joined
-from ..network.zenoh_transport import zenoh_config
+from ..network.zenoh_session import zenoh_config
 from .bridge import RmwZenohBridge
 from .wire import install
 

@@ -21,7 +21,7 @@ from editor.views.live import MonitorPanel, open_network
 from editor.views.ros_bridge import HEADERS, RosBridgePanel
 from runtime.network import Transport
 from runtime.network.rmw_graph import GraphEndpoint, parse_endpoint
-from runtime.network.zenoh_transport import zenoh_config
+from runtime.network.zenoh_session import zenoh_config
 from runtime.ros.bridge import RmwZenohBridge
 from runtime.ros.rmw_zenoh import Endpoint, EntityKind, RmwQos, liveliness_token, parse_liveliness_token
 from tests.conftest import REPO

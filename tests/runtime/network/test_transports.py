@@ -325,7 +325,7 @@ def test_a_process_that_forgets_stop_still_exits(network: Network) -> None:
 
 
 def test_zenoh_key_expressions() -> None:
-    from runtime.network.zenoh_transport import key_expr
+    from runtime.network.zenoh_session import key_expr
 
     assert key_expr("/a/b") == "ckm/a/b"
     assert key_expr("a/b") == "ckm/a/b"
@@ -341,7 +341,7 @@ def test_zenoh_refuses_a_group_key() -> None:
 
 
 def test_zenoh_config_follows_the_network() -> None:
-    from runtime.network.zenoh_transport import zenoh_config
+    from runtime.network.zenoh_session import zenoh_config
 
     network = private_network("zenoh")
     config = zenoh_config(network)
