@@ -9,9 +9,13 @@ from typing import Any
 
 import pytest
 
+import ckmconf
 from plugins.humanoid.track import PanTiltTrack
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context
+from runtime.ros.config import ConfigRosTypes
+from runtime.ros.convert import to_message
+from tests.conftest import CONFIGS
 
 from .head_loop import plugin
 
@@ -150,3 +154,19 @@ def test_bad_parameters_are_refused(track: PanTiltTrack) -> None:
         plugin(PanTiltTrack, "pan-tilt-track", environment="missing.xml").setup()
     with pytest.raises(RuntimeError, match="not set up"):
         plugin(PanTiltTrack, "pan-tilt-track").process({}, Context(0, 0.0, ""))
+
+
+@pytest.mark.parametrize("in_view", [True, False])
+def test_the_track_state_fits_the_use_cases_type_and_the_recording(track: PanTiltTrack, in_view: bool) -> None:
+    """/pantilt/track is recorded as ckm_msgs/msg/TrackState: every field the plugin writes is declared."""
+    system = ckmconf.load(CONFIGS / "usecase" / "lab.xml")
+    red = {"name": "cylinder_red_stripes", "x": 0.3, "y": 0.6, "reliability": 0.7}
+    state = run(track, seen(red) if in_view else seen(), now=1.0)["track"]
+    declared = next(m for m in system.message_types if m.name == "TrackState")
+    assert set(state) == {f.name for f in declared.fields}
+    types = ConfigRosTypes(system)
+    ros_type = types.ros_type_of("TrackState")
+    message = to_message(types.ros, ros_type, types.payload(ros_type, state))
+    back = types.ros.decode(ros_type, types.ros.encode(ros_type, message))
+    assert back.in_view is in_view and back.label == ("cylinder_red_stripes" if in_view else "")
+    assert back.error == pytest.approx(state["error"] or 0.0)
