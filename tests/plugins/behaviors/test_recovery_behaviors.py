@@ -1,0 +1,123 @@
+"""The dropped-object recovery's behavior kinds (plugins/behaviors/recovery.py, issue K point 3d)
+against services simulated in memory: HALT cancels the navigation and stops the base; LOOK_FLOOR
+counts a sighting only once the robot has stood still at a view, turns between views, backs off
+between rounds and gives up after its last view."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import pytest
+
+import ckmconf
+from ckmconf.model import Param, System
+from runtime.kernel.interfaces import ParamError
+
+from .test_usecase_behaviors import REPO, Rig
+
+CYLINDER = {"name": "cylinder_red_stripes", "shape": "cylinder", "texture": "red_stripes", "frame": "map",
+            "x": 2.0, "y": 1.0, "z": 0.06, "reliability": 0.9, "sources": ["rgb", "depth"],
+            "observer": [{"x": 1.5, "y": 1.2, "yaw": 0.3}]}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def lab() -> System:
+    return ckmconf.load(REPO / "configs" / "usecase" / "lab.xml")
+
+
+def _done(rig: Rig, move: dict[str, Any]) -> None:
+    rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "done", "remaining": 0.0, "total": 1.0}
+
+
+class _Changed:
+    """The lab's behaviors, one of them with some Params changed (what Rig reads of a System)."""
+
+    def __init__(self, lab: System, name: str, params: dict[str, str]) -> None:
+        record = lab.behavior(name)
+        assert record is not None
+        given = {p.name: p for p in record.params}
+        given.update({k: Param(name=k, value=v) for k, v in params.items()})
+        self.record = dataclasses.replace(record, params=tuple(given.values()))
+
+    def behavior(self, name: str) -> Any:
+        return self.record
+
+
+def _look(lab: System, **params: str) -> Rig:
+    return Rig(_Changed(lab, "LOOK_FLOOR", params), "LOOK_FLOOR")  # type: ignore[arg-type]
+
+
+def test_halt_cancels_the_navigation_goal_and_stops_the_base_with_a_zero_move(lab: System) -> None:
+    rig = Rig(lab, "HALT")
+    assert rig.services["nav"].configured[0][0] == {"goal": ""}  # the empty goal cancels it (amcl.py)
+    move = rig.last("move")
+    assert {k: move[k] for k in ("frame", "x", "y", "yaw")} == {"frame": "robot", "x": 0.0, "y": 0.0, "yaw": 0.0}
+    assert not rig.behavior.step().done
+    rig.services["base"].outputs["move_status"] = {"id": move["id"] - 1, "state": "done"}  # an older move's
+    assert not rig.behavior.step().done
+    _done(rig, move)
+    assert rig.behavior.step().done
+    rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "failed"}
+    assert rig.behavior.step().failed
+
+
+def test_look_counts_a_sighting_only_after_settling_at_a_view(lab: System) -> None:
+    rig = _look(lab)
+    rig.inputs["objects"] = {"objects": [CYLINDER], "reliability": 0.9}  # seen while the robot was still turning
+    rig.time = 2.0
+    assert not rig.behavior.step().done  # under LOOK_FLOOR's settle time (2.5 s): the pose it was placed with is stale
+    rig.time = 2.6
+    status = rig.behavior.step()
+    assert status.done
+    target = rig.last("target")
+    assert (target["label"], target["frame"], target["x"], target["y"]) == ("cylinder_red_stripes", "map", 2.0, 1.0)
+    assert target["observer"] == CYLINDER["observer"]  # APPR places it with the pose it was seen from (D172)
+
+
+def test_look_ignores_unreliable_sightings_and_other_objects(lab: System) -> None:
+    rig = _look(lab)
+    weak = {**CYLINDER, "reliability": 0.6}  # under LOOK_FLOOR's minReliability 0.8
+    other = {**CYLINDER, "name": "cylinder_blue_dots", "texture": "blue_dots"}
+    single = {**CYLINDER, "sources": ["rgb"]}  # under minSources 2
+    rig.inputs["objects"] = {"objects": [weak, other, single]}
+    rig.time = 3.0
+    assert not rig.behavior.step().done
+
+
+def test_look_turns_between_views_backs_off_between_rounds_and_fails_after_the_last(lab: System) -> None:
+    rig = _look(lab, views="3", rounds="2", turn="0.7", settle="1", dwell="1", shift="0.3")
+    moves: list[dict[str, Any]] = []
+    progress = []
+    for _ in range(200):
+        rig.time += 0.25
+        status = rig.behavior.step()
+        progress.append(status.progress)
+        if status.failed:
+            break
+        move = next((v for n, v in reversed(rig.written) if n == "move"), None)
+        if move is not None and (not moves or moves[-1]["id"] != move["id"]):
+            moves.append(move)
+            assert not rig.behavior.step().done  # waiting for the base
+            _done(rig, move)
+    else:
+        pytest.fail("LOOK_FLOOR never gave up")
+    assert [(m["x"], m["yaw"]) for m in moves] == [(0.0, 0.7), (0.0, 0.7), (-0.3, 0.0), (0.0, 0.7), (0.0, 0.7)]
+    assert "not found in 6 views" in status.detail
+    assert progress == sorted(progress)  # the share of views examined only grows
+
+
+def test_look_fails_when_the_base_cannot_turn(lab: System) -> None:
+    rig = _look(lab, settle="0", dwell="0")
+    rig.time = 0.1
+    rig.behavior.step()
+    move = rig.last("move")
+    assert move["yaw"] == pytest.approx(0.6) and math.isclose(move["x"], 0.0)
+    rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "failed"}
+    assert rig.behavior.step().failed
+
+
+def test_look_refuses_views_that_do_not_turn(lab: System) -> None:
+    with pytest.raises(ParamError, match="'turn' must not be 0"):
+        _look(lab, turn="0")
