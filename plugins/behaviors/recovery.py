@@ -9,9 +9,10 @@ home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/useca
   being followed for good (plugins/navigation/displacement.py); done when the base reports it done.
 - ``search-object`` (LOOK): looks for the target with the fused recognition, standing still at
   each view — the fusion places what it sees with the robot's pose (D172), so a sighting made
-  while turning would be misplaced — and turning ``turn`` radians between views; after a full
-  round of ``views`` it backs ``shift`` metres (an object too near the base is under the camera's
-  view, about 0.45 m, issue K.3d feasibility) and looks round again, up to ``rounds`` rounds.
+  while turning would be misplaced — and turning ``turn`` radians between views. It first backs
+  ``back`` metres along the way the robot just drove (free; the robot stopped past where the object
+  fell, and an object nearer than about 0.45 m is under the camera's view, D225); after a full
+  round of ``views`` it backs ``shift`` metres and looks round again, up to ``rounds`` rounds.
   Writes the target's position (an ``ObjectPosition``) like SPOT, so APPR can approach it.
 
 Messages are those of :mod:`plugins.behaviors.usecase` (``/base/move_goal``, ``/base/move_status``,
@@ -62,6 +63,8 @@ class SearchObject(_Goals):
         P("settle", 2.5, "Wait at a view before a sighting counts: the camera, recognition and fusion "
           "latencies after the robot stopped.", unit="s", min=0.0),
         P("dwell", 2.0, "How long a view is watched after it settled.", unit="s", min=0.0),
+        P("back", 0.0, "Backward move before the first view: back along the way just driven (free), towards "
+          "where the object fell.", unit="m", min=0.0),
         P("shift", 0.4, "Backward move between two rounds.", unit="m", min=0.0),
         P("rounds", 2, "Rounds of views at most.", min=1),
     )
@@ -78,6 +81,10 @@ class SearchObject(_Goals):
         self.view, self.round = 0, 0
         self.looking_since: float | None = self.context.now()
         self.move_id: int | None = None
+        if self.params["back"] > 0.0:
+            back = -float(self.params["back"])
+            self.move_id = self._send("move", {"frame": "robot", "x": back, "y": 0.0, "yaw": 0.0})
+            self.looking_since = None
 
     def _total(self) -> int:
         return int(self.params["views"]) * int(self.params["rounds"])

@@ -1,7 +1,7 @@
 """The dropped-object recovery's behavior kinds (plugins/behaviors/recovery.py, issue K point 3d)
 against services simulated in memory: HALT cancels the navigation and stops the base; LOOK_FLOOR
-counts a sighting only once the robot has stood still at a view, turns between views, backs off
-between rounds and gives up after its last view."""
+counts a sighting only once the robot has stood still at a view, backs off first, turns between
+views, backs off between rounds and gives up after its last view."""
 
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ def test_halt_cancels_the_navigation_goal_and_stops_the_base_with_a_zero_move(la
 
 
 def test_look_counts_a_sighting_only_after_settling_at_a_view(lab: System) -> None:
-    rig = _look(lab)
+    rig = _look(lab, back="0")
     rig.inputs["objects"] = {"objects": [CYLINDER], "reliability": 0.9}  # seen while the robot was still turning
     rig.time = 2.0
     assert not rig.behavior.step().done  # under LOOK_FLOOR's settle time (2.5 s): the pose it was placed with is stale
@@ -77,7 +77,7 @@ def test_look_counts_a_sighting_only_after_settling_at_a_view(lab: System) -> No
 
 
 def test_look_ignores_unreliable_sightings_and_other_objects(lab: System) -> None:
-    rig = _look(lab)
+    rig = _look(lab, back="0")
     weak = {**CYLINDER, "reliability": 0.6}  # under LOOK_FLOOR's minReliability 0.8
     other = {**CYLINDER, "name": "cylinder_blue_dots", "texture": "blue_dots"}
     single = {**CYLINDER, "sources": ["rgb"]}  # under minSources 2
@@ -86,9 +86,14 @@ def test_look_ignores_unreliable_sightings_and_other_objects(lab: System) -> Non
     assert not rig.behavior.step().done
 
 
-def test_look_turns_between_views_backs_off_between_rounds_and_fails_after_the_last(lab: System) -> None:
-    rig = _look(lab, views="3", rounds="2", turn="0.7", settle="1", dwell="1", shift="0.3")
-    moves: list[dict[str, Any]] = []
+def test_look_backs_off_turns_between_views_and_between_rounds_and_fails_after_the_last(lab: System) -> None:
+    rig = _look(lab, views="3", rounds="2", turn="0.7", settle="1", dwell="1", shift="0.3", back="0.2")
+    moves: list[dict[str, Any]] = [rig.last("move")]  # backing off at once, before the first view
+    rig.inputs["objects"] = {"objects": [CYLINDER], "reliability": 0.9}  # seen on the way back: not counted
+    rig.time = 2.5
+    assert not rig.behavior.step().done
+    rig.inputs["objects"] = None
+    _done(rig, moves[0])
     progress = []
     for _ in range(200):
         rig.time += 0.25
@@ -103,13 +108,14 @@ def test_look_turns_between_views_backs_off_between_rounds_and_fails_after_the_l
             _done(rig, move)
     else:
         pytest.fail("LOOK_FLOOR never gave up")
-    assert [(m["x"], m["yaw"]) for m in moves] == [(0.0, 0.7), (0.0, 0.7), (-0.3, 0.0), (0.0, 0.7), (0.0, 0.7)]
+    assert [(m["x"], m["yaw"]) for m in moves] == [(-0.2, 0.0), (0.0, 0.7), (0.0, 0.7), (-0.3, 0.0), (0.0, 0.7),
+                                                   (0.0, 0.7)]
     assert "not found in 6 views" in status.detail
     assert progress == sorted(progress)  # the share of views examined only grows
 
 
 def test_look_fails_when_the_base_cannot_turn(lab: System) -> None:
-    rig = _look(lab, settle="0", dwell="0")
+    rig = _look(lab, settle="0", dwell="0", back="0")
     rig.time = 0.1
     rig.behavior.step()
     move = rig.last("move")
