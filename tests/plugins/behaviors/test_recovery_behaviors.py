@@ -119,7 +119,7 @@ def test_look_fails_when_the_base_cannot_turn(lab: System) -> None:
     rig.time = 0.1
     rig.behavior.step()
     move = rig.last("move")
-    assert move["yaw"] == pytest.approx(0.6) and math.isclose(move["x"], 0.0)
+    assert move["yaw"] == pytest.approx(0.7) and math.isclose(move["x"], 0.0)
     rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "failed"}
     assert rig.behavior.step().failed
 
