@@ -24,7 +24,7 @@ def _bounds(lower: float | None, upper: float | None) -> str:
 
 
 def _within(policy: Policy, require: Require) -> bool:
-    """The TCM's compatibility test (runtime.resources.tcm._within): the policy lies inside the QR."""
+    """The TCM's compatibility test (runtime.resources.tcm_rating.within): the policy lies inside the QR."""
     low = require.lower is None or (policy.lower is not None and policy.lower >= require.lower)
     high = require.upper is None or (policy.upper is not None and policy.upper <= require.upper)
     return low and high
