@@ -110,6 +110,10 @@ class Master:
             if due > now and not pending and self.settling.settled(live):
                 if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
                     _REAL["sleep"](IDLE_PACE)
+                # again, after the frames settled: an arrived frame sets its DELIVERY slot before its count
+                due = int(blocks[live, 1:].min()) if live.any() else IDLE
+                if due <= now or words[PENDING]:
+                    continue
                 words[0] = min(due, now + clock.step_ns)
                 self.moves += 1
                 moved = _REAL["monotonic"]()

@@ -376,6 +376,8 @@ class SharedClock:
             for _, _, entry in self.heap:
                 self._fire(entry)
             self.heap.clear()
+        if self.before_fire is not None:  # the frames kept for the next instant: now (D220)
+            self.before_fire(IDLE)
 
     def after_fork(self) -> None:
         """In a forked child: nothing of the parent's block is ours."""

@@ -114,6 +114,7 @@ class Ledger:
         self.clock = clock
         self.lock = threading.Lock()
         self.rows: dict[int, int] = {}  # peer pid → its entry in this process's row of counts
+        self.known: dict[int, int] = {}  # guid → pid, as last found registered
         self.deferred: list[tuple[int, Callable[[], None]]] = []  # (instant it arrived at, hand it over)
         self.holding = 0  # transports waiting for the run's other transports
         clock.before_fire = self.flush
@@ -142,13 +143,18 @@ class Ledger:
                 row = self.clock.guids[block]
                 row[row == guid] = 0
 
-    def pid(self, guid: int) -> int | None:
-        """The pid of the live process of this run whose transport ``guid`` is, or None (not on the clock)."""
+    def pid(self, guid: int, stopped: bool = False) -> int | None:
+        """The pid of the live process of this run whose transport ``guid`` is, or None (not on the clock);
+        ``stopped``: also of a transport that stopped since (its last frames still arrive and count)."""
         blocks = np.flatnonzero((self.clock.guids == guid).any(axis=1))
         for block in blocks.tolist():
             pid = int(self.clock.blocks[block, 0])
             if pid:
+                self.known[guid] = pid
                 return pid
+        last = self.known.get(guid)
+        if stopped and last is not None and last in self.clock.blocks[:, 0]:
+            return last
         return None
 
     def peers(self, own: int) -> set[int]:
@@ -194,7 +200,7 @@ class Ledger:
     def arrived(self, guid: int, hand_over: Callable[[], None]) -> bool:
         """A frame from ``guid`` arrived: if it is on the clock, counted and ``hand_over`` kept for the
         next instant (True); else False (the caller hands it over now)."""
-        pid = self.pid(guid)
+        pid = self.pid(guid, stopped=True)
         if pid is None or self.clock.block is None or self.clock.orphaned is not None:
             return False
         with self.lock:
