@@ -12,7 +12,10 @@ home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/useca
   while turning would be misplaced — and turning ``turn`` radians between views. It first backs
   ``back`` metres along the way the robot just drove (free; the robot stopped past where the object
   fell, and an object nearer than about 0.45 m is under the camera's view, D225); after a full
-  round of ``views`` it backs ``shift`` metres and looks round again, up to ``rounds`` rounds.
+  round of ``views`` it backs ``shift`` metres and looks round again, up to ``rounds`` rounds. A
+  texture print is recognisable from some sides only: a candidate of the target's shape that the
+  depth recognition alone saw (no texture) within ``probeRange`` is looked at again from ``probe``
+  radians round it (the robot moves on the circle through it, facing it), ``probes`` times at most.
   Writes the target's position (an ``ObjectPosition``) like SPOT, so APPR can approach it.
 
 Messages are those of :mod:`plugins.behaviors.usecase` (``/base/move_goal``, ``/base/move_status``,
@@ -30,7 +33,16 @@ from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
-from .usecase import _TARGET, _Goals, _share_done, _state, find_target, object_position
+from .usecase import (
+    _TARGET,
+    _Goals,
+    _share_done,
+    _state,
+    find_target,
+    in_robot_frame,
+    object_position,
+    observer_pose,
+)
 
 
 class StopNavigation(_Goals):
@@ -67,6 +79,10 @@ class SearchObject(_Goals):
           "where the object fell.", unit="m", min=0.0),
         P("shift", 0.4, "Backward move between two rounds.", unit="m", min=0.0),
         P("rounds", 2, "Rounds of views at most.", min=1),
+        P("probe", 0.0, "A candidate of the target's shape that no recogniser told the texture of (a print is "
+          "recognisable from some sides only) is looked at again from this far round it (0: never).", unit="rad"),
+        P("probes", 3, "Such second looks at most, in the whole search.", min=0),
+        P("probeRange", 1.2, "Farthest candidate looked at again.", unit="m", min=0.0),
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
@@ -78,7 +94,8 @@ class SearchObject(_Goals):
     def start(self) -> None:
         """Look from where the robot stands first."""
         super().start()
-        self.view, self.round = 0, 0
+        self.view, self.round, self.probed = 0, 0, 0
+        self.candidate: tuple[float, float] | None = None
         self.looking_since: float | None = self.context.now()
         self.move_id: int | None = None
         if self.params["back"] > 0.0:
@@ -113,8 +130,16 @@ class SearchObject(_Goals):
                 self.context.log("target found", view=done_views, name=found.get("name"),
                                  reliability=found.get("reliability"))
                 return BehaviorStatus(progress=1.0, done=True, detail=f"{found.get('name')} at view {done_views}")
+            self.candidate = self._candidate(result) or self.candidate
         if watched < p["settle"] + p["dwell"]:
             return BehaviorStatus(progress=done_views / self._total(), detail=f"view {done_views}")
+        if self.candidate is not None and p["probe"] != 0.0 and self.probed < p["probes"]:
+            self.probed += 1
+            self.context.log("looking again round a candidate", at=list(self.candidate), probe=self.probed)
+            self.move_id = self._send("move", self._round(self.candidate, float(p["probe"])))
+            self.candidate, self.looking_since = None, None
+            return BehaviorStatus(progress=done_views / self._total(), detail="looking at a candidate again")
+        self.candidate = None
         self.view += 1
         if self.view < int(p["views"]):
             goal = {"frame": "robot", "x": 0.0, "y": 0.0, "yaw": math.remainder(float(p["turn"]), 2 * math.pi)}
@@ -126,3 +151,26 @@ class SearchObject(_Goals):
         self.move_id = self._send("move", goal)
         self.looking_since = None
         return BehaviorStatus(progress=(done_views + 1) / self._total(), detail="moving to the next view")
+
+    def _candidate(self, result: Any) -> tuple[float, float] | None:
+        """The nearest object of the target's shape within ``probeRange`` whose texture no recogniser
+        gave (seen by its shape alone), in the robot frame; None if there is none."""
+        objects = result.get("objects") if isinstance(result, Mapping) else None
+        best: tuple[float, float] | None = None
+        for item in objects if isinstance(objects, list) else []:
+            if not isinstance(item, Mapping) or item.get("texture") or item.get("name") != self.params["target"]:
+                continue
+            relative = in_robot_frame(item, observer_pose(item))
+            if relative is not None and math.hypot(*relative) <= self.params["probeRange"] and (
+                    best is None or math.hypot(*relative) < math.hypot(*best)):
+                best = relative
+        return best
+
+    @staticmethod
+    def _round(candidate: tuple[float, float], angle: float) -> dict[str, Any]:
+        """The move (robot frame) to the point ``angle`` rad round ``candidate`` at the same distance,
+        facing it: the straight way there keeps at least cos(angle / 2) of that distance from it."""
+        cx, cy = candidate
+        # the candidate seen from the new point: the current view turned by `angle` about it
+        vx, vy = cx * math.cos(angle) - cy * math.sin(angle), cx * math.sin(angle) + cy * math.cos(angle)
+        return {"frame": "robot", "x": cx - vx, "y": cy - vy, "yaw": math.atan2(vy, vx)}

@@ -127,3 +127,31 @@ def test_look_fails_when_the_base_cannot_turn(lab: System) -> None:
 def test_look_refuses_views_that_do_not_turn(lab: System) -> None:
     with pytest.raises(ParamError, match="'turn' must not be 0"):
         _look(lab, turn="0")
+
+
+def test_look_looks_again_from_round_a_candidate_seen_by_its_shape_alone(lab: System) -> None:
+    """A cylinder the depth recognition alone saw (no texture: its print faces away) 0.6 m ahead-left
+    is looked at again from 0.5 rad round it, at the same distance and facing it; three times at most."""
+    rig = _look(lab, back="0", settle="1", dwell="0", probe="0.5", probes="3")
+    observer = {"x": 1.0, "y": 2.0, "yaw": 0.5}
+    ahead, left = 0.5, 0.2  # the candidate in the robot's frame
+    shape_only = {"name": "cylinder", "shape": "cylinder", "frame": "map", "reliability": 0.95, "sources": ["depth"],
+                  "x": 1.0 + ahead * math.cos(0.5) - left * math.sin(0.5),
+                  "y": 2.0 + ahead * math.sin(0.5) + left * math.cos(0.5), "observer": [observer]}  # fmt: skip
+    blue = {**CYLINDER, "name": "cylinder_blue_dots", "texture": "blue_dots", "x": 1.3, "y": 2.1}  # told apart
+    rig.inputs["objects"] = {"objects": [blue, shape_only]}
+    moves = []
+    for _ in range(4):
+        rig.time += 1.1
+        assert not rig.behavior.step().done
+        moves.append(rig.last("move"))
+        _done(rig, moves[-1])
+        rig.time += 0.1
+        rig.behavior.step()  # arrived: the next view starts
+    probes, turn = moves[:3], moves[3]
+    for move in probes:
+        x, y, yaw = move["x"], move["y"], move["yaw"]
+        assert math.dist((x, y), (ahead, left)) == pytest.approx(math.hypot(ahead, left))  # same distance
+        assert math.atan2(left - y, ahead - x) == pytest.approx(yaw)  # facing it
+        assert math.atan2(-left, -ahead) - math.atan2(y - left, x - ahead) == pytest.approx(-0.5)  # 0.5 rad round
+    assert (turn["x"], turn["y"], turn["yaw"]) == (0.0, 0.0, pytest.approx(0.7))  # then the search goes on
