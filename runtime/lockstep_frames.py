@@ -59,44 +59,49 @@ class Settling:
         """True when no frame is in flight between the processes of ``live`` blocks (or only forgiven ones)."""
         pids = self.clock.blocks[live, 0]
         rows = self.clock.counts[live]
-        known = np.isin(rows[:, :, 0], pids) & (rows[:, :, 0] != 0)
-        in_flight = int(rows[:, :, 1][known].sum()) - int(rows[:, :, 2][known].sum())
+        # a pair counts while its receiver has a transport: one that stopped takes no more frames (a run's end)
+        receiving = np.count_nonzero(self.clock.guids[live], axis=1) > 0
+        known = (rows[:, :, 0] != 0) & np.isin(rows[:, :, 0], pids[receiving])  # sent, to a receiving process
+        known_in = (rows[:, :, 0] != 0) & np.isin(rows[:, :, 0], pids) & receiving[:, None]  # arrived at one
+        in_flight = int(rows[:, :, 1][known].sum()) - int(rows[:, :, 2][known_in].sum())
         if in_flight <= 0:  # (never below: a frame is counted sent before it can arrive)
             self.since = None
             self.forgiven.clear()  # a forgiven frame that arrived after all is not forgiven twice
             return True
-        if self.forgiven and self._forgiven(pids, rows, known) >= in_flight:
+        if self.forgiven and self._forgiven(pids, rows, (known, known_in)) >= in_flight:
             self.since = None
             return True
         wall = _wall("monotonic")()
         if self.since is None:
             self.since = wall
         elif wall - self.since > FRAME_WAIT:
-            self._forgive(pids, rows, known)
+            self._forgive(pids, rows, (known, known_in))
             self.since = None
             return True
         return False
 
     def _pairs(self, pids: npt.NDArray[np.int64], rows: npt.NDArray[np.int64],
-               known: npt.NDArray[np.bool_]) -> dict[tuple[int, int], int]:  # fmt: skip
+               masks: tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]) -> dict[tuple[int, int], int]:  # fmt: skip
         """Frames in flight per (sender pid, receiver pid)."""
         sent: dict[tuple[int, int], int] = {}
         arrived: dict[tuple[int, int], int] = {}
         for row, pid in enumerate(pids.tolist()):
-            for peer, out, into in rows[row][known[row]].tolist():
+            for peer, out, _ in rows[row][masks[0][row]].tolist():
                 sent[(pid, peer)] = out
+            for peer, _, into in rows[row][masks[1][row]].tolist():
                 arrived[(peer, pid)] = into
         return {pair: out - arrived.get(pair, 0) for pair, out in sent.items() if out > arrived.get(pair, 0)}
 
     def _forgiven(self, pids: npt.NDArray[np.int64], rows: npt.NDArray[np.int64],
-                  known: npt.NDArray[np.bool_]) -> int:  # fmt: skip
+                  masks: tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]) -> int:  # fmt: skip
         """Frames forgiven still in flight (a late one that arrived after all is no longer forgiven)."""
-        flying = self._pairs(pids, rows, known)
+        flying = self._pairs(pids, rows, masks)
         self.forgiven = {pair: min(count, flying[pair]) for pair, count in self.forgiven.items() if pair in flying}
         return sum(self.forgiven.values())
 
-    def _forgive(self, pids: npt.NDArray[np.int64], rows: npt.NDArray[np.int64], known: npt.NDArray[np.bool_]) -> None:
-        flying = self._pairs(pids, rows, known)
+    def _forgive(self, pids: npt.NDArray[np.int64], rows: npt.NDArray[np.int64],
+                 masks: tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]) -> None:  # fmt: skip
+        flying = self._pairs(pids, rows, masks)
         lost = sum(flying.values()) - sum(self.forgiven.get(pair, 0) for pair in flying)
         self.lost += lost
         self.forgiven = flying

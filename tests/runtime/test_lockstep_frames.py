@@ -43,17 +43,20 @@ def _run(config: Path, run_dir: Path) -> list[dict[str, object]]:
     done = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     partitions = json.loads((run_dir / "stats.json").read_text())["partitions"]["rover"]
-    assert partitions["lidar"]["pids"][0]["exit_code"] == 0
-    logs = (run_dir / "ckm.log").read_text() + (run_dir / "lidar" / "ckm.log").read_text()
-    assert "forgiven" not in logs and "did not hear" not in logs  # every frame arrived, every link formed
+    exits = {name: state["pids"][0]["exit_code"] for name, state in partitions.items()}
+    assert exits == {"lidar": 0, "left": 0}, done.stderr[-2000:]
+    logs = "".join((run_dir / name / "ckm.log").read_text() for name in ("", "lidar", "left"))
+    said = [line for line in logs.splitlines() if "ckm.lockstep" in line]
+    assert not [line for line in said if "forgiven" in line or "did not hear" in line], said  # all arrived, linked
     trace: list[dict[str, object]] = json.loads((run_dir / "sim-final.json").read_text())["trace"]
     return [sample for sample in trace if float(str(sample["time"])) <= 2.0]
 
 
 def test_a_partitioned_rover_gives_the_same_trajectory_in_two_runs_one_under_heavy_load(tmp_path: Path) -> None:
     """tests/data/lockstep/rover_partitioned.xml: the rover of tests/data/lockstep/rover.xml with its lidar
-    in a partition of its own, so every range reaches the wheels' relays over CKMultiPeer from another
-    process. Its true poses at 0.05, 1 and 2 simulated seconds are the same, to the micrometre, in a
+    in a partition of its own and its left relay in another, so every range fans out over CKMultiPeer to
+    two other processes and the left duty crosses back to the wheels. Its true poses at 0.05, 1 and 2
+    simulated seconds are the same, to the micrometre, in a
     quiet run and in one with four busy processes competing for the two cores (before D220 two quiet
     runs already differed by millimetres: a frame in flight when the clock moved arrived a step late)."""
     config = tmp_path / "rover.xml"
@@ -79,7 +82,8 @@ def test_the_master_waits_for_a_frame_in_flight_and_forgives_a_lost_one_once(
     """The accounting on a real clock file: process A (this test) sent three frames to process B (a
     sleeping child), which counts two arrived: the clock may not move; the third arriving settles it;
     a fourth that never comes is forgiven after FRAME_WAIT wall seconds, logged once, and a late
-    arrival of it afterwards is not counted twice (the next lost one is forgiven again, silently)."""
+    arrival of it afterwards is not counted twice (the next lost one is forgiven again, silently);
+    frames to a process whose transport stopped, or that ended, are not waited for."""
     monkeypatch.setattr(lockstep_frames, "FRAME_WAIT", 0.2)
     lockstep.create(0.01, tmp_path)
     clock = SharedClock(tmp_path, 10_000_000, os.getpid(), 0.0, 0.0)
@@ -87,6 +91,7 @@ def test_the_master_waits_for_a_frame_in_flight_and_forgives_a_lost_one_once(
     try:
         a, b = os.getpid(), child.pid
         clock.blocks[0, 0], clock.blocks[1, 0] = a, b
+        clock.guids[0, 0], clock.guids[1, 0] = 1001, 1002  # each has a transport on the clock
         clock.counts[0, 0] = [b, 3, 0]  # A: sent 3 to B
         clock.counts[1, 0] = [a, 0, 2]  # B: 2 arrived from A
         clock.counts[0, 1] = [4242, 9, 0]  # frames to a process not in the run: not waited for
@@ -113,9 +118,15 @@ def test_the_master_waits_for_a_frame_in_flight_and_forgives_a_lost_one_once(
         assert settling.lost == 2
         forgiven = [r.getMessage() for r in caplog.records if "forgiven" in r.getMessage()]
         assert len(forgiven) == 1 and "1 frame(s)" in forgiven[0] and str((a, b)) in forgiven[0]  # logged once
+        clock.counts[0, 0, 1] = 6  # one more in flight, then B's transport stops (a run's end): not waited for
+        assert not settling.settled(live)
+        clock.guids[1, 0] = 0
+        assert settling.settled(live)
+        clock.guids[1, 0] = 1002
+        assert not settling.settled(live)
         clock.blocks[1, 0] = 0  # B ended: its frames no longer count
         assert settling.settled(clock.blocks[:, 0] != 0)
-        assert np.all(clock.counts[0, 0] == [b, 5, 0])
+        assert np.all(clock.counts[0, 0] == [b, 6, 0])
     finally:
         child.kill()
         child.wait(10)
