@@ -184,7 +184,7 @@ def test_a_drop_on_the_way_home_is_detected_and_the_object_picked_off_the_floor_
     outcome, paths = run(lab, {"ObjectPlace/WAIT": lab.drop})
     recovery = ["HALT", "STOW", "LOOK", "APPR", "PICK"]
     assert paths == ["ObjectPlace/NAV", "ObjectPlace/WAIT", *(f"ObjectPlace/RECOVER/{s}" for s in recovery),
-                     "ObjectPlace/RENAV", "ObjectPlace/REWAIT", "ObjectPlace/REDOCK", "ObjectPlace/PLACE",
+                     "ObjectPlace/RENAV", "ObjectPlace/REWAIT", "ObjectPlace/DOCK", "ObjectPlace/PLACE",
                      "ObjectPlace/BACK"]  # fmt: skip
     assert outcome == "placed"
     nav = lab.service("Navigation.AMCL").configured

@@ -122,7 +122,7 @@ PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("Obje
          ("ObjectPlace", "PLACE"): ARM,
          ("ObjectPlace", "BACK"): MOBILE,
          # the dropped-object recovery (issue K.3d): the drive home again, and ObjectRecovery
-         ("ObjectPlace", "RENAV"): MOBILE, ("ObjectPlace", "REWAIT"): MOBILE, ("ObjectPlace", "REDOCK"): MOBILE,
+         ("ObjectPlace", "RENAV"): MOBILE, ("ObjectPlace", "REWAIT"): MOBILE,
          ("ObjectRecovery", "HALT"): MOBILE, ("ObjectRecovery", "STOW"): ARM, ("ObjectRecovery", "LOOK"): QUALITY,
          ("ObjectRecovery", "APPR"): MOBILE, ("ObjectRecovery", "PICK"): ARM, ("ObjectRecovery", "RELEASE"): ARM,
          ("ObjectRecovery", "BACK"): MOBILE, ("ObjectRecovery", "RESTOW"): ARM}  # fmt: skip
