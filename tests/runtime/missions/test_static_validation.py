@@ -347,7 +347,7 @@ def test_usecase_strict_only_adds_unproven_requirements(usecase: System) -> None
     and the Nao's services bound the measures the behaviors require."""
     findings = check_mission(usecase, "Agent1FetchCoop", strict=True)
     assert {f.kind for f in findings} == {"unproven-requirement"}
-    assert len(findings) == 7  # SPOT_COOP's four, LOOK_FLOOR's three (the dropped-object recovery, issue K.3d)
+    assert len(findings) == 4
     assert all("reliability in" in f.message for f in findings)
 
 
