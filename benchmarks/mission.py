@@ -50,6 +50,7 @@ from runtime.missions.report import build_report
 __all__ = ["collect", "describe", "run", "run_once"]
 DEFAULT_CONFIG = Path("configs/usecase/lab.xml")
 MARGIN_S = 120.0  # wall seconds beyond duration / scale: start-up (verification, the world server) and stop
+LOCKSTEP_WALL_PER_SIM_S = 12.0  # a lock-step clock runs as fast as the machine can: bounded, not paced (D190)
 STOP_GRACE_S = 30.0  # after SIGINT, before SIGKILL
 
 
@@ -111,7 +112,8 @@ def run_once(
 ) -> tuple[int | None, float]:
     """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s).
 
-    ``timeout`` (wall seconds) defaults to ``duration / time_scale`` plus :data:`MARGIN_S`; ``env``
+    ``timeout`` (wall seconds) defaults to ``duration / time_scale`` plus :data:`MARGIN_S` (in lock-step,
+    :data:`LOCKSTEP_WALL_PER_SIM_S` wall seconds per simulated one: the clock waits for the machine); ``env``
     is added to the run's environment (a world scenario).
     """
     command = [sys.executable, "-m", "runtime.cli", str(config), "--plan", plan, "--duration", f"{duration:g}"]
@@ -121,7 +123,8 @@ def run_once(
     if lockstep is not None:
         command += ["--lockstep", f"{lockstep:g}"]
     if timeout is None:
-        timeout = duration / (time_scale or 1.0) + MARGIN_S
+        pace = LOCKSTEP_WALL_PER_SIM_S if lockstep is not None else 1.0 / (time_scale or 1.0)
+        timeout = duration * pace + MARGIN_S
     log.parent.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     with log.open("w") as out:
