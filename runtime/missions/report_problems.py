@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import re
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -71,14 +72,22 @@ def _files(run_dir: Path, pattern: str) -> list[Path]:
     return sorted({*run_dir.glob(pattern), *run_dir.glob(f"*/{pattern}")})
 
 
-def _logs(run_dir: Path, problems: list[tuple[str, str, str, str]], warnings: list[tuple[str, str, str, str]]) -> None:
-    for path in _files(run_dir, "*.log"):
+def _lines(
+    run_dir: Path, pattern: str, problems: list[tuple[str, str, str, str]]
+) -> Iterator[tuple[str, list[str]]]:
+    """(source, lines) of each text file matching ``pattern``; a file that cannot be read is a problem."""
+    for path in _files(run_dir, pattern):
         source = str(path.relative_to(run_dir))
         try:
             lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
         except OSError as error:
             problems.append((source, "error", f"cannot read: {error.strerror or error}", ""))
             continue
+        yield source, lines
+
+
+def _logs(run_dir: Path, problems: list[tuple[str, str, str, str]], warnings: list[tuple[str, str, str, str]]) -> None:
+    for source, lines in _lines(run_dir, "*.log", problems):
         for line in lines:
             match = _LOG_LINE.match(line)
             if match is None:
@@ -89,13 +98,7 @@ def _logs(run_dir: Path, problems: list[tuple[str, str, str, str]], warnings: li
 
 
 def _events(run_dir: Path, problems: list[tuple[str, str, str, str]]) -> None:
-    for path in _files(run_dir, "events*.jsonl"):
-        source = str(path.relative_to(run_dir))
-        try:
-            lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-        except OSError as error:
-            problems.append((source, "error", f"cannot read: {error.strerror or error}", ""))
-            continue
+    for source, lines in _lines(run_dir, "events*.jsonl", problems):
         for line in lines:
             try:
                 event = json.loads(line)
