@@ -172,6 +172,16 @@ class Lab:
             "cameras": f"rgb: {focal} {focal} {cx} {cy} {self.size[0]} {self.size[1]}",
             "mounts": f"rgb: turtlebot {LINK}; depth: turtlebot camera_depth_optical_frame",
         }
+        self._set_fusion(given, loc)
+        self.nao: Robot | None = None
+        self.nao_pipeline: list[ProcessingPlugin] = []
+        if nao is not None:
+            self._add_nao(system, nao, nao_profile, given, loc)
+        self.targets = {t.name: t for t in self._targets()}
+        self.frames = 0
+
+    def _set_fusion(self, given: dict[str, Any], loc: Any) -> None:
+        """The FeatureFusion plugin named ``fusion``, its Params ``given``, set up."""
         record = Plugin(
             name="fusion",
             kind="feature-fusion",
@@ -180,12 +190,6 @@ class Lab:
         )
         self.fusion = FeatureFusion(record)
         self.fusion.setup()
-        self.nao: Robot | None = None
-        self.nao_pipeline: list[ProcessingPlugin] = []
-        if nao is not None:
-            self._add_nao(system, nao, nao_profile, given, loc)
-        self.targets = {t.name: t for t in self._targets()}
-        self.frames = 0
 
     def _add_nao(
         self, system: Any, pose: tuple[float, float, float], profile: str, given: dict[str, Any], loc: Any
@@ -213,14 +217,7 @@ class Lab:
             "mounts": f"{given['mounts']}; pantilt: nao {NAO_LINK}",
             "bases": f"pantilt: {pose[0]} {pose[1]} {pose[2]}",
         }
-        record = Plugin(
-            name="fusion",
-            kind="feature-fusion",
-            loc=loc,
-            params=tuple(Param(name=k, value=str(v)) for k, v in given.items()),
-        )
-        self.fusion = FeatureFusion(record)
-        self.fusion.setup()
+        self._set_fusion(given, loc)
 
     def look(self, pan: float, tilt: float) -> dict[str, Any]:
         """Turn the Nao's head to (pan, tilt) rad, render its top camera once, run PanTiltCamera's pipeline."""
