@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from runtime.cli import EXIT_AGENTS
-from runtime.missions.recording import RunError, read_run
+from runtime.missions.recording import Event, Run, RunError, read_run
 from runtime.network.ports import private_base
 from tests.waiting import until
 
@@ -48,25 +48,41 @@ def _ckm_run(config: Path, node: str, run_dir: Path, duration: float, plan: str 
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def test_two_agents_in_two_processes_complete_the_plan_with_a_signal(tmp_path: Path) -> None:
-    config = _config(tmp_path)
-    fetcher = _ckm_run(config, "fetcher-pc", tmp_path / "run", 30)
-    spotter = _ckm_run(config, "spotter-pc", tmp_path / "run", 30)
+def _kill(*processes: subprocess.Popen[str]) -> None:
+    """Kill (and reap) those of ``processes`` still running: a failed test leaves none behind."""
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+            process.wait(10)
+
+
+def _run_both(config: Path, run_dir: Path, duration: float, timeout: float) -> Run:
+    """Fetcher and spotter each on its own ``ckm-run`` until both exit 0; the run they recorded."""
+    fetcher = _ckm_run(config, "fetcher-pc", run_dir, duration)
+    spotter = _ckm_run(config, "spotter-pc", run_dir, duration)
     try:
         for process in (fetcher, spotter):
-            _, err = process.communicate(timeout=60)
+            _, err = process.communicate(timeout=timeout)
             assert process.returncode == 0, err
     finally:
-        for process in (fetcher, spotter):
-            if process.poll() is None:
-                process.kill()
-                process.wait(10)
-    run = read_run(tmp_path / "run")
-    ends = {e.agent: e.fields["outcome"] for e in run.events if e.kind == "end"}
-    assert ends == {"spotter": "spotted", "fetcher": "done"}
+        _kill(fetcher, spotter)
+    return read_run(run_dir)
+
+
+def _signal(run: Run) -> Event:
+    """The signal event the fetcher received (asserting the spotter sent it)."""
     sent = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "sent")
     received = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "received")
     assert sent.agent == "spotter" and received.agent == "fetcher"
+    return received
+
+
+def test_two_agents_in_two_processes_complete_the_plan_with_a_signal(tmp_path: Path) -> None:
+    config = _config(tmp_path)
+    run = _run_both(config, tmp_path / "run", 30, timeout=60)
+    ends = {e.agent: e.fields["outcome"] for e in run.events if e.kind == "end"}
+    assert ends == {"spotter": "spotted", "fetcher": "done"}
+    received = _signal(run)
     assert not [e for e in run.events if e.kind == "agent-lost"]  # the spotter finished: never "lost"
     left_nav = next(e for e in run.events if e.kind == "exit" and e.agent == "fetcher" and e.fields["state"] == "NAV")
     assert left_nav.fields["to"] == "GO" and left_nav.t >= received.t
@@ -84,9 +100,7 @@ def test_an_agent_that_disappears_is_reported_lost(tmp_path: Path) -> None:
         assert fetcher.returncode == EXIT_AGENTS, err
         assert "agent fetcher: mission ended stopped" in err
     finally:
-        if fetcher.poll() is None:
-            fetcher.kill()
-            fetcher.wait(10)
+        _kill(fetcher)
     run = read_run(tmp_path / "run")
     lost = [e for e in run.events if e.kind == "agent-lost"]
     assert [e.fields["lost"] for e in lost] == ["spotter"]
@@ -152,26 +166,15 @@ def test_a_signal_payload_crosses_two_processes_and_sets_the_receivers_goal(tmp_
 
     thread = threading.Thread(target=publish, daemon=True)
     thread.start()
-    fetcher = _ckm_run(config, "fetcher-pc", tmp_path / "run", 40)
-    spotter = _ckm_run(config, "spotter-pc", tmp_path / "run", 40)
     try:
-        for process in (fetcher, spotter):
-            _, err = process.communicate(timeout=90)
-            assert process.returncode == 0, err
+        run = _run_both(config, tmp_path / "run", 40, timeout=90)
     finally:
         stop.set()
         thread.join(5)
         feed.stop()
-        for process in (fetcher, spotter):
-            if process.poll() is None:
-                process.kill()
-                process.wait(10)
-    run = read_run(tmp_path / "run")
     ends = {e.agent: e.fields["outcome"] for e in run.events if e.kind == "end"}
     assert ends == {"spotter": "spotted", "fetcher": "underway"}
-    sent = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "sent")
-    received = next(e for e in run.events if e.kind == "signal" and e.fields["direction"] == "received")
-    assert sent.agent == "spotter" and received.agent == "fetcher"
+    received = _signal(run)
     payload = received.fields["value"]["data"]
     assert (payload["label"], payload["x"], payload["y"], payload["z"]) == ("cylinder_red_stripes", 3.0, 4.0, 0.1)
     goal = next(e for e in run.events if e.kind == "log" and e.agent == "fetcher")
@@ -216,10 +219,7 @@ def test_a_spotter_killed_after_start_sends_the_fetcher_down_its_failure_branch(
         spotter.wait(10)
         _, run = _gave_up(run_dir, fetcher)
     finally:
-        for process in (fetcher, spotter):
-            if process.poll() is None:
-                process.kill()
-                process.wait(10)
+        _kill(fetcher, spotter)
     lost = [e for e in run.events if e.kind == "agent-lost"]
     assert [(e.agent, e.fields["lost"]) for e in lost] == [("fetcher", "spotter")]
     assert not [e for e in run.events if e.kind == "end" and e.agent == "spotter"]  # killed: it wrote no end
@@ -237,10 +237,7 @@ def test_a_spotter_ending_in_its_failure_final_sends_the_fetcher_down_its_failur
         assert spotter.returncode == EXIT_AGENTS and "agent spotter: mission ended lost" in err, err
         _, run = _gave_up(run_dir, fetcher)
     finally:
-        for process in (fetcher, spotter):
-            if process.poll() is None:
-                process.kill()
-                process.wait(10)
+        _kill(fetcher, spotter)
     finished = [e.fields for e in run.events if e.kind == "agent-finished" and e.agent == "fetcher"]
     assert finished == [{"finished": "spotter", "outcome": "lost"}]
     assert not [e for e in run.events if e.kind == "agent-lost"]
