@@ -6,7 +6,7 @@ Two map instances, each with its own transport, on one private loopback network 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -14,28 +14,18 @@ import pytest
 from ckmconf.model.environment import Environment
 from plugins.environment.map_model import MapModel, small_object
 from plugins.environment.sharing import FUNCTION, MapShare, decode_object, encode_object
-from runtime.network import Transport, open_transport
+from runtime.network import Transport
 from runtime.resources.client import ServiceDirectory
-from tests.runtime.network.conftest import TRANSPORTS, private_network
+from tests.runtime.network.conftest import TRANSPORTS, private_network, transports  # noqa: F401 (fixture)
 
 TIMEOUT = 15.0
 
 
 @pytest.fixture(params=TRANSPORTS)
-def network(request: pytest.FixtureRequest) -> Iterator[Callable[[str], Transport]]:
+def network(request: pytest.FixtureRequest, transports: Callable[..., Transport]) -> Callable[[str], Transport]:  # noqa: F811
+    """Started transports on one private loopback network of each transport kind; all stopped at the end."""
     settings = private_network(request.param)
-    made: list[Transport] = []
-
-    def make(name: str) -> Transport:
-        transport = open_transport(settings, name=name)
-        made.append(transport)
-        transport.setup()
-        transport.start()
-        return transport
-
-    yield make
-    for transport in reversed(made):
-        transport.stop()
+    return lambda name: transports(settings, name)
 
 
 def _until(condition: Callable[[], bool], timeout: float = TIMEOUT) -> bool:

@@ -11,7 +11,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +31,7 @@ from runtime.resources.delegation import (
 )
 from runtime.resources.spt import Context, ProcessingPlugin, Topology
 from tests.conftest import REPO
-from tests.runtime.network.conftest import private_network
+from tests.runtime.network.conftest import private_network, transports  # noqa: F401 (fixture)
 from tests.runtime.resources.plugin_host_peer import Accumulate, registry, same
 
 RNG = np.random.default_rng(7)
@@ -84,21 +84,10 @@ class Run:
 
 
 @pytest.fixture
-def network() -> Iterator[Callable[[str], Transport]]:
+def network(transports: Callable[..., Transport]) -> Callable[[str], Transport]:  # noqa: F811 (the fixture)
     """Started transports on one private loopback network; all stopped at the end."""
     settings: Network = private_network()
-    made: list[Transport] = []
-
-    def make(name: str) -> Transport:
-        transport = open_transport(settings, name=name)
-        made.append(transport)
-        transport.setup()
-        transport.start()
-        return transport
-
-    yield make
-    for transport in reversed(made):
-        transport.stop()
+    return lambda name: transports(settings, name)
 
 
 def _linked(a: Transport, b: Transport, timeout: float = 10.0) -> None:
