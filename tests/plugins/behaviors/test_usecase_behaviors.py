@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -18,35 +17,10 @@ from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext
 from runtime.missions.payloads import check_payload
 from runtime.registry import default_registry
-from runtime.resources.api import Bounds
+from tests.memory_service import MemoryService
 
 REPO = Path(__file__).resolve().parents[3]
 STANDOFF = 0.29  # APPR's standoff in configs/usecase/behaviors.xml (D188)
-
-
-class Service:
-    """A service handle whose outputs and measures the test sets."""
-
-    def __init__(self, ref: str) -> None:
-        self.ref = ref
-        self.outputs: dict[str, Any] = {}
-        self.values: dict[str, float] = {}
-        self.configured: list[tuple[dict[str, Any], tuple[Bounds, ...]]] = []
-
-    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
-        self.configured.append((dict(parameters), requirements))
-
-    def output(self, name: str) -> Any:
-        return self.outputs.get(name)
-
-    def measures(self) -> dict[str, float]:
-        return dict(self.values)
-
-    def samples(self, measure: str) -> list[float]:
-        return [self.values[measure]] if measure in self.values else []
-
-    def running(self) -> bool:
-        return True
 
 
 class Rig:
@@ -59,7 +33,7 @@ class Rig:
         if drop:  # the behavior without these Params (their defaults)
             record = dataclasses.replace(record, params=tuple(p for p in record.params if p.name not in drop))
         self.time = 0.0
-        self.services = {u.alias: Service(u.service) for u in record.uses}
+        self.services = {u.alias: MemoryService(u.service) for u in record.uses}
         self.inputs = inputs or {}
         self.written: list[tuple[str, Any]] = []
         context = BehaviorContext(

@@ -21,36 +21,11 @@ from ckmconf.model import System
 from runtime.missions.behaviors import Behavior, BehaviorContext
 from runtime.missions.hfsm import MissionEngine
 from runtime.registry import default_registry
-from runtime.resources.api import Bounds
 from tests.conftest import REPO
+from tests.memory_service import MemoryService
 
 POSE = {"x": 4.0, "y": 3.0, "yaw": -1.5}
 SUCCESS = ["ObjectPlace/NAV", "ObjectPlace/WAIT", "ObjectPlace/DOCK", "ObjectPlace/PLACE", "ObjectPlace/BACK"]
-
-
-class Service:
-    """A service handle the scripted lab writes outputs and measures into."""
-
-    def __init__(self, ref: str) -> None:
-        self.ref = ref
-        self.outputs: dict[str, Any] = {}
-        self.values: dict[str, float] = {}
-        self.configured: list[dict[str, Any]] = []
-
-    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
-        self.configured.append(dict(parameters))
-
-    def output(self, name: str) -> Any:
-        return self.outputs.get(name)
-
-    def measures(self) -> dict[str, float]:
-        return dict(self.values)
-
-    def samples(self, measure: str) -> list[float]:
-        return [self.values[measure]] if measure in self.values else []
-
-    def running(self) -> bool:
-        return True
 
 
 class ScriptedLab:
@@ -59,7 +34,7 @@ class ScriptedLab:
     def __init__(self, system: System, *, visible_after: int | None = 3) -> None:
         self.system = system
         self.time = 0.0
-        self.services: dict[str, Service] = {}
+        self.services: dict[str, MemoryService] = {}
         self.topics: dict[str, Any] = {"/nav/pose": {"pose": POSE}}
         self.sent: list[tuple[str, Any]] = []  # (topic, message) in order
         self.pending: list[tuple[float, Callable[[], None]]] = []
@@ -73,8 +48,8 @@ class ScriptedLab:
         self.service("Navigation.AMCL").values["localization_dispersion"] = 0.1
         self.service("GlobalRecog.Fusion").values["reliability"] = 0.0
 
-    def service(self, ref: str) -> Service:
-        return self.services.setdefault(ref, Service(ref))
+    def service(self, ref: str) -> MemoryService:
+        return self.services.setdefault(ref, MemoryService(ref))
 
     def factory(self, behavior: str, path: str, now: Callable[[], float]) -> Behavior:
         """The real behavior of behaviors.xml, wired to these services and topics."""
@@ -125,7 +100,7 @@ class ScriptedLab:
             self.pending.remove(due)
             due[1]()
         nav = self.service("Navigation.AMCL")
-        goals = [c["goal"] for c in nav.configured if "goal" in c]
+        goals = [c["goal"] for c, _ in nav.configured if "goal" in c]
         if len(goals) != self.goals:  # a goal set (again: a new navigation) or cancelled
             self.goals, self.goal, self.goal_set = len(goals), goals[-1], self.time
         if self.goal:
@@ -188,7 +163,7 @@ def test_a_drop_on_the_way_home_is_detected_and_the_object_picked_off_the_floor_
                      "ObjectPlace/BACK"]  # fmt: skip
     assert outcome == "placed"
     nav = lab.service("Navigation.AMCL").configured
-    assert [c["goal"] for c in nav if "goal" in c] == ["1.0 1.3 1.5708", "", "1.0 1.3 1.5708"]  # home, cancel, home
+    assert [c["goal"] for c, _ in nav if "goal" in c] == ["1.0 1.3 1.5708", "", "1.0 1.3 1.5708"]  # home, cancel, home
     moves = lab.sent_on("/base/move_goal")
     assert moves[0] == {**moves[0], "x": 0.0, "y": 0.0, "yaw": 0.0}  # HALT: the zero move that stops the path
     assert sum(1 for m in moves if m["x"] == 0.0 and m["yaw"] != 0.0) == 3  # LOOK turned until it saw it
