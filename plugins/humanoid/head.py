@@ -16,6 +16,8 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from plugins.urdf_model import load_urdf
+
 Vector = npt.NDArray[np.float64]
 
 
@@ -23,17 +25,9 @@ class HeadModel:
     """Forward kinematics of a pan-tilt head carrying a camera (see the module docstring)."""
 
     def __init__(self, urdf: str | Path, pan: str, tilt: str, camera: str) -> None:
-        self.client = p.connect(p.DIRECT)
-        try:
-            self.body = p.loadURDF(str(urdf), useFixedBase=True, physicsClientId=self.client)
-        except p.error as exc:
-            p.disconnect(physicsClientId=self.client)
-            raise ValueError(f"cannot load the robot model {urdf}: {exc}") from None
-        joints, links = {}, {}
-        for index in range(p.getNumJoints(self.body, physicsClientId=self.client)):
-            info = p.getJointInfo(self.body, index, physicsClientId=self.client)
-            joints[info[1].decode()] = index
-            links[info[12].decode()] = index
+        model = load_urdf(urdf)
+        self.client, self.body = model.client, model.body
+        joints, links = model.joints, model.links
         missing = [n for n in (pan, tilt) if n not in joints] + ([camera] if camera not in links else [])
         if missing:
             self.close()

@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
+from plugins.urdf_model import load_urdf
+
 MODELS = Path(__file__).resolve().parents[1] / "sim" / "models"
 """The robot models shipped with the simulator (``model="turtlebot"`` names ``turtlebot.urdf`` there)."""
 GROUPS = ("arm", "gripper")
@@ -136,20 +138,10 @@ class ArmModel:
     def __init__(self, urdf: str | Path, arm: Sequence[str], gripper: str, tool: str) -> None:
         if len(arm) != 4:
             raise ValueError(f"the arm needs a pan and three pitch joints, got {list(arm)}")
-        self.client = p.connect(p.DIRECT)
-        try:
-            self.body = p.loadURDF(str(urdf), useFixedBase=True, physicsClientId=self.client)
-        except p.error as exc:
-            p.disconnect(physicsClientId=self.client)
-            raise ValueError(f"cannot load the robot model {urdf}: {exc}") from None
-        joints, links = {}, {}
-        self.movable: list[int] = []
-        for index in range(p.getNumJoints(self.body, physicsClientId=self.client)):
-            info = p.getJointInfo(self.body, index, physicsClientId=self.client)
-            joints[info[1].decode()] = index
-            links[info[12].decode()] = index
-            if info[2] != p.JOINT_FIXED:
-                self.movable.append(index)
+        model = load_urdf(urdf)
+        self.client, self.body = model.client, model.body
+        joints, links = model.joints, model.links
+        self.movable: list[int] = model.movable
         missing = [name for name in (*arm, gripper) if name not in joints] + ([tool] if tool not in links else [])
         if missing:
             self.close()
