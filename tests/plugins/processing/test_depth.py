@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from ckmconf.errors import ConfigError, Loc
-from ckmconf.loader import load
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin, SmartResource
 from plugins.processing.depth import (
@@ -42,6 +41,7 @@ from plugins.processing.shapes import (
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, Topology
 from tests.conftest import CONFIGS
+from tests.plugins.processing.camera_profiles import camera_with, every_profile
 
 CTX = Context(frame=0, stamp=0.0, resource="RGBDCamera")
 RESOURCES = CONFIGS / "usecase" / "resources.xml"
@@ -425,20 +425,13 @@ def test_committed_model_is_a_small_pcd_that_the_generator_reproduces() -> None:
 @pytest.fixture(scope="module")
 def depth_camera() -> SmartResource:
     """The use case's RGBDCamera (from lab.xml) with only the depth plugins and profiles."""
-    camera = load(CONFIGS / "usecase" / "lab.xml").resource("RGBDCamera")
-    assert camera is not None
-    profiles = tuple(p for p in camera.profiles if p.name in PROFILES)
-    used = {name for p in profiles for name in p.root.plugins()}
-    return dataclasses.replace(camera, plugins=tuple(p for p in camera.plugins if p.name in used), profiles=profiles)
+    return camera_with(CONFIGS / "usecase" / "lab.xml", PROFILES)
 
 
 @pytest.fixture(scope="module")
 def topology(depth_camera: SmartResource) -> Iterator[Topology]:
-    spt = Topology(depth_camera)
-    spt.setup()
-    spt.select_all({name: name for name in PROFILES})
-    yield spt
-    spt.stop()
+    with every_profile(depth_camera, PROFILES) as spt:
+        yield spt
 
 
 def test_depth_profiles_run_through_the_topology(topology: Topology) -> None:

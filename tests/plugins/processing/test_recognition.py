@@ -23,6 +23,7 @@ from plugins.processing.scenes import USECASE_MODEL, render_rgb_scene
 from plugins.processing.textures import parse_model, read_model
 from runtime.resources.spt import Context, ProcessingPlugin, Topology
 from tests.conftest import CONFIGS
+from tests.plugins.processing.camera_profiles import camera_with, every_profile
 
 CTX = Context(frame=0, stamp=0.0, resource="RGBDCamera")
 OBJECTS = [o.name for o in read_model(USECASE_MODEL).objects]
@@ -43,20 +44,13 @@ def matcher(model: str = str(USECASE_MODEL)) -> KeypointMatching:
 @pytest.fixture(scope="module")
 def rgb_camera() -> SmartResource:
     """The use case's RGBDCamera with only the RGB profiles (the depth plugins are tested elsewhere)."""
-    camera = load(CONFIGS / "usecase" / "resources.xml").resource("RGBDCamera")
-    assert camera is not None
-    profiles = tuple(p for p in camera.profiles if p.name in PROFILES)
-    used = {name for p in profiles for name in p.root.plugins()}
-    return dataclasses.replace(camera, plugins=tuple(p for p in camera.plugins if p.name in used), profiles=profiles)
+    return camera_with(CONFIGS / "usecase" / "resources.xml", PROFILES)
 
 
 @pytest.fixture(scope="module")
 def topology(rgb_camera: SmartResource) -> Iterator[Topology]:
-    spt = Topology(rgb_camera)
-    spt.setup()
-    spt.select_all({name: name for name in PROFILES})
-    yield spt
-    spt.stop()
+    with every_profile(rgb_camera, PROFILES) as spt:
+        yield spt
 
 
 # ---------------------------------------------------------------------- parameters
