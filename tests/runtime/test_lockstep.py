@@ -4,7 +4,6 @@ instants, faster than the wall clock, and a simulated run's result does not depe
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import subprocess
@@ -13,9 +12,8 @@ from pathlib import Path
 
 import pytest
 
-import ckmconf
 from tests.conftest import REPO
-from tests.runtime.network.conftest import private_network
+from tests.runtime.lockstep_runs import busy, private_copy, run_lockstep
 
 PROBE = r"""
 import json, os, queue, sys, tempfile, threading, time
@@ -84,17 +82,8 @@ def test_ckm_run_refuses_a_bad_step_lockstep_with_a_time_scale_and_a_single_node
         assert done.returncode == 2 and message in done.stderr, done.stderr
 
 
-def _load(count: int) -> list[subprocess.Popen[bytes]]:
-    """``count`` busy processes at the test's own priority: the machine has no core to spare."""
-    spin = "import time\nend = time.time() + 120\nwhile time.time() < end:\n    pass\n"
-    return [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(count)]
-
-
 def _run(config: Path, run_dir: Path) -> list[dict[str, object]]:
-    command = [sys.executable, "-m", "runtime.cli", str(config), "--lockstep", "0.01", "--duration", "3.5",
-               "--log-dir", str(run_dir)]  # fmt: skip
-    done = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    run_lockstep(config, run_dir, 3.5)
     final = json.loads((run_dir / "sim-final.json").read_text())
     trace: list[dict[str, object]] = final["trace"]
     # the first world step after each simulated second (the trace's samples: plugins.sim.evidence)
@@ -106,17 +95,10 @@ def test_a_simulated_run_in_lockstep_gives_the_same_trajectory_under_heavy_load(
     """tests/data/lockstep/rover.xml (a rover whose wheels' duty follows its lidar's range: a closed
     loop through the world) on a private network: its true poses at 1, 2 and 3 simulated seconds are
     the same, to the micrometre, with and without four busy processes competing for the two cores."""
-    config = tmp_path / "rover.xml"
-    system = ckmconf.load(REPO / "tests/data/lockstep/rover.xml")
-    ckmconf.dump(dataclasses.replace(system, network=private_network()), config)
+    config = private_copy(REPO / "tests/data/lockstep/rover.xml", tmp_path / "rover.xml")
     quiet = _run(config, tmp_path / "quiet")
-    load = _load(4)
-    try:
+    with busy(4):
         loaded = _run(config, tmp_path / "loaded")
-    finally:
-        for process in load:
-            process.kill()
-            process.wait(10)
     horizon = [sample for sample in quiet if float(str(sample["time"])) <= 3.0]
     assert len(horizon) == 4
     assert loaded[: len(horizon)] == horizon
@@ -135,13 +117,8 @@ def test_a_partitioned_node_runs_in_lockstep_and_its_partitions_end_cleanly(tmp_
     """configs/examples/partitions.xml: two partition processes (a 200 Hz servo loop, a 10 Hz relay) on
     the run's lock-step clock: they hold it from their start, run every release of the 4 simulated
     seconds and exit on their own at the end (the run's clock never stalls on them)."""
-    config = tmp_path / "partitions.xml"
-    system = ckmconf.load(REPO / "configs/examples/partitions.xml")
-    ckmconf.dump(dataclasses.replace(system, network=private_network()), config)
-    command = [sys.executable, "-m", "runtime.cli", str(config), "--lockstep", "0.01", "--duration", "4",
-               "--log-dir", str(tmp_path / "run")]  # fmt: skip
-    done = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    config = private_copy(REPO / "configs/examples/partitions.xml", tmp_path / "partitions.xml")
+    run_lockstep(config, tmp_path / "run", 4)
     partitions = json.loads((tmp_path / "run" / "stats.json").read_text())["partitions"]["arm-node"]
     assert {name: state["pids"][0]["exit_code"] for name, state in partitions.items()} == {"servo": 0, "telemetry": 0}
     tasks = json.loads((tmp_path / "run" / "servo" / "stats.json").read_text())["nodes"]["arm-node"]["tasks"]

@@ -5,7 +5,6 @@ wall time, so a partitioned run is as repeatable as a one-process one and a lost
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import os
@@ -17,11 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ckmconf
 from runtime import lockstep, lockstep_frames
 from runtime.lockstep_clock import SharedClock
 from tests.conftest import REPO
-from tests.runtime.network.conftest import private_network
+from tests.runtime.lockstep_runs import busy, private_copy, run_lockstep
 
 
 @pytest.fixture(autouse=True)
@@ -31,17 +29,8 @@ def _offscreen(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("CKM_TIME_SCALE", raising=False)
 
 
-def _load(count: int) -> list[subprocess.Popen[bytes]]:
-    """``count`` busy processes at the test's own priority: the machine has no core to spare."""
-    spin = "import time\nend = time.time() + 120\nwhile time.time() < end:\n    pass\n"
-    return [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(count)]
-
-
 def _run(config: Path, run_dir: Path) -> list[dict[str, object]]:
-    command = [sys.executable, "-m", "runtime.cli", str(config), "--lockstep", "0.01", "--duration", "2.5",
-               "--log-dir", str(run_dir)]  # fmt: skip
-    done = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    done = run_lockstep(config, run_dir, 2.5)
     partitions = json.loads((run_dir / "stats.json").read_text())["partitions"]["rover"]
     exits = {name: state["pids"][0]["exit_code"] for name, state in partitions.items()}
     assert exits == {"lidar": 0, "left": 0}, done.stderr[-2000:]
@@ -59,17 +48,10 @@ def test_a_partitioned_rover_gives_the_same_trajectory_in_two_runs_one_under_hea
     simulated seconds are the same, to the micrometre, in a
     quiet run and in one with two busy processes taking the two cores (before D220 two quiet
     runs already differed by millimetres: a frame in flight when the clock moved arrived a step late)."""
-    config = tmp_path / "rover.xml"
-    system = ckmconf.load(REPO / "tests/data/lockstep/rover_partitioned.xml")
-    ckmconf.dump(dataclasses.replace(system, network=private_network()), config)
+    config = private_copy(REPO / "tests/data/lockstep/rover_partitioned.xml", tmp_path / "rover.xml")
     quiet = _run(config, tmp_path / "quiet")
-    load = _load(2)  # both cores busy (the shared machine adds its own load)
-    try:
+    with busy(2):  # both cores busy (the shared machine adds its own load)
         loaded = _run(config, tmp_path / "loaded")
-    finally:
-        for process in load:
-            process.kill()
-            process.wait(10)
     assert [sample["time"] for sample in quiet] == pytest.approx([0.05, 1.0, 2.0], abs=0.06)
     assert loaded == quiet
     rover = [sample["robots"]["rover"] for sample in quiet]  # type: ignore[index]
