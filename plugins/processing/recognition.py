@@ -257,6 +257,9 @@ class KeypointMatching(ProcessingPlugin):
                                                         "multi_probe_level": 1}  # FLANN_INDEX_LSH
             self._matcher = cv2.FlannBasedMatcher(lsh, {"checks": 64})
             self._matcher.add([self.model.descriptors])
+            # FLANN draws its hash tables from OpenCV's process-wide RNG: reset it to its start state so the
+            # index depends on the model only, not on what the process built before (D206)
+            cv2.setRNGSeed(0)
             self._matcher.train()
 
     def stop(self) -> None:

@@ -182,3 +182,26 @@ def test_the_lsh_index_finds_what_brute_force_finds(lab: Lab) -> None:
         full = {o["name"]: o["inliers"] for o in exhaustive.process(value, Context(0, 0.0, "RGBDCamera"))["objects"]}
         assert fast.keys() == full.keys() and RED in fast, (pose, fast, full)
         assert all(abs(fast[n] - full[n]) <= 0.2 * full[n] + 2 for n in full), (pose, fast, full)
+
+
+def test_the_lsh_index_does_not_depend_on_what_the_process_did_before(lab: Lab) -> None:
+    """D206: FLANN draws its LSH tables from OpenCV's process-wide RNG. A matcher set up after other
+    random draws (another index, another test in the same process) finds the same matches as one set
+    up first, so a recognition does not change with the order tests or plugins were set up in."""
+    import cv2
+
+    from plugins.processing.recognition import KeypointMatching
+
+    lsh = lab.rgb[-1]
+    x, y, yaw = GOAL
+    lab.place(x, y, yaw)
+    value: Any = lab.render()[0]
+    for step in lab.rgb[:-1]:
+        value = step.process(value, Context(frame=0, stamp=0.0, resource="RGBDCamera"))
+    results = []
+    for draws in (1, 1000):
+        cv2.randu(np.empty((draws, 1), np.float32), 0.0, 1.0)  # advance the process-wide RNG
+        again = KeypointMatching(lsh.record)
+        again.setup()
+        results.append(again.process(value, Context(0, 0.0, "RGBDCamera"))["objects"])
+    assert results[0] == results[1] and results[0]
