@@ -200,7 +200,7 @@ def test_the_lsh_index_does_not_depend_on_what_the_process_did_before(lab: Lab) 
         value = step.process(value, Context(frame=0, stamp=0.0, resource="RGBDCamera"))
     results = []
     for draws in (1, 1000):
-        cv2.randu(np.empty((draws, 1), np.float32), 0.0, 1.0)  # advance the process-wide RNG
+        cv2.randu(np.empty((draws, 1), np.float32), np.zeros(1), np.ones(1))  # advance the process-wide RNG
         again = KeypointMatching(lsh.record)
         again.setup()
         results.append(again.process(value, Context(0, 0.0, "RGBDCamera"))["objects"])
