@@ -3,10 +3,30 @@ outputs, measures): the test writes its outputs and measures, and reads what it 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import functools
+from collections.abc import Callable, Mapping
 from typing import Any
 
+from ckmconf.model import System
+from runtime.missions.behaviors import Behavior, BehaviorContext
+from runtime.registry import default_registry
 from runtime.resources.api import Bounds
+
+
+def wired_behavior(system: System, name: str, service: Callable[[str], Any], topics: Mapping[str, Any],
+                   publish: Callable[[str, Any], None], now: Callable[[], float]) -> Behavior:
+    """The real behavior ``name`` of ``system`` (its registered kind): its services are ``service(ref)``,
+    its inputs read ``topics``, its outputs go to ``publish(topic, message)``."""
+    record = system.behavior(name)
+    assert record is not None
+    context = BehaviorContext(
+        services={u.alias: service(u.service) for u in record.uses},
+        inputs={p.name: functools.partial(topics.get, p.topic) for p in record.inputs},
+        outputs={p.name: functools.partial(publish, str(p.topic)) for p in record.outputs},
+        now=now,
+    )
+    made: Behavior = default_registry().resolve("behavior", record.kind, record)(record, context)
+    return made
 
 
 class MemoryService:

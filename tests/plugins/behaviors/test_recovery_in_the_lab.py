@@ -13,7 +13,6 @@ the mission must back off, look round, approach and take the cylinder off the fl
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
@@ -24,11 +23,11 @@ import ckmconf
 from benchmarks.fusion_scene import Lab
 from ckmconf.model import System
 from plugins.sim.disturbances import Disturbances
-from runtime.missions.behaviors import Behavior, BehaviorContext
+from runtime.missions.behaviors import Behavior
 from runtime.missions.hfsm import MissionEngine
-from runtime.registry import default_registry
 from runtime.resources.api import Bounds
 from tests.conftest import REPO
+from tests.memory_service import wired_behavior
 from tests.plugins.manipulation.arm_loop import ArmLoop, arm_plugin
 
 START = (3.0, 3.0, 0.0)
@@ -93,16 +92,7 @@ class Recovery:
         }  # fmt: skip
 
     def factory(self, behavior: str, path: str, now: Callable[[], float]) -> Behavior:
-        record = self.system.behavior(behavior)
-        assert record is not None
-        context = BehaviorContext(
-            services={u.alias: self.handles[u.service] for u in record.uses},
-            inputs={p.name: functools.partial(self.topics.get, p.topic) for p in record.inputs},
-            outputs={p.name: functools.partial(self.publish, str(p.topic)) for p in record.outputs},
-            now=now,
-        )
-        made: Behavior = default_registry().resolve("behavior", record.kind, record)(record, context)
-        return made
+        return wired_behavior(self.system, behavior, self.handles.__getitem__, self.topics, self.publish, now)
 
     def publish(self, topic: str, message: Any) -> None:
         self.topics[topic] = message

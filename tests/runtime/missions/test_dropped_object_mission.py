@@ -18,11 +18,10 @@ import pytest
 
 import ckmconf
 from ckmconf.model import System
-from runtime.missions.behaviors import Behavior, BehaviorContext
+from runtime.missions.behaviors import Behavior
 from runtime.missions.hfsm import MissionEngine
-from runtime.registry import default_registry
 from tests.conftest import REPO
-from tests.memory_service import MemoryService
+from tests.memory_service import MemoryService, wired_behavior
 
 POSE = {"x": 4.0, "y": 3.0, "yaw": -1.5}
 SUCCESS = ["ObjectPlace/NAV", "ObjectPlace/WAIT", "ObjectPlace/DOCK", "ObjectPlace/PLACE", "ObjectPlace/BACK"]
@@ -53,16 +52,7 @@ class ScriptedLab:
 
     def factory(self, behavior: str, path: str, now: Callable[[], float]) -> Behavior:
         """The real behavior of behaviors.xml, wired to these services and topics."""
-        record = self.system.behavior(behavior)
-        assert record is not None
-        context = BehaviorContext(
-            services={u.alias: self.service(u.service) for u in record.uses},
-            inputs={p.name: functools.partial(self.topics.get, p.topic) for p in record.inputs},
-            outputs={p.name: functools.partial(self.publish, str(p.topic)) for p in record.outputs},
-            now=now,
-        )
-        made: Behavior = default_registry().resolve("behavior", record.kind, record)(record, context)
-        return made
+        return wired_behavior(self.system, behavior, self.service, self.topics, self.publish, now)
 
     def publish(self, topic: str, message: Any) -> None:
         self.sent.append((topic, message))
