@@ -23,7 +23,16 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import ckmconf
-from benchmarks.mission_random import NAVIGATION_PARAM, NS, ROBOT, Q, _param_values, _params, _set_param, _sim_channels
+from benchmarks.mission_random import (
+    NAVIGATION_PARAM,
+    NS,
+    ROBOT,
+    Q,
+    param_values,
+    params_named,
+    set_param,
+    sim_channels,
+)
 
 DROP_TABLE = (6.2, 5.6)  # the drop table's centre (m); its front edge is 0.3 m below, at y 5.3
 HOME_AREA = ((5.4, 4.2), (6.9, 4.2), (6.9, 5.9), (5.4, 5.9))
@@ -51,12 +60,12 @@ def _move_drop_table(root: ET.Element) -> bool:
 
 def _move_start(root: ET.Element) -> bool:
     changed = False
-    for _, channel in _sim_channels(root):
-        values = _param_values(channel)
+    for _, channel in sim_channels(root):
+        values = param_values(channel)
         if values.get("body") == ROBOT and values.get("pose"):
-            _set_param(channel, "pose", START)
+            set_param(channel, "pose", START)
             changed = True
-    for _, param in _params(root, "SmartResource", NAVIGATION_PARAM):
+    for _, param in params_named(root, "SmartResource", NAVIGATION_PARAM):
         param.set("value", START)
         changed = True
     return changed

@@ -148,7 +148,7 @@ def _edge_distance(points: list[tuple[float, float]], x: float, y: float) -> flo
     return best
 
 
-def _params(root: ET.Element, owner: str, name: str) -> list[tuple[ET.Element, ET.Element]]:
+def params_named(root: ET.Element, owner: str, name: str) -> list[tuple[ET.Element, ET.Element]]:
     """(owner element, Param element) pairs for ``<owner>`` elements with a ``<Param name=name>`` below them."""
     return [
         (element, param)
@@ -158,11 +158,13 @@ def _params(root: ET.Element, owner: str, name: str) -> list[tuple[ET.Element, E
     ]
 
 
-def _param_values(channel: ET.Element) -> dict[str, str]:
+def param_values(channel: ET.Element) -> dict[str, str]:
+    """The ``<Param>`` name → value pairs directly under ``channel``."""
     return {p.get("name", ""): p.get("value", "") for p in channel.findall(Q + "Param")}
 
 
-def _set_param(channel: ET.Element, name: str, value: str) -> None:
+def set_param(channel: ET.Element, name: str, value: str) -> None:
+    """Set ``channel``'s ``<Param name>`` to ``value``, adding it after the other Params if missing."""
     for param in channel.findall(Q + "Param"):
         if param.get("name") == name:
             param.set("value", value)
@@ -179,7 +181,7 @@ def _fmt(value: float) -> str:
     return f"{value:.4f}".rstrip("0").rstrip(".") if value != 0 else "0"
 
 
-def _sim_channels(root: ET.Element) -> list[tuple[ET.Element, ET.Element]]:
+def sim_channels(root: ET.Element) -> list[tuple[ET.Element, ET.Element]]:
     """(node, channel) for every ``sim`` HWChannel of the document, in document order."""
     return [
         (node, channel)
@@ -262,10 +264,10 @@ def randomise(config: Path, seed: int, out_dir: Path, jitter: Jitter | None = No
     trees = {path: ET.parse(path) for path in sorted(out_dir.glob("*.xml"))}
     nominal = next(
         (
-            tuple(float(v) for v in _param_values(ch)["pose"].split())
+            tuple(float(v) for v in param_values(ch)["pose"].split())
             for tree in trees.values()
-            for _, ch in _sim_channels(tree.getroot())
-            if _param_values(ch).get("body") == ROBOT and _param_values(ch).get("pose")
+            for _, ch in sim_channels(tree.getroot())
+            if param_values(ch).get("body") == ROBOT and param_values(ch).get("pose")
         ),
         None,
     )
@@ -283,11 +285,11 @@ def randomise(config: Path, seed: int, out_dir: Path, jitter: Jitter | None = No
                 for key, value in (("x", x), ("y", y), ("yaw", yaw)):
                     pose.set(key, _fmt(value))
                 changed.add(path)
-        for node, channel in _sim_channels(root):
-            values = _param_values(channel)
+        for node, channel in sim_channels(root):
+            values = param_values(channel)
             if values.get("body") == ROBOT and values.get("pose"):
-                _set_param(channel, "pose", start_text)
-            _set_param(channel, "seed", str(seed if values.get("world") else 1000 * seed + index))
+                set_param(channel, "pose", start_text)
+            set_param(channel, "seed", str(seed if values.get("world") else 1000 * seed + index))
             index += 1
             base = (
                 float(values["noise"])
@@ -296,9 +298,9 @@ def randomise(config: Path, seed: int, out_dir: Path, jitter: Jitter | None = No
             )
             if channel.get("direction") == "in" and base > 0:
                 result.noise[f"{node.get('name')}/{channel.get('name')}"] = base * result.noise_factor
-                _set_param(channel, "noise", repr(base * result.noise_factor))
+                set_param(channel, "noise", repr(base * result.noise_factor))
             changed.add(path)
-        for _, param in _params(root, "SmartResource", NAVIGATION_PARAM):
+        for _, param in params_named(root, "SmartResource", NAVIGATION_PARAM):
             param.set("value", start_text)
             changed.add(path)
     for path in changed:
