@@ -220,7 +220,8 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
                 raise ValueError("--lockstep cannot run a split run (a killed agent): its processes share no clock")
     except (ckmconf.ConfigError, ValueError, OSError) as error:
         parser.error(str(error))
-    scale = args.time_scale or None
+    # lock-step time has no scale: the clock waits for the machine (ckm-run refuses both)
+    scale = None if args.lockstep is not None else args.time_scale or None
     out: Path = args.out
     results: dict[str, list[dict[str, Any]]] = {plan: [] for plan in args.plans}
     base = args.config

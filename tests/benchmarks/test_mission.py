@@ -173,6 +173,20 @@ def test_bench_runs_a_plan_and_its_summary_is_what_the_recordings_say(
     assert (out / "mission-states.png").stat().st_size > 5_000
 
 
+def test_a_lockstep_bench_runs_without_the_default_time_scale(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # ckm-run refuses --lockstep beside --time-scale: the bench must not pass its default scale along
+    out = tmp_path / "bench"
+    argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "1"]
+    argv += ["--duration", "30", "--lockstep", "0.01", "--no-randomise", "--out", str(out)]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["time_scale"] is None and result["plans"][0]["success_rate"] == 1.0
+    command = (out / "runs" / "fetch-together-seed1.log").read_text().splitlines()[0]
+    assert "--lockstep 0.01" in command and "--time-scale" not in command
+
+
 def test_a_run_stopped_at_its_timeout_or_failing_is_no_success(tmp_path: Path) -> None:
     finals = success_finals(PLAN, "fetch-together")
     assert finals == {"walker": "over", "carrier": "done"}
