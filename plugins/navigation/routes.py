@@ -2,7 +2,8 @@
 
 :class:`Routes` wraps the A* planner of plugins/environment/planner.py for one footprint:
 
-- a start inside the inflated obstacles (the robot stood close to the workbench after APPR) is
+- a start inside the inflated obstacles (the robot stood close to the workbench after APPR), or on
+  their edge with no straight way out (D210), is
   left by the nearest free A* cell within ``escape`` metres, the robot's position prepended; a
   goal inside them (a pose short of an object on a table) is replaced by the nearest free cell
   within ``goal_escape`` metres, so only a goal deeper in (or walled off) is unreachable;
@@ -65,7 +66,7 @@ class Routes:
         try:
             return self._from(here, goal)
         except Unreachable as refused:
-            if "the goal collides" not in refused.reason or not self.goal_escape > 0:
+            if not _stuck(refused, "goal") or not self.goal_escape > 0:
                 raise
             for near in self._free_near(goal, self.goal_escape):
                 try:
@@ -79,13 +80,13 @@ class Routes:
         try:
             return list(self.planner.plan(here, goal).waypoints)
         except Unreachable as refused:
-            if "the start collides" not in refused.reason or not self.escape > 0:
+            if not _stuck(refused, "start") or not self.escape > 0:
                 raise
             for exit_point in self._free_near(here, self.escape):
                 try:
                     return [here, *self.planner.plan(exit_point, goal).waypoints]
                 except Unreachable as again:
-                    if "the goal collides" in again.reason:  # for plan()'s goal escape: both ends move
+                    if _stuck(again, "goal"):  # for plan()'s goal escape: both ends move
                         raise again from None
                     continue
             raise
@@ -133,6 +134,13 @@ class Routes:
             return
         env = dataclasses.replace(self.env, avoided=self.env.avoided + tuple(self.extra))
         self.planner = Planner(MapModel.from_environment(env), self.footprint, resolution=self.resolution)
+
+
+def _stuck(refused: Unreachable, end: str) -> bool:
+    """Whether the planner refused because ``end`` ("start" or "goal") is inside an obstacle's inflation
+    or on its very edge, where every straight way out grazes it ("boxed in": a robot that stopped
+    exactly at the footprint's distance from a table, D210)."""
+    return f"the {end} collides" in refused.reason or f"the {end} is boxed in" in refused.reason
 
 
 def blocking(

@@ -46,3 +46,14 @@ def test_a_bad_pose_is_refused_naming_the_behavior(lab: System) -> None:  # noqa
     context = BehaviorContext(services={}, inputs={}, outputs={}, now=lambda: 0.0)
     with pytest.raises(ParamError, match=r"behavior 'DOCK'.*'by the table' is not 'x y yaw'"):
         default_registry().resolve("behavior", "dock", broken)(broken, context)
+
+
+def test_dock_cancels_the_navigation_goal_before_it_moves(lab: System) -> None:  # noqa: F811
+    # D211: WAIT's dispersion check can set NAV_HOME's goal again just before DOCK; a path the
+    # Navigation then plans would preempt DOCK's move (a bench run failed so). The empty goal
+    # cancels it: the Navigation sends the base an empty path, which stops no move.
+    rig = Rig(lab, "DOCK", {"pose": {"pose": {"x": 1.0, "y": 1.3, "yaw": math.pi / 2}}})
+    ((parameters, requirements),) = rig.services["nav"].configured
+    assert parameters == {"goal": ""} and requirements == ()
+    rig.behavior.step()
+    assert rig.last("move")["frame"] == "robot"

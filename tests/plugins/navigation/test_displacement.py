@@ -207,3 +207,16 @@ def test_a_copy_restored_from_the_state_goes_on_with_the_same_commands() -> None
         assert copy.process(inputs, context) == robot.frame(service, path=inputs["path"], move_goal=inputs["move_goal"])
     with pytest.raises(ValueError, match="not a base-displacement state"):
         copy.restore({"kind": "base-displacement"})
+
+
+def test_a_cancelled_navigations_empty_path_leaves_a_running_move_alone() -> None:
+    # D211: DOCK cancels the navigation goal; the Navigation then sends an empty path (its last id),
+    # which must not preempt DOCK's move, while a new path still would.
+    robot, service = Unicycle(), base()
+    robot.frame(service, path=path([[0.0, 0.0], [1.0, 0.0]], path_id=3))
+    robot.frame(service, move_goal=move(1, 0.2))
+    for _ in range(5):
+        status = robot.frame(service, path=path([], path_id=3))["move_status"]
+    assert status["id"] == 1 and status["state"] == "moving"
+    replanned = robot.frame(service, path=path([[robot.x, robot.y], [1.0, 0.0]], path_id=4))
+    assert replanned["move_status"]["state"] == "failed"

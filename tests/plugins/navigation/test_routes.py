@@ -6,9 +6,11 @@ drop table's edge."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
+from benchmarks.mission_compact import compact
 from ckmconf.loader import load
 from plugins.environment.geometry import Footprint
 from plugins.environment.planner import Unreachable
@@ -39,3 +41,17 @@ def test_a_start_and_a_goal_both_inside_inflations_get_a_path() -> None:
 def test_without_the_escape_the_colliding_end_is_named(escape: float, goal_escape: float, end: str) -> None:
     with pytest.raises(Unreachable, match=f"the {end} collides with"):
         routes(escape, goal_escape).plan(AT_THE_WORKBENCH, HOME)
+
+
+def test_a_start_on_the_edge_of_an_inflation_with_no_straight_way_out_leaves_by_a_free_cell(tmp_path: Path) -> None:
+    # A bench run (compact layout, seed 16): driven to HomeArea's centre, the robot stopped 0.2001 m
+    # from the drop table, just outside its 0.2 m footprint, where every straight way to a free cell
+    # grazes the inflation: "the start is boxed in", and NAV_COOP failed at once (D210).
+    environment = load(compact(CONFIGS / "usecase" / "lab.xml", tmp_path / "usecase")).environment
+    assert environment is not None
+    here = (6.12776, 5.09986)
+    stuck = Routes(environment, Footprint.round(0.2, 0.5), 0.1, 0.0, 0.3, ScanObstacles())
+    with pytest.raises(Unreachable, match="the start is boxed in"):
+        stuck.plan(here, (7.6, 5.501))
+    way = Routes(environment, Footprint.round(0.2, 0.5), 0.1, 0.6, 0.3, ScanObstacles()).plan(here, (7.6, 5.501))
+    assert way[0] == here and math.dist(way[1], here) <= 0.6 and way[-1] == (7.6, 5.501)

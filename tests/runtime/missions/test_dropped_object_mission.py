@@ -153,7 +153,8 @@ def test_a_drop_on_the_way_home_is_detected_and_the_object_picked_off_the_floor_
                      "ObjectPlace/BACK"]  # fmt: skip
     assert outcome == "placed"
     nav = lab.service("Navigation.AMCL").configured
-    assert [c["goal"] for c, _ in nav if "goal" in c] == ["1.0 1.3 1.5708", "", "1.0 1.3 1.5708"]  # home, cancel, home
+    goals = [c["goal"] for c, _ in nav if "goal" in c]
+    assert goals == ["1.0 1.3 1.5708", "", "1.0 1.3 1.5708", ""]  # home, HALT's cancel, home, DOCK's cancel (D211)
     moves = lab.sent_on("/base/move_goal")
     assert moves[0] == {**moves[0], "x": 0.0, "y": 0.0, "yaw": 0.0}  # HALT: the zero move that stops the path
     assert sum(1 for m in moves if m["x"] == 0.0 and m["yaw"] != 0.0) == 3  # LOOK turned until it saw it
