@@ -18,7 +18,9 @@ configuration with plans: the tests use ``configs/examples/plan_two_agents.xml``
 
 ``--layout compact`` runs the compact copy of the lab (:mod:`benchmarks.mission_compact`: the
 drop table and the start next to the workbench; the same system, a shorter fetch) under the
-randomisation; ``--lockstep STEP`` passes ``ckm-run --lockstep STEP`` (D190).
+randomisation; ``--lockstep STEP`` passes ``ckm-run --lockstep STEP`` (D190). ``--ports DISCOVERY BASE``
+runs a copy whose ``<Network>`` has these discovery and base ports (:func:`layout_config`), so a bench can
+run beside another one (or a lab run) on the same machine.
 
 ``--scenario NAME`` disturbs every run on purpose — a box in the corridor, the target moved during
 the approach, the object dropped on the way home, the humanoid's process killed — and records in
@@ -31,23 +33,25 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import ckmconf
 from benchmarks.mission_compact import compact
-from benchmarks.mission_random import Jitter, randomise
+from benchmarks.mission_random import NS, Jitter, Q, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
 from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, object_home, run_split
 from runtime.missions.recording import RunError, read_run
 from runtime.missions.report import build_report
 
-__all__ = ["collect", "describe", "run", "run_once"]
+__all__ = ["collect", "describe", "layout_config", "on_ports", "run", "run_once"]
 DEFAULT_CONFIG = Path("configs/usecase/lab.xml")
 MARGIN_S = 120.0  # wall seconds beyond duration / scale: start-up (verification, the world server) and stop
 LOCKSTEP_WALL_PER_SIM_S = 12.0  # a lock-step clock runs as fast as the machine can: bounded, not paced (D190)
@@ -173,6 +177,48 @@ def _stop(process: subprocess.Popen[bytes]) -> None:
     process.wait()
 
 
+def on_ports(config: Path, out_dir: Path, ports: tuple[int, int]) -> Path:
+    """Copy ``config``'s directory to ``out_dir`` with every ``<Network>``'s ``discoveryPort`` and ``basePort``
+    set to ``ports``; the copy's System file (validated).
+
+    Raises:
+        ValueError: the configuration (its System file and Parts) has no ``<Network>``; ckmconf.ConfigError:
+            the copy is invalid.
+    """
+    config = Path(config)
+    if out_dir.exists():
+        shutil.rmtree(out_dir)
+    shutil.copytree(config.parent, out_dir)
+    ET.register_namespace("", NS)
+    for path in sorted(out_dir.glob("*.xml")):
+        tree = ET.parse(path)
+        elements = list(tree.getroot().iter(Q + "Network"))
+        for element in elements:
+            element.set("discoveryPort", str(ports[0]))
+            element.set("basePort", str(ports[1]))
+        if elements:
+            tree.write(path, encoding="UTF-8", xml_declaration=True)
+    copy = out_dir / config.name
+    network = ckmconf.load(copy).network
+    if network is None or (network.discovery_port, network.base_port) != ports:  # none in its own Parts
+        raise ValueError(f"{config}: no <Network> to give the ports {ports[0]} {ports[1]}")
+    return copy
+
+
+def layout_config(config: Path, layout: str, out: Path, ports: tuple[int, int] | None = None) -> Path:
+    """The System file the runs start from: ``config`` itself, or its copy under ``out/configs`` with the
+    compact ``layout`` and/or the network ``ports`` (discovery, base). The randomised copies are made from it.
+
+    Raises:
+        ValueError, OSError, ckmconf.ConfigError: the copy cannot be made (see :func:`compact`, :func:`on_ports`).
+    """
+    if layout == "compact":
+        return compact(config, out / "configs" / "compact", ports=ports)
+    if ports is not None:
+        return on_ports(config, out / "configs" / "ports", ports)
+    return config
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ckm-bench mission", description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="System file (default: the lab)")
@@ -186,6 +232,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--layout", choices=("lab", "compact"), default="lab",
                         help="compact: the drop table and the start next to the workbench (a short fetch)")
     parser.add_argument("--lockstep", type=float, help="ckm-run --lockstep STEP (simulated s): lock-step time")
+    parser.add_argument("--ports", type=int, nargs=2, metavar=("DISCOVERY", "BASE"),
+                        help="run a copy on these network ports (its <Network> discoveryPort and basePort)")
     parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the sensor noise (0: none)")
     parser.add_argument(
         "--scenario",
@@ -211,6 +259,9 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         parser.error(f"--lockstep must be positive, not {args.lockstep}")
     if args.noise_scale < 0:
         parser.error(f"--noise-scale must not be negative, not {args.noise_scale}")
+    ports: tuple[int, int] | None = None if args.ports is None else (args.ports[0], args.ports[1])
+    if ports is not None and (not all(1024 <= p <= 65535 for p in ports) or ports[0] == ports[1]):
+        parser.error(f"--ports must be two different ports in 1024-65535, not {ports[0]} {ports[1]}")
     try:
         finals = {plan: success_finals(args.config, plan) for plan in args.plans}
         scenario = choose(args.scenario, args.kill_agent, args.kill_after)
@@ -224,12 +275,10 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
     scale = None if args.lockstep is not None else args.time_scale or None
     out: Path = args.out
     results: dict[str, list[dict[str, Any]]] = {plan: [] for plan in args.plans}
-    base = args.config
-    if args.layout == "compact":
-        try:
-            base = compact(args.config, out / "configs" / "compact")
-        except (ckmconf.ConfigError, ValueError, OSError) as error:
-            parser.error(str(error))
+    try:
+        base = layout_config(args.config, args.layout, out, ports)
+    except (ckmconf.ConfigError, ValueError, OSError) as error:
+        parser.error(str(error))
     for seed in range(args.first_seed, args.first_seed + args.runs):
         config, changed = base, None
         if not args.no_randomise:

@@ -14,7 +14,7 @@ import pytest
 
 import ckmconf
 from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
-from benchmarks.mission import collect, run_once, success_finals
+from benchmarks.mission import collect, layout_config, run_once, success_finals
 from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
 from benchmarks.mission_report import summarise, wilson
 from plugins.sim.plan import WorldPlan
@@ -211,6 +211,44 @@ def test_an_unknown_plan_is_refused_before_anything_runs(tmp_path: Path, capsys:
     with pytest.raises(SystemExit) as refused:
         main(["mission", "--config", str(PLAN), "--plans", "nope", "--out", str(tmp_path)])
     assert refused.value.code == 2 and "no plan 'nope' (plans: fetch-together)" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
+
+
+def _network_ports(copy: Path) -> dict[str, str]:
+    network = ET.parse(copy.parent / "network.xml").getroot().find(Q + "Network")
+    assert network is not None
+    return {k: network.get(k, "") for k in ("discoveryPort", "basePort")}
+
+
+@pytest.mark.parametrize("layout", ["lab", "compact"])
+def test_the_ports_option_gives_the_copys_network_its_ports(tmp_path: Path, layout: str) -> None:
+    """``--ports`` (a bench beside another on one machine): the copy the runs start from has them in network.xml."""
+    copy = layout_config(LAB, layout, tmp_path, (7851, 7861))
+    assert copy.parent.parent == tmp_path / "configs" and copy.name == LAB.name
+    assert _network_ports(copy) == {"discoveryPort": "7851", "basePort": "7861"}
+    network = ckmconf.load(copy).network
+    assert network is not None and (network.discovery_port, network.base_port) == (7851, 7861)
+    assert _network_ports(LAB) == {"discoveryPort": "7400", "basePort": "7410"}  # the lab itself is left alone
+    # the randomised copies are made from it, so every run of the bench is on those ports
+    assert _network_ports(randomise(copy, 3, tmp_path / "seed3").config) == _network_ports(copy)
+    assert layout_config(LAB, "lab", tmp_path) == LAB  # no ports, no copy
+
+
+@pytest.mark.parametrize(
+    ("config", "ports", "message"),
+    [
+        (LAB, ["7851", "7851"], "--ports must be two different ports in 1024-65535, not 7851 7851"),
+        (LAB, ["80", "7861"], "--ports must be two different ports in 1024-65535, not 80 7861"),
+        (PLAN, ["7851", "7861"], "plan_two_agents.xml: no <Network> to give the ports 7851 7861"),
+    ],
+)
+def test_bad_ports_are_refused_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], config: Path, ports: list[str], message: str
+) -> None:
+    plan = "individual" if config == LAB else "fetch-together"
+    with pytest.raises(SystemExit) as refused:
+        main(["mission", "--config", str(config), "--plans", plan, "--ports", *ports, "--out", str(tmp_path)])
+    assert refused.value.code == 2 and message in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
 
 
