@@ -1,0 +1,137 @@
+"""APPR's re-aim (D207) against services simulated in memory: when it stops short, which sighting it
+takes the last leg from, what it does when none comes, and what it leaves as it was."""
+
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import ckmconf
+from ckmconf.model import System
+from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
+from runtime.registry import default_registry
+from tests.memory_service import MemoryService
+
+REPO = Path(__file__).resolve().parents[3]
+STANDOFF, REAIM = 0.29, 0.16  # APPR's standoff and reaim in configs/usecase/behaviors.xml
+LABEL = "cylinder_red_stripes"
+HERE = {"x": 2.0, "y": 2.0, "yaw": math.pi / 2}  # the robot's pose estimate: facing +y
+
+
+@pytest.fixture(scope="module")
+def lab() -> System:
+    return ckmconf.load(REPO / "configs" / "usecase" / "lab.xml")
+
+
+class Appr:
+    """APPR of the use case with its services in memory and a clock; the arm already reached."""
+
+    def __init__(self, system: System, target: dict[str, Any], objects: dict[str, Any] | None) -> None:
+        record = system.behavior("APPR")
+        assert record is not None
+        self.time = 0.0
+        self.services = {u.alias: MemoryService(u.service) for u in record.uses}
+        self.inputs: dict[str, Any] = {"target": target, "pose": {"pose": dict(HERE)}, "objects": objects}
+        self.written: list[tuple[str, Any]] = []
+        context = BehaviorContext(
+            services=self.services,
+            inputs={p.name: functools.partial(self.inputs.get, p.name) for p in record.inputs},
+            outputs={p.name: functools.partial(self._write, p.name) for p in record.outputs},
+            now=lambda: self.time,
+        )
+        self.behavior: Behavior = default_registry().resolve("behavior", record.kind, record)(record, context)
+        self.behavior.start()
+        arm = next(v for n, v in self.written if n == "arm_goal")
+        self.services["arm"].outputs["status"] = {"id": arm["id"], "state": "reached"}
+
+    def _write(self, name: str, value: Any) -> None:
+        self.written.append((name, value))
+
+    def moves(self) -> list[dict[str, Any]]:
+        return [v for n, v in self.written if n == "move"]
+
+    def finish_move(self) -> BehaviorStatus:
+        self.services["base"].outputs["move_status"] = {"id": self.moves()[-1]["id"], "state": "done"}
+        return self.behavior.step()
+
+    def wait(self, seconds: float) -> BehaviorStatus:
+        end = self.time + seconds
+        status = self.behavior.step()
+        while self.time < end - 1e-9:
+            self.time += 0.1
+            status = self.behavior.step()
+        return status
+
+
+def _sighting(x: float, y: float, observer: dict[str, float], name: str = LABEL) -> dict[str, Any]:
+    """A fused result holding one positioned sighting (map frame) placed with ``observer``."""
+    found = {"name": name, "shape": "cylinder", "texture": "red_stripes", "frame": "map", "x": x, "y": y, "z": 0.36,
+             "reliability": 0.99, "sources": ["depth", "rgb"], "observer": [dict(observer)]}  # fmt: skip
+    return {"objects": [found], "reliability": 0.99}
+
+
+def _target(distance: float) -> dict[str, Any]:
+    """SPOT's target ``distance`` m straight ahead of HERE, placed with HERE."""
+    return {"label": LABEL, "frame": "map", "x": 2.0, "y": 2.0 + distance, "z": 0.36, "reliability": 0.99,
+            "observer": [dict(HERE)]}  # fmt: skip
+
+
+def test_a_long_drive_stops_short_and_takes_the_last_leg_from_a_fresh_sighting(lab: System) -> None:
+    seen = _sighting(2.0, 2.7, HERE)  # what the fusion holds when APPR starts
+    rig = Appr(lab, _target(0.7), seen)
+    rig.behavior.step()
+    (short,) = rig.moves()
+    assert (short["x"], short["y"], short["yaw"]) == pytest.approx((0.7 - STANDOFF - REAIM, 0.0, 0.0), abs=1e-9)
+    status = rig.finish_move()
+    assert not status.done and status.detail == "looking again"
+    assert status.progress == pytest.approx(0.2 + 0.8 * (0.7 - STANDOFF - REAIM) / (0.7 - STANDOFF))
+    # the robot stands 0.25 m further on, turned 0.02 rad; the estimate follows
+    stopped = {"x": 2.0, "y": 2.25, "yaw": math.pi / 2 + 0.02}
+    rig.inputs["pose"] = {"pose": stopped}
+    rig.inputs["objects"] = _sighting(1.99, 2.70, {"x": 2.0, "y": 2.0, "yaw": math.pi / 2})  # from before the stop
+    assert rig.wait(3.0).detail == "looking again" and len(rig.moves()) == 1  # settling, then not placed from here
+    rig.inputs["objects"] = _sighting(1.99, 2.70, stopped)  # a fresh one: the target 1 cm aside of the first
+    rig.behavior.step()
+    last = rig.moves()[-1]
+    dx, dy = -0.01, 0.45  # the target from where the robot stands, in the map
+    c, s = math.cos(stopped["yaw"]), math.sin(stopped["yaw"])
+    x, y = c * dx + s * dy, -s * dx + c * dy
+    keep = (math.hypot(x, y) - STANDOFF) / math.hypot(x, y)
+    assert (last["x"], last["y"], last["yaw"]) == pytest.approx((x * keep, y * keep, math.atan2(y, x)), abs=1e-9)
+    assert rig.behavior.context.events == [{"message": "re-aimed", "x": round(x, 4), "y": round(y, 4)}]
+    assert rig.finish_move().done
+
+
+def test_no_fresh_sighting_in_time_goes_straight_on(lab: System) -> None:
+    seen = _sighting(2.0, 2.7, HERE)
+    rig = Appr(lab, _target(0.7), seen)
+    rig.behavior.step()
+    rig.finish_move()
+    assert rig.wait(2.5 + 5.0 - 0.2).detail == "looking again"  # the fusion's result never changes
+    rig.wait(0.3)
+    last = rig.moves()[-1]
+    assert (last["x"], last["y"], last["yaw"]) == pytest.approx((REAIM, 0.0, 0.0), abs=1e-9)
+    assert rig.behavior.context.events == [{"message": "no fresh sighting: straight on", "distance": REAIM}]
+    assert rig.finish_move().done
+
+
+@pytest.mark.parametrize(
+    ("distance", "objects"),
+    [
+        (0.6, _sighting(2.0, 2.6, HERE)),  # NAV's goal, 0.31 m to drive: shorter than reaimAbove
+        (0.7, None),  # no fused result to look again with
+        (0.7, _sighting(2.0, 2.7, HERE, name="cylinder_blue_dots")),  # the fusion does not hold the target
+    ],
+)
+def test_a_short_drive_or_no_sighting_of_the_target_is_one_move(
+    lab: System, distance: float, objects: dict[str, Any] | None
+) -> None:
+    rig = Appr(lab, _target(distance), objects)
+    rig.behavior.step()
+    (move,) = rig.moves()
+    assert (move["x"], move["y"], move["yaw"]) == pytest.approx((distance - STANDOFF, 0.0, 0.0), abs=1e-9)
+    assert rig.finish_move().done and rig.behavior.context.events == []
