@@ -115,7 +115,7 @@ def usecase() -> System:
     return ckmconf.load(USECASE)
 
 
-QUALITY = 0.9  # the weakest data-flow step: Fusion's, Pan-Tilt Recog.'s and Track's policies (0.9)
+QUALITY = 0.9  # the weakest data-flow step: Fusion's, Pan-Tilt Recog.'s and Track's policies (0.9); APPR reads the fusion (D207)
 MOBILE = 0.95  # AMCL's, Scan's and Displacement's policies
 ARM = 0.99  # MoveIt's "active" policy
 PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("ObjectPlace", "DOCK"): MOBILE,
@@ -133,16 +133,17 @@ PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("Obje
     [
         ("Agent1Fetch",
          {("Navigation", "NAV"): MOBILE, ("Navigation", "WAIT"): MOBILE, ("ObjectInteraction", "SPOT"): QUALITY,
-          ("ObjectInteraction", "APPR"): MOBILE, ("ObjectInteraction", "PICK"): ARM,
+          ("ObjectInteraction", "APPR"): QUALITY, ("ObjectInteraction", "PICK"): ARM,
           ("ObjectInteraction", "RELEASE"): ARM, ("ObjectInteraction", "BACK"): MOBILE,
           ("ObjectInteraction", "STOW"): ARM, **PLACE},
-         {("ObjectInteraction", "SPOT"), ("ObjectRecovery", "LOOK")}),
+         {("ObjectInteraction", "SPOT"), ("ObjectInteraction", "APPR"), ("ObjectRecovery", "LOOK")}),
         ("Agent1FetchCoop",
          {("NavigationCoop", "NAV"): QUALITY, ("NavigationCoop", "WAIT"): MOBILE,
-          ("ObjectInteractionCoop", "SPOT"): QUALITY, ("ObjectInteractionCoop", "APPR"): MOBILE,
+          ("ObjectInteractionCoop", "SPOT"): QUALITY, ("ObjectInteractionCoop", "APPR"): QUALITY,
           ("ObjectInteractionCoop", "PICK"): ARM, ("ObjectInteractionCoop", "RELEASE"): ARM,
           ("ObjectInteractionCoop", "BACK"): MOBILE, ("ObjectInteractionCoop", "STOW"): ARM, **PLACE},
-         {("NavigationCoop", "NAV"), ("ObjectInteractionCoop", "SPOT"), ("ObjectRecovery", "LOOK")}),
+         {("NavigationCoop", "NAV"), ("ObjectInteractionCoop", "SPOT"), ("ObjectInteractionCoop", "APPR"),
+          ("ObjectRecovery", "LOOK")}),
         ("Agent2Spot", {("Agent2Spot", "OBJ_TRACK"): QUALITY, ("Agent2Spot", "OBJ_FIX"): QUALITY},
          {("Agent2Spot", "OBJ_TRACK"), ("Agent2Spot", "OBJ_FIX")}),
     ],
