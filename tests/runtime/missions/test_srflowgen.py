@@ -115,7 +115,7 @@ def usecase() -> System:
     return ckmconf.load(USECASE)
 
 
-QUALITY = 0.9  # the weakest data-flow step: Fusion's, Pan-Tilt Recog.'s and Track's policies (0.9); APPR reads the fusion (D207)
+QUALITY = 0.9  # the weakest step: Fusion's, Pan-Tilt Recog.'s and Track's policies; APPR reads the fusion (D207)
 MOBILE = 0.95  # AMCL's, Scan's and Displacement's policies
 ARM = 0.99  # MoveIt's "active" policy
 PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("ObjectPlace", "DOCK"): MOBILE,
