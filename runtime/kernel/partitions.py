@@ -37,6 +37,7 @@ import psutil
 
 from ckmconf.model import Alarm, Node, Partition
 
+from .. import lockstep
 from .partition_process import (
     MEMORY_EXIT,
     PARENT_ENV,
@@ -70,7 +71,7 @@ class _State:
     restarts: int = 0
     due: float | None = None  # monotonic time of the next start
     asked: Literal["restart", "stop"] | None = None  # why the supervisor asked the current process to exit
-    kill_at: float | None = None  # monotonic time after which a process asked to exit is killed
+    kill_at: float | None = None  # wall monotonic time after which a process asked to exit is killed
     given_up: bool = False
     sampled: float = 0.0
     console_from: int = 0  # where the current process's output starts in console.log
@@ -223,7 +224,7 @@ class PartitionSupervisor:
         if process is not None:
             code = process.poll()
             if code is None:
-                if state.kill_at is not None and now >= state.kill_at:
+                if state.kill_at is not None and _wall() >= state.kill_at:
                     process.kill()
                     state.kill_at = None
                 elif now - state.sampled >= CPU_SAMPLE:
@@ -336,7 +337,7 @@ class PartitionSupervisor:
             self.report("reaction-unavailable", {"action": "restart", "partition": name, "reason": reason})
             return
         if state.process is not None:
-            state.asked, state.kill_at = "restart", time.monotonic() + self.stop_timeout
+            state.asked, state.kill_at = "restart", _wall() + self.stop_timeout
             state.process.terminate()
         else:
             state.due = time.monotonic()
@@ -357,11 +358,11 @@ class PartitionSupervisor:
             self._sample(state, state.process.pid)  # its last CPU reading
             state.asked = "stop"
             state.process.terminate()
-        deadline = time.monotonic() + self.stop_timeout
+        deadline = _wall() + self.stop_timeout
         for state in running:
             assert state.process is not None
             try:
-                code = state.process.wait(max(0.0, deadline - time.monotonic()))
+                code = state.process.wait(max(0.0, deadline - _wall()))
             except subprocess.TimeoutExpired:
                 LOG.warning("%s: partition %s ignored SIGTERM; killing it", self.node.name, state.record.name)
                 state.process.kill()
@@ -371,6 +372,13 @@ class PartitionSupervisor:
                     LOG.error("%s: partition %s survived SIGKILL", self.node.name, state.record.name)
                     continue
             self._ended(state, code)
+
+
+
+def _wall() -> float:
+    """The wall clock: a stop's bound is on it, not on a lock-step or scaled clock, which may run
+    far ahead of the wall while the supervisor waits (a partition killed while stopping cleanly)."""
+    return float(lockstep.real("monotonic")())
 
 
 __all__ = ["MEMORY_EXIT", "Life", "MemoryWatch", "PartitionSupervisor", "enter_partition", "first_error"]

@@ -16,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -378,6 +379,41 @@ def test_memory_watch_reports_growth_past_the_budget() -> None:
     probe = subprocess.run([sys.executable, "-c", MEMORY_PROBE], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert probe.returncode == 0, probe.stderr
     assert probe.stdout.strip() == "exceeded"
+
+
+SLOW_TO_STOP = (
+    "import signal, sys, time\n"
+    "def stop(*_):\n"
+    "    time.sleep(0.6)  # a clean stop that takes a while\n"
+    "    sys.exit(0)\n"
+    "signal.signal(signal.SIGTERM, stop)\n"
+    "print('ready', flush=True)\n"
+    "time.sleep(60)\n"
+)
+
+
+def test_a_stop_is_bounded_on_the_wall_clock_when_the_run_clock_races_ahead(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Under --lockstep the run's clock may move ten times faster than the wall while the supervisor
+    waits for the first partition to stop; the second one once found its share of ``stop_timeout``
+    used up on that clock and was killed (-9) while stopping cleanly. Both exit 0 now."""
+    import runtime.kernel.partitions as partitions
+
+    wall = time.monotonic
+    racing = types.SimpleNamespace(monotonic=lambda: 20 * wall(), sleep=time.sleep, time=time.time)
+    monkeypatch.setattr(partitions, "time", racing)
+    node = Node(name="n", partitions=(Partition(name="a"), Partition(name="b")))
+    supervisor = PartitionSupervisor(
+        node, tmp_path / "x.xml", tmp_path, Events(), command=sleeper(SLOW_TO_STOP), stop_timeout=3
+    )
+    supervisor.start()
+    try:
+        logs = [supervisor.run_dir / name / "console.log" for name in ("a", "b")]
+        assert until(lambda: all(log.exists() and "ready" in log.read_text() for log in logs), 20)
+    finally:
+        supervisor.stop()
+    assert {name: supervisor.statistics()[name]["last_exit_code"] for name in ("a", "b")} == {"a": 0, "b": 0}
 
 
 def test_a_partition_that_reports_failures_when_stopped_fails_the_run(
