@@ -18,6 +18,12 @@ than its success final (the first its mission declares: ``crashed`` and ``stoppe
 failures too). Everything is recorded in the run directory
 (:class:`~runtime.missions.recording.RunRecorder`).
 
+The agents of a plan meet before their missions start (D208): each sends its heartbeat and waits
+until it has heard every other agent (or heard that it finished), at most ``lostAfter``. A signal
+is published once, when its state emits it; an agent whose process joined the network later would
+not hear it (a fast spotter once signalled before its fetcher's process had linked, and the fetcher
+gave up). An agent not heard within ``lostAfter`` is reported lost as soon as the mission starts.
+
 Silence, like every period and timeout of the mission, is measured on the run's clock
 (``time.monotonic``, read at each call): under ``ckm-run --time-scale`` :mod:`runtime.simtime`
 scales it in every process of the run, so ``lostAfter`` is simulated seconds, as the world's
@@ -288,6 +294,7 @@ class AgentRunner:
         end = None if duration is None else self._started + duration
         next_beat = 0.0
         try:
+            self._meet()
             self.engine.start()
             while not self._stop.is_set():
                 now = self.clock()
@@ -310,6 +317,19 @@ class AgentRunner:
         finally:
             self._finish()
         return self.outcome
+
+    def _meet(self) -> None:
+        """Heartbeats until every other agent of the plan is heard (or finished), at most ``lostAfter`` (D208)."""
+        others = {a.name for a in self.plan.agents} - {self.agent.name}
+        while not self._stop.is_set():
+            missing = others - set(self.seen) - set(self.finished)
+            if not missing or self.clock() - self._started >= self.plan.lost_after:
+                if missing:
+                    LOG.warning("plan %s: agent %s starts without %s (not heard within lostAfter, %g s)",
+                                self.plan.name, self.agent.name, ", ".join(sorted(missing)), self.plan.lost_after)
+                return
+            self._beat.publish({"agent": self.agent.name, "state": "", "t": self.clock(), "progress": 0.0})
+            self._stop.wait(min(self.heartbeat, self.period))
 
     def _show(self, now: float) -> None:
         """One progress line when the active state changes: agent, elapsed time, state path, mission progress."""

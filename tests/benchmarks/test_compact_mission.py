@@ -20,29 +20,25 @@ from pathlib import Path
 import pytest
 
 import ckmconf
-from benchmarks.mission import run_once
-from benchmarks.mission_compact import DROP_TABLE, compact
+from benchmarks.mission_compact import DROP_TABLE
 from runtime.missions.recording import read_run
 from runtime.missions.report import build_report
 from runtime.missions.validation.online import replay
-from tests.conftest import CONFIGS
+from tests.benchmarks.compact_run import Background
+from tests.conftest import COMPACT_RUN
 
-LAB = CONFIGS / "usecase" / "lab.xml"
-PORTS = (7650, 7660)  # a private network: never the lab's 7400/7410
-LOCKSTEP = 0.01  # simulated s: the clock's largest step (the kernel's fastest loops run at 0.01-0.02 s)
-DURATION = 120.0  # simulated s: the compact fetch takes about a minute
-WALL_LIMIT = 900.0  # wall s: 227 s on a loaded 2-core machine
 TABLE_TOP = 0.30
 CYLINDER_HALF_HEIGHT = 0.06
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int | None]:
-    root = tmp_path_factory.mktemp("compact-mission")
-    config = compact(LAB, root / "usecase", ports=PORTS)
-    code, _wall = run_once(config, "cooperative", root / "run", duration=DURATION, time_scale=None,
-                           log=root / "run.log", lockstep=LOCKSTEP, timeout=WALL_LIMIT)  # fmt: skip
-    return config, root / "run", code
+def run(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, int | None]:
+    """The run the suite started beside the other tests (tests/conftest.py), else one started now."""
+    background = request.config.stash.get(COMPACT_RUN, None)
+    if background is None:
+        background = Background(tmp_path_factory.mktemp("compact-mission"), niceness=0)
+    result = background.result()
+    return Path(result["config"]), background.root / "run", result["code"]
 
 
 @pytest.mark.timeout(1200)

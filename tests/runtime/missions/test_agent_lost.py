@@ -19,6 +19,7 @@ from runtime import simtime
 from runtime.missions.agent import AgentRunner
 from runtime.missions.recording import read_run
 from runtime.network import open_transport
+from runtime.network.api import TopicQoS
 from tests.runtime.network.conftest import private_network
 from tests.waiting import until
 
@@ -37,12 +38,12 @@ def test_silence_is_measured_on_the_runs_clock_and_lost_takes_the_failure_branch
     thread = threading.Thread(target=lambda: answer.append(runner.run(120)), daemon=True)
     try:
         thread.start()
-        assert until(lambda: runner.engine.active_path() is not None, timeout=10)
         time.sleep(0.5)  # wall time passes, the run's clock stands: the spotter is not lost
         clock.advance(1.0)  # 1 s of the run's clock, under lostAfter (1.5 s)
         time.sleep(0.3)
-        assert not runner.lost and runner.engine.active_path() == "Fetch/NAVIGATION/NAV"
-        clock.advance(1.0)  # past lostAfter: lost, and NAV's lost('spotter') fires
+        # the fetcher still waits to hear the spotter before its mission starts (D208)
+        assert not runner.lost and runner.engine.active_path() is None
+        clock.advance(1.0)  # past lostAfter: the mission starts without it, lost, and NAV's lost('spotter') fires
         thread.join(10)
         assert not thread.is_alive()
     finally:
@@ -55,6 +56,36 @@ def test_silence_is_measured_on_the_runs_clock_and_lost_takes_the_failure_branch
     assert [e.fields["lost"] for e in events if e.kind == "agent-lost"] == ["spotter"]
     left = next(e for e in events if e.kind == "exit" and e.fields["state"] == "NAV")
     assert left.fields["to"] == "gave_up"
+
+
+def test_an_agent_waits_for_the_others_heartbeat_and_starts_as_soon_as_it_is_heard(tmp_path: Path) -> None:
+    """D208: the fetcher's mission does not start while the spotter has not been heard (a signal sent
+    before its process linked would be lost), and starts at once when the spotter's heartbeat comes,
+    on a clock that never moved."""
+    system = load(PLANS)
+    clock = ManualClock()
+    network = private_network()
+    transport, spotter = open_transport(network, name="fetcher-pc"), open_transport(network, name="spotter-pc")
+    for each in (transport, spotter):
+        each.setup()
+        each.start()
+    runner = AgentRunner(system, "together", "fetcher", transport, tmp_path / "run", heartbeat=0.1, period=0.02,
+                         clock=clock)  # fmt: skip
+    thread = threading.Thread(target=runner.run, args=(120,), daemon=True)
+    beat = spotter.publisher(TopicQoS("/plan/together/agents", "ckm/agent-heartbeat", history=8))
+    try:
+        thread.start()
+        time.sleep(0.5)
+        assert runner.engine.active_path() is None and not runner.lost
+        assert until(lambda: (beat.publish({"agent": "spotter", "state": "", "t": 0.0}), "spotter" in runner.seen)[1],
+                     timeout=10)  # fmt: skip
+        assert until(lambda: runner.engine.active_path() == "Fetch/NAVIGATION/NAV", timeout=10)
+        assert not runner.lost
+    finally:
+        runner.stop()
+        thread.join(10)
+        for each in (transport, spotter):
+            each.stop()
 
 
 def test_an_agent_that_finished_in_its_success_final_is_not_lost(tmp_path: Path) -> None:
