@@ -3,7 +3,6 @@ takes the last leg from, what it does when none comes, and what it leaves as it 
 
 from __future__ import annotations
 
-import functools
 import math
 from pathlib import Path
 from typing import Any
@@ -12,9 +11,8 @@ import pytest
 
 import ckmconf
 from ckmconf.model import System
-from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
-from runtime.registry import default_registry
-from tests.memory_service import MemoryService
+from runtime.missions.behaviors import BehaviorStatus
+from tests.plugins.behaviors.test_usecase_behaviors import Rig
 
 REPO = Path(__file__).resolve().parents[3]
 STANDOFF, REAIM = 0.29, 0.16  # APPR's standoff and reaim in configs/usecase/behaviors.xml
@@ -27,29 +25,13 @@ def lab() -> System:
     return ckmconf.load(REPO / "configs" / "usecase" / "lab.xml")
 
 
-class Appr:
+class Appr(Rig):
     """APPR of the use case with its services in memory and a clock; the arm already reached."""
 
     def __init__(self, system: System, target: dict[str, Any], objects: dict[str, Any] | None) -> None:
-        record = system.behavior("APPR")
-        assert record is not None
-        self.time = 0.0
-        self.services = {u.alias: MemoryService(u.service) for u in record.uses}
-        self.inputs: dict[str, Any] = {"target": target, "pose": {"pose": dict(HERE)}, "objects": objects}
-        self.written: list[tuple[str, Any]] = []
-        context = BehaviorContext(
-            services=self.services,
-            inputs={p.name: functools.partial(self.inputs.get, p.name) for p in record.inputs},
-            outputs={p.name: functools.partial(self._write, p.name) for p in record.outputs},
-            now=lambda: self.time,
-        )
-        self.behavior: Behavior = default_registry().resolve("behavior", record.kind, record)(record, context)
-        self.behavior.start()
+        super().__init__(system, "APPR", {"target": target, "pose": {"pose": dict(HERE)}, "objects": objects})
         arm = next(v for n, v in self.written if n == "arm_goal")
         self.services["arm"].outputs["status"] = {"id": arm["id"], "state": "reached"}
-
-    def _write(self, name: str, value: Any) -> None:
-        self.written.append((name, value))
 
     def moves(self) -> list[dict[str, Any]]:
         return [v for n, v in self.written if n == "move"]
