@@ -21,9 +21,14 @@ is taken as already relative to the robot.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from typing import Any
+
+from runtime.missions.behaviors import Behavior
+
+_ids = itertools.count(1)  # goal ids, fresh across every behavior of the process
 
 
 def _state(message: Any, goal_id: int | None = None) -> str | None:
@@ -116,3 +121,12 @@ def observer_pose(position: Mapping[str, Any]) -> tuple[float, float, float] | N
     """The robot pose a ``map`` position was placed with (its ``observer`` list, D172), else None."""
     observer = position.get("observer")
     return robot_pose(observer[0]) if isinstance(observer, list) and len(observer) == 1 else None
+
+
+class _Goals(Behavior):
+    """Sends goals and follows their statuses by id."""
+
+    def _send(self, output: str, goal: dict[str, Any]) -> int:
+        goal_id = next(_ids)
+        self.write(output, {"id": goal_id, **goal})
+        return goal_id

@@ -1,0 +1,160 @@
+"""APPR (Table 7.7): the approach to the spotted object, with its re-aim after a long drive (D207).
+
+Split from :mod:`plugins.behaviors.usecase` (which re-exports it) to keep modules small.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from runtime.missions.behaviors import BehaviorStatus
+from runtime.verification.manifest import MAPPING, P, Params, Ports
+
+from .messages import _Goals, _share_done, _state, find_target, in_robot_frame, observer_pose, robot_pose
+
+
+class Approach(_Goals):
+    """APPR: the arm to ``armPose``, then the base to ``standoff`` metres from the target (a ``map``
+    target is placed relative to the robot with the pose it was placed with, its ``observer``, or
+    else the ``pose`` input); the base waits for the arm, so the arm never rises through the
+    table's edge.
+
+    A drive longer than ``reaimAbove`` (one from where BACK left the robot after a missed grasp)
+    stops ``reaim`` metres short, stands ``settle`` seconds and takes the last leg from a fresh
+    sighting of the target on the ``objects`` input (the fused recognition), placed with its own
+    observer pose: the heading the wheel odometry lost on the long drive (D207) is measured again
+    where the arm still lets the camera see the object. No fresh sighting within ``reaimWait``
+    seconds: the last leg goes straight on, as one move would have. A target without a ``label``
+    or no sighting of it on ``objects`` when the drive starts: one move, as before."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("standoff", 0.2, "Distance kept from the target.", unit="m"),
+        P("armPose", "pre_grasp", "Predefined arm pose reached on the way."),
+        P("reaim", 0.0, "Stop this far short of the standoff to look again (0: never).", unit="m", min=0.0),
+        P("reaimAbove", 0.0, "Only on drives longer than this.", unit="m", min=0.0),
+        P("settle", 2.5, "Standing still this long before a sighting counts (camera, recognition, fusion).",
+          unit="s", min=0.0),
+        P("reaimWait", 5.0, "Longest wait for a fresh sighting after settling.", unit="s", min=0.0),
+    )
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+
+    def start(self) -> None:
+        """Send the arm goal; the base goal follows once the arm has reached it."""
+        super().start()
+        self.phase = "arm"  # arm → drive (one move, or the short one) → look → last (the last leg)
+        self.move_id: int | None = None
+        self.legs: list[float] = []  # the drive's lengths: one move, or the short move and the last leg
+        self.label = ""
+        self.stopped = 0.0  # when the short move ended
+        self.settled: Any = None  # the fused message when the settling ended: a sighting must be newer
+        self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]})
+
+    def _relative(self, target: Any) -> tuple[float, float] | None:
+        """The target in the robot frame: with the pose it was placed with, else the ``pose`` input."""
+        # The pose the fusion placed the target with, when it says: the robot has stood still
+        # since, and the estimate's bias cancels (D172). Else the latest estimate.
+        pose = observer_pose(target)
+        if pose is None and "pose" in self.context.inputs:
+            pose = robot_pose(self.read("pose"))
+        return in_robot_frame(target, pose)
+
+    def _sighting(self) -> Mapping[str, Any] | None:
+        """The most reliable positioned sighting of the target on the ``objects`` input, None if none."""
+        result = self.read("objects") if self.label and "objects" in self.context.inputs else None
+        if not isinstance(result, Mapping) or not isinstance(result.get("objects"), list):
+            return None
+        placed = [o for o in result["objects"] if isinstance(o, Mapping) and isinstance(o.get("x"), int | float)
+                  and isinstance(o.get("y"), int | float)]  # fmt: skip
+        return find_target({"objects": placed}, self.label, "")
+
+    def _move(self, relative: tuple[float, float], keep_off: float) -> float:
+        """Send the drive to ``keep_off`` metres from the target at ``relative``, facing it; its length."""
+        x, y = relative
+        distance = math.hypot(x, y)
+        keep = max(0.0, distance - keep_off) / distance if distance > 0 else 0.0
+        self.move_id = self._send("move", {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)})
+        return distance * keep
+
+    def _first_move(self) -> BehaviorStatus | None:
+        """Send the first move (status while it cannot be sent): to the standoff, or short of it to look again."""
+        target = self.read("target")
+        if not isinstance(target, Mapping) or not isinstance(target.get("x"), int | float):
+            return BehaviorStatus(progress=0.0, detail="no target")
+        relative = self._relative(target)
+        if relative is None:
+            return BehaviorStatus(progress=0.0, detail="waiting for the pose estimate")
+        p = self.params
+        self.label = str(target.get("label") or "")
+        drive = math.hypot(*relative) - p["standoff"]
+        if p["reaim"] > 0 and drive > max(p["reaimAbove"], p["reaim"]) and self._sighting() is not None:
+            self.legs = [self._move(relative, p["standoff"] + p["reaim"]), p["reaim"]]
+        else:
+            self.legs = [self._move(relative, p["standoff"])]
+        self.phase = "drive"
+        return None
+
+    def _fresh(self) -> tuple[float, float] | None:
+        """The target relative to the robot as a sighting made since the robot settled sees it, else None."""
+        objects = self.read("objects")
+        if self.settled is None:
+            self.settled = objects if objects is not None else {}
+        sighting = self._sighting() if objects != self.settled else None  # a new fusion result
+        observer = None if sighting is None else observer_pose(sighting)
+        pose = robot_pose(self.read("pose")) if "pose" in self.context.inputs else None
+        if observer is None or pose is None:
+            return None
+        # placed with the pose where the robot stands (not one from before the stop)
+        if math.dist(observer[:2], pose[:2]) > 0.05 or abs(math.remainder(observer[2] - pose[2], math.tau)) > 0.05:
+            return None
+        assert sighting is not None
+        return self._relative(sighting)
+
+    def _look(self) -> bool:
+        """Standing short of the standoff: send the last leg once a fresh sighting or the wait's end allows."""
+        waited, p = self.context.now() - self.stopped, self.params
+        if waited < p["settle"]:
+            return False
+        relative = self._fresh()
+        if relative is not None:
+            self.legs[1] = self._move(relative, p["standoff"])
+            self.context.log("re-aimed", x=round(relative[0], 4), y=round(relative[1], 4))
+            return True
+        if waited >= p["settle"] + p["reaimWait"]:  # the move short faced the target: straight on
+            self.legs[1] = self._move((self.legs[1] + p["standoff"], 0.0), p["standoff"])
+            self.context.log("no fresh sighting: straight on", distance=round(self.legs[1], 4))
+            return True
+        return False
+
+    def step(self) -> BehaviorStatus:
+        """Raise the arm, then drive to ``standoff`` from the target; done when both are reached."""
+        arm_state = _state(self.service("arm").output("status"), self.arm_id)
+        if self.phase == "arm":
+            if arm_state != "reached":  # the arm up first: it must not sweep the table
+                if arm_state == "failed":
+                    return BehaviorStatus(progress=0.0, failed=True, detail="the arm did not reach its pose")
+                return BehaviorStatus(progress=0.0, detail="raising the arm")
+            if (waiting := self._first_move()) is not None:
+                return waiting
+        move = self.service("base").output("move_status")
+        move_state = _state(move, self.move_id)
+        if self.phase == "drive" and move_state == "done" and len(self.legs) == 2:
+            self.phase, self.stopped = "look", self.context.now()
+        if self.phase == "look":
+            if not self._look():
+                return BehaviorStatus(progress=self._progress(arm_state, 1.0), detail="looking again")
+            self.phase, move_state = "last", None
+        share = _share_done(move) if move_state else 0.0
+        if "failed" in (move_state, arm_state):
+            return BehaviorStatus(progress=self._progress(arm_state, share), failed=True)
+        done = move_state == "done" and arm_state == "reached" and (self.phase == "last" or len(self.legs) == 1)
+        return BehaviorStatus(progress=1.0 if done else self._progress(arm_state, share), done=done)
+
+    def _progress(self, arm_state: str | None, share: float) -> float:
+        """0.2 for the arm, 0.8 for the share of the whole drive done (``share`` of the current move)."""
+        total = sum(self.legs)
+        before = self.legs[0] if self.phase == "last" else 0.0
+        current = self.legs[-1] if self.phase == "last" else self.legs[0] if self.legs else 0.0
+        driven = (before + share * current) / total if total > 0 else share
+        return 0.8 * driven + 0.2 * (arm_state == "reached")
