@@ -68,6 +68,7 @@ class Disturbances:
         self.pending: list[Event] = list(scenario.events)
         self.world: World | None = None
         self.bodies: dict[str, int] = {}
+        self.starts: dict[str, tuple[float, ...]] = {}
         self._parked = 0
 
     # ------------------------------------------------------------------ binding
@@ -83,6 +84,8 @@ class Disturbances:
                     raise self._error(action.body, f"box {action.body.text!r}: the world has a body of that name")
                 assert action.size is not None
                 self.bodies[action.body.text] = self._box(*action.size)
+        # where every body stands as the world is built (a box: parked): ``of start`` measures from there (D209)
+        self.starts = {name: tuple(world.pose(body)[0][:2]) for name, body in self.bodies.items()}
         for event in self.scenario.events:  # boxes first: a later line may name an earlier one's box
             for condition in event.conditions:
                 for token in (condition.body, condition.place):
@@ -140,8 +143,9 @@ class Disturbances:
         if condition.body is None:
             return world.time >= condition.value
         x, y = world.pose(self.bodies[condition.body.text])[0][:2]
-        if condition.point is not None:
-            distance = math.hypot(x - condition.point[0], y - condition.point[1])
+        point = self.starts[condition.body.text] if condition.from_start else condition.point
+        if point is not None:
+            distance = math.hypot(x - point[0], y - point[1])
         else:
             assert condition.place is not None
             low, high = p.getAABB(self.bodies[condition.place.text], -1, physicsClientId=world.client)

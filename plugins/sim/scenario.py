@@ -9,7 +9,9 @@ holds (checked after each advance of the physics), in file order::
              | "when" COND ("and" COND)*
     COND    := BODY ("within" | "beyond") D "of" PLACE   planar distance, metres
              | "after" T
-    PLACE   := BODY | "point" X Y                     a body: the distance to its base's bounding box
+    PLACE   := BODY | "point" X Y | "start"           a body: the distance to its base's bounding box;
+                                                      start: where the measured BODY stood when the
+                                                      world was built (any layout's start, D209)
     ACTION  := "move" BODY "to" X Y [Z]               keeps its orientation (and height without Z)
              | "move" BODY "by" DX DY [DZ]
              | "drop" BODY "beside" BODY DX DY        upright on the floor at (DX, DY) in the frame of
@@ -55,8 +57,9 @@ class Condition:
     body: Token | None
     relation: str  # "within", "beyond" or "after"
     value: float
-    place: Token | None = None  # the body measured to; None: ``point``
+    place: Token | None = None  # the body measured to; None: ``point`` or ``start``
     point: tuple[float, float] | None = None
+    from_start: bool = False  # ``of start``: the measured body's position when the world was built
 
 
 @dataclass(frozen=True)
@@ -152,7 +155,7 @@ class _Line:
 
 
 KEYWORDS = frozenset({"at", "when", "and", "after", "within", "beyond", "of", "point", "move", "to", "by", "drop",
-                      "beside", "add", "box", "remove"})  # fmt: skip
+                      "beside", "add", "box", "remove", "start"})  # fmt: skip
 
 
 def _condition(line: _Line) -> Condition:
@@ -169,7 +172,10 @@ def _condition(line: _Line) -> Condition:
         line.take("point")
         point = (line.number("x (m)"), line.number("y (m)"))
         return Condition(body, relation, distance, point=point)
-    return Condition(body, relation, distance, place=line.name("a body or 'point X Y'"))
+    if target is not None and target.text == "start":
+        line.take("start")
+        return Condition(body, relation, distance, from_start=True)
+    return Condition(body, relation, distance, place=line.name("a body, 'point X Y' or 'start'"))
 
 
 def _action(line: _Line) -> Action:

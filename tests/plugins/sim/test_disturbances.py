@@ -123,6 +123,32 @@ def test_dropped_object_falls_from_the_gripper_to_the_floor_on_the_way_home(lab:
     assert z == pytest.approx(0.06, abs=0.01)  # standing on the floor (12 cm tall)
 
 
+def test_of_start_measures_from_where_the_body_stood_when_the_world_was_built(environment: object) -> None:
+    """D209: ``of start`` follows the layout (the compact copy starts the Turtlebot at (6.3, 4.6), 5.8 m
+    from the lab's start): nothing fires there at the start, the crate lands once it has gone 1.5 m."""
+    world = World(environment, seed=1)  # type: ignore[arg-type]
+    try:
+        world.load_robot("turtlebot", "turtlebot", (6.3, 4.6, 0.785))
+        fired = _install(world, "blocked-path")
+        world.step(240)
+        assert fired == []  # "beyond 1.5 of point 1.5 1.5" had dropped the crate here at once
+        _place(world, "turtlebot", 6.3, 3.3, -1.57)
+        world.step(240)
+        assert fired == []  # 1.3 m from its start
+        _place(world, "turtlebot", 6.3, 2.9, -1.57)
+        world.step(240)
+        assert [f.body for f in fired] == ["crate"]
+        x, y, _ = fired[0].position
+        assert math.hypot(x - 6.3, y - (2.9 - 1.2)) < 0.05  # 1.2 m ahead of it
+    finally:
+        world.close()
+
+
+def test_start_is_a_keyword_not_a_body_name() -> None:
+    with pytest.raises(ScenarioError, match=r"s.scenario:1:14: the new box.s name must be a name, not .start."):
+        parse("at 1 add box start 1 1 1 at 2 2", "s.scenario")
+
+
 def test_remove_and_move_to_and_time_triggers(lab: World) -> None:
     fired: list[Fired] = []
     text = "at 0.5 remove box_orange\nwhen after 1 and turtlebot within 5 of point 1 1 move cylinder_blue_dots to 2 3"
