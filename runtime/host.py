@@ -12,7 +12,8 @@ processes. :class:`Host` owns what happens to them in one process, in this order
 4. **start** the nodes, then their partition supervisors;
 5. **wait** until SIGINT/SIGTERM (:func:`stop_on_signals`), the run's duration, a failure
    (:meth:`Host.fail`) or the caller's own end condition;
-6. **stop**, each step isolated and bounded by ``stop_timeout``: the partitions, the nodes in
+6. **stop**, each step isolated and bounded by ``stop_timeout``: the alarms' judging (a stop's own
+   effects are not faults), the partitions, the nodes in
    reverse order (each drives its actuators to their safe values first), whatever the caller
    registered with :meth:`Host.on_stop`, the transport, the hardware sessions;
 7. write the **run record** (:mod:`runtime.runrecord`) and report every failure on stderr with
@@ -268,9 +269,11 @@ class Host:
     # ------------------------------------------------------------------ stopping
 
     def stop(self) -> None:
-        """Stop everything, each step isolated and bounded: the partitions first (their actuators
+        """Stop everything, each step isolated and bounded: the alarms' judging, the partitions (their actuators
         safe), the nodes in reverse order, the :meth:`on_stop` steps, the transport, the
         sessions. Never raises; a step that does not end in time is listed in ``stuck``."""
+        for runtime in self.runtimes:  # alarms first: a stop's own effects are not the run's faults
+            isolated(f"stop monitoring node {runtime.node.name}", runtime.stop_monitoring)
         for supervisor in self.supervisors:  # bounded by its own stop_timeout per partition
             isolated(f"stop the partitions of {supervisor.node.name}", supervisor.stop)
         steps: list[tuple[str, Callable[[], Any]]] = [(f"stop node {r.node.name}", r.stop) for r in self.runtimes]

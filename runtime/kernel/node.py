@@ -255,6 +255,12 @@ class NodeRuntime:
             self.scheduler.start()
         self.hosting.start()
 
+    def stop_monitoring(self) -> None:
+        """Stop judging the node's alarms: the run is being stopped, and what a stop does (partitions
+        ended, topics no longer published) is not a fault of the run (a short lab run once failed
+        on ``scan_stale`` raised while its partitions stopped)."""
+        self.scheduler.remove(f"{self.node.name}.monitor")
+
     def stop(self) -> None:
         """Drive every actuator to its safe value first, then stop the services and close the hardware.
 

@@ -26,9 +26,11 @@ from runtime.kernel.reactions import react
 from runtime.kernel.services import stale_after
 from runtime.network import TopicQoS, Transport, open_transport
 from runtime.resources.resource import SmartResourceRuntime
+from tests.conftest import REPO
 from tests.runtime.kernel.test_node import SWITCHING
 from tests.runtime.network.conftest import private_network
 from tests.runtime.resources.plugin_host_peer import registry
+from tests.waiting import until
 
 
 @pytest.fixture
@@ -97,3 +99,25 @@ def test_a_stream_its_records_cannot_make_is_a_config_error_at_the_service(trans
     with pytest.raises(ConfigError) as refused:
         runtime.setup()
     assert refused.value.xpath == "/Service" and "must share one acquisition plugin" in refused.value.message
+
+
+@pytest.mark.parametrize("stopping", [False, True])
+def test_a_node_being_stopped_no_longer_judges_its_alarms(transport: Transport, tmp_path: Path, stopping: bool) -> None:
+    """Host.stop calls stop_monitoring before it ends the partitions: a topic that goes (or stays)
+    unpublished while the run stops is not the run's fault (a 3 s lab run failed on scan_stale so)."""
+    text = (REPO / "tests" / "data" / "run" / "serious_alarm.xml").read_text()
+    path = tmp_path / "alarm.xml"
+    path.write_text(text.replace('above="0.2" severity="error"', 'above="0.2" hold="0.5" severity="error"'))
+    system = ckmconf.load(path)
+    runtime = NodeRuntime(system.nodes[0], system, transport)
+    runtime.setup()
+    runtime.start()
+    try:
+        if stopping:
+            runtime.stop_monitoring()
+        assert runtime.monitor is not None
+        state = runtime.monitor.alarms["heartbeat_lost"]
+        raised = until(lambda: state.raised > 0, 2.0)
+        assert raised is not stopping
+    finally:
+        runtime.stop()
