@@ -374,7 +374,6 @@ class PartitionSupervisor:
             self._ended(state, code)
 
 
-
 def _wall() -> float:
     """The wall clock: a stop's bound is on it, not on a lock-step or scaled clock, which may run
     far ahead of the wall while the supervisor waits (a partition killed while stopping cleanly)."""
