@@ -44,13 +44,15 @@ def bind_listener(interface: str, base: int, tries: int) -> socket.socket:
         server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             server.bind((interface, port))
+            # With SO_REUSEADDR two peers starting together can both bind a port no one listens
+            # on yet; the second to listen then gets EADDRINUSE here: the port is taken, try the next.
+            server.listen(64)
         except OSError as exc:
             server.close()
             if exc.errno not in (errno.EADDRINUSE, errno.EACCES):
                 raise NetworkError(f"cannot listen on {interface}:{port}: {exc}") from exc
             last = exc
             continue
-        server.listen(64)
         server.settimeout(0.1)
         return server
     raise NetworkError(f"no free port on {interface} in {base}…{base + tries - 1}: {last}")
