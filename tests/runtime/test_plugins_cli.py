@@ -79,7 +79,7 @@ def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
         ("pdi", "ckm-plugins: no kind 'pdi' is registered (see ckm-plugins list)"),
         (
             "controller.pdi",
-            "ckm-plugins: no controller kind 'pdi' (registered: constant, diff-drive, diff-drive-odometry,"
+            "ckm-plugins: no controller kind 'pdi' (registered: back-off, constant, diff-drive, diff-drive-odometry,"
             " friction-feedforward, gpc, joint-trajectory, pan-tilt-position, pid, ramp-stop, relay)",
         ),
     ],
