@@ -241,7 +241,9 @@ def _parser() -> argparse.ArgumentParser:
         "lost-humanoid, or a FILE.scenario of world events (benchmarks/mission_scenarios.py)",
     )
     parser.add_argument("--kill-agent", help="kill the process of this plan agent in every run (a split run)")
-    parser.add_argument("--kill-after", type=float, help="simulated s after that agent's mission started (default 5)")
+    parser.add_argument(
+        "--kill-after", type=float, help="simulated s after that agent's mission started (default 5, lost-humanoid 1)"
+    )
     return parser
 
 

@@ -6,9 +6,10 @@ A scenario disturbs every run of the benchmark and says how the missions must ha
   (``benchmarks/scenarios/NAME.scenario``, :mod:`plugins.sim.scenario`) the run's world server
   fires (``CKM_SIM_SCENARIO``); expected: the mission still succeeds (re-plan, spot again, pick
   again) and the object ends on the drop table (the world's own evidence, ``sim-final.json``);
-- ``lost-humanoid``: the process of the plan's agent ``nao`` is killed (SIGKILL) 5 simulated
-  seconds after its mission started; expected: every other agent ends in a failure final (the
-  Turtlebot's ``lost('nao')`` branch) and its recording has ``agent-lost``.
+- ``lost-humanoid``: the process of the plan's agent ``nao`` is killed (SIGKILL) 1 simulated
+  second after its mission started, before the Nao signals (D232); expected: every other agent
+  ends in a failure final (the Turtlebot's ``lost('nao')`` branch) and its recording has
+  ``agent-lost``.
 
 ``--scenario FILE.scenario`` runs any world scenario file (expected: success); ``--kill-agent`` and
 ``--kill-after`` set or change the killed agent and the delay. A world scenario needs a
@@ -67,7 +68,7 @@ BUILT_IN = {
     "blocked-path": Scenario("blocked-path", world=str(SCENARIOS / "blocked-path.scenario")),
     "moved-object": Scenario("moved-object", world=str(SCENARIOS / "moved-object.scenario")),
     "dropped-object": Scenario("dropped-object", world=str(SCENARIOS / "dropped-object.scenario")),
-    "lost-humanoid": Scenario("lost-humanoid", kill_agent="nao", kill_after=5.0, expect="failure"),
+    "lost-humanoid": Scenario("lost-humanoid", kill_agent="nao", kill_after=1.0, expect="failure")  # D232,
 }
 
 
