@@ -3,6 +3,8 @@ bounded acceleration, then stop; a second take-over reverses again; bad Params a
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from plugins.controllers import backoff
@@ -26,7 +28,7 @@ class _Clock:
 @pytest.fixture
 def clock(monkeypatch: pytest.MonkeyPatch) -> _Clock:
     fake = _Clock()
-    monkeypatch.setattr(backoff.time, "monotonic", fake)
+    monkeypatch.setattr(backoff, "time", SimpleNamespace(monotonic=fake))
     return fake
 
 
@@ -47,7 +49,7 @@ def test_reverses_for_its_duration_with_bounded_acceleration_then_stops(clock: _
     c = back_off()
     c.bumpless((0.3, 0.2))  # taking over from the kinematics, the base still driving forward
     rows = _run(c, clock, 80)
-    previous = (0.3, 0.2)
+    previous: tuple[float, ...] = (0.3, 0.2)
     for row in rows:
         assert all(abs(a - b) <= 1.0 * DT + 1e-12 for a, b in zip(row, previous, strict=True))
         previous = row
