@@ -98,12 +98,15 @@ class Master:
                 LOG.warning("lock-step clock held at %.3f s for %g s by process(es) %s", now * 1e-9, STALL, holders)
 
     def _tick_due(self, now: int, live: npt.NDArray[np.bool_]) -> None:
-        """Wake every live process of the run at ``now`` (its ticker ends the waits that are due). Waking
-        only the processes with a wait due in the file measured no faster, and a thread's wait that is
-        not in the file (a process's observer) would then wait for another process's move."""
+        """Wake the processes with a wait due at ``now``, and those with no timed participant (the
+        world server observes the clock: its waits are not in the file). A process with nothing due
+        sleeps on: one hand-off per process that works at this instant, not per process of the run."""
         clock, blocks = self.clock, self.clock.blocks
         here = os.getpid()
         for index in np.flatnonzero(live):
+            row_due = int(blocks[index, 1:].min())
+            if now < row_due < IDLE:
+                continue
             pid = int(blocks[index, 0])
             if pid == here:  # this process's waits: ended here, one hand-off fewer
                 clock.fire_due()
