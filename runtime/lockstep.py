@@ -37,6 +37,7 @@ import multiprocessing.connection
 import os
 import queue
 import shutil
+import socket
 import subprocess
 import threading
 import time
@@ -45,18 +46,27 @@ from collections.abc import Callable, Iterator, MutableMapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .lockstep_clock import (
     _REAL,
     IDLE,
+    IDLE_PACE,
+    LOG,
+    PENDING,
     RUNNING,
+    STALL,
     VARIABLE,
     WORDS,
     SharedClock,
+    _alive,
     to_ns,
+    unheld,
 )
-from .lockstep_master import Master
+from .lockstep_frames import Settling
 
 HOLD = "CKM_LOCKSTEP_HOLD"  # set for a ckm-run process the run starts: it holds the clock from its start
+START_WAIT = 60.0  # wall seconds the clock waits for a started ckm-run process to join it
 
 __all__ = ["VARIABLE", "SharedClock", "active", "create", "install", "observe", "real", "unclocked", "unheld_children"]
 
@@ -65,6 +75,81 @@ def real(name: str) -> Callable[..., Any]:
     """The wall clock's ``time.NAME`` (``monotonic``, ``sleep``…) as it was before any patch."""
     function: Callable[..., Any] = _REAL.get(name) or getattr(time, name)
     return function
+
+
+# ---------------------------------------------------------------------- the master
+
+
+class Master:
+    """Advances the shared clock (a thread of the run's lead process)."""
+
+    def __init__(self, clock: SharedClock) -> None:
+        self.clock = clock
+        self.moves = 0
+        self.settling = Settling(clock)
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        path = clock.directory / "m"
+        path.unlink(missing_ok=True)
+        self.sock.bind(str(path))
+        unheld(threading.Thread(target=self._run, name="ckm-lockstep-master", daemon=True)).start()
+
+    def _run(self) -> None:
+        clock, blocks, words = self.clock, self.clock.blocks, self.clock.words
+        clock.local.unclocked = True  # the frames it hands over in this process may sleep: on the wall clock
+        checked = moved = _REAL["monotonic"]()
+        self.sock.settimeout(0.02)
+        while True:
+            live = blocks[:, 0] != 0
+            now = int(words[0])
+            due = int(blocks[live, 1:].min()) if live.any() else IDLE
+            pending = int(words[PENDING])
+            if pending and _REAL["monotonic"]() - moved > START_WAIT:  # a process that never came: go on
+                LOG.warning("lock-step clock: %d started process(es) not on the clock after %g s", pending, START_WAIT)
+                words[PENDING] = pending = 0
+            # frames between the processes still in flight hold it too (D220: forgiven after a wall timeout)
+            if due > now and not pending and self.settling.settled(live):
+                if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
+                    _REAL["sleep"](IDLE_PACE)
+                # again, after the frames settled: an arrived frame sets its DELIVERY slot before its count
+                due = int(blocks[live, 1:].min()) if live.any() else IDLE
+                if due <= now or words[PENDING]:
+                    continue
+                words[0] = min(due, now + clock.step_ns)
+                self.moves += 1
+                moved = _REAL["monotonic"]()
+                here = os.getpid()
+                for pid in blocks[live, 0]:
+                    if int(pid) == here:  # this process's waits: ended here, one hand-off fewer
+                        clock.fire_due()
+                        continue
+                    with contextlib.suppress(OSError):
+                        self.sock.sendto(b".", str(clock.directory / f"p{int(pid)}"))
+                continue
+            try:
+                self.sock.recv(16)
+                self.sock.setblocking(False)
+                try:
+                    while True:
+                        self.sock.recv(16)
+                except OSError:
+                    pass
+                finally:
+                    self.sock.settimeout(0.02)
+            except OSError:  # a timeout: look again (a poke may have been lost)
+                pass
+            wall = _REAL["monotonic"]()
+            if wall - checked > 1.0:
+                checked = wall
+                for index in np.flatnonzero(live):
+                    pid = int(blocks[index, 0])
+                    if not _alive(pid):
+                        LOG.warning("lock-step clock: process %d ended; its threads no longer hold the clock", pid)
+                        blocks[index, 1:] = IDLE
+                        blocks[index, 0] = 0
+            if wall - moved > STALL:
+                moved = wall
+                holders = [int(blocks[i, 0]) for i in np.flatnonzero(live) if int(blocks[i, 1:].min()) <= now]
+                LOG.warning("lock-step clock held at %.3f s for %g s by process(es) %s", now * 1e-9, STALL, holders)
 
 
 # ---------------------------------------------------------------------- installing

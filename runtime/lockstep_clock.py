@@ -22,8 +22,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .lockstep_os import alive, nonblocking_sender
-
 LOG = logging.getLogger("ckm.lockstep")
 VARIABLE = "CKM_LOCKSTEP"  # "DIRECTORY STEP_NS MASTER_PID MONO0 WALL0"
 BLOCKS = 64  # processes of a run
@@ -104,9 +102,6 @@ class SharedClock:
         self.threads: dict[int, threading.Thread] = {}
         self.local = threading.local()
         self.sock: socket.socket | None = None
-        # wake-ups leave by a socket that never blocks: a timed socket spins while the master's queue
-        # (net.unix.max_dgram_qlen, 10 here) is full, and a full queue wakes the master anyway
-        self.tx = nonblocking_sender()
         self.before_fire: Callable[[int], None] | None = None  # frames handed over at a move (lockstep_frames)
 
     # ------------------------------------------------------------------ time
@@ -132,7 +127,7 @@ class SharedClock:
         try:
             for index in range(BLOCKS):
                 pid = int(self.blocks[index, 0])
-                if pid == 0 or not alive(pid):
+                if pid == 0 or not _alive(pid):
                     self.blocks[index, 1:] = IDLE
                     self.guids[index] = 0  # a dead process's transports and counts are not ours
                     self.counts[index] = 0
@@ -187,7 +182,7 @@ class SharedClock:
             self.blocks[block, 0] = 0
             if self.sock is not None:
                 with contextlib.suppress(OSError):
-                    self.tx.sendto(b".", str(self.directory / "m"))
+                    self.sock.sendto(b".", str(self.directory / "m"))
 
     def release_slot(self, slot: int) -> None:
         """Free a participant's slot (its thread ended)."""
@@ -259,7 +254,7 @@ class SharedClock:
         """Tell the master a slot changed (it may now advance)."""
         if self.sock is not None:
             with contextlib.suppress(OSError):
-                self.tx.sendto(b".", str(self.directory / "m"))
+                self.sock.sendto(b".", str(self.directory / "m"))
 
     # ------------------------------------------------------------------ waits
 
@@ -331,7 +326,7 @@ class SharedClock:
             except TimeoutError:
                 if self.newborns:
                     sock.settimeout(self._lapse())
-                if not alive(self.master):
+                if not _alive(self.master):
                     self._orphan()
                     return
             except OSError:
@@ -387,6 +382,21 @@ class SharedClock:
     def after_fork(self) -> None:
         """In a forked child: nothing of the parent's block is ours."""
         self._reset()
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie, ended but not yet reaped by its parent, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True
+    return stat[stat.rfind(")") + 2 :][:1] not in ("Z", "X")
 
 
 def unheld(thread: threading.Thread) -> threading.Thread:
