@@ -16,12 +16,12 @@ from collections.abc import Mapping
 from typing import Any
 
 from ckmconf.model.kernel import Controller as ControllerRecord
-from runtime.kernel.interfaces import ParamError, read_params
+from runtime.kernel.interfaces import read_params
 from runtime.verification.manifest import NUMBER, P, Params, Ports
 
 from .common import check_state
 from .diffdrive import _toward
-from .multi import MultiOutputController, Row, role_values
+from .multi import MultiOutputController, Row, measured_row, measured_size
 
 
 class BackOff(MultiOutputController):
@@ -58,14 +58,7 @@ class BackOff(MultiOutputController):
 
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)
-        if not record.outputs:
-            raise ParamError(f"{self.owner} needs at least one <Output>")
-        self.size = len(record.outputs)
-        measures = sum(1 for port in record.inputs if port.role == "measure")
-        if measures not in (0, self.size):
-            raise ParamError(
-                f"{self.owner}: give one 'measure' input per output ({self.size}), in the same order, not {measures}"
-            )
+        self.size = measured_size(record, self.owner)
         params = read_params(record.params, self.PARAMS, owner=self.owner)
         self.speed: float = params["speed"]
         self.duration: float = params["duration"]
@@ -85,8 +78,7 @@ class BackOff(MultiOutputController):
             self._outputs, self._active = None, 0.0
         self._last = now
         if self._outputs is None:
-            measured = [float(v) for v in role_values(inputs, "measure")]
-            self._outputs = tuple(measured) if len(measured) == self.size else (0.0,) * self.size
+            self._outputs = measured_row(inputs, self.size)
         target = self._target(self._active)
         self._outputs = tuple(_toward(v, target, self.acceleration * dt) for v in self._outputs)
         self._active += dt

@@ -28,7 +28,7 @@ from runtime.kernel.interfaces import ParamError, read_params
 from runtime.verification.manifest import MAPPING, NUMBER, REQUIRED, P, Params, Ports
 
 from .common import check_state, clamp
-from .multi import MultiOutputController, Row, field, role_values
+from .multi import MultiOutputController, Row, field, measured_row, measured_size
 
 
 def _toward(current: float, target: float, step: float) -> float:
@@ -140,14 +140,7 @@ class RampStop(MultiOutputController):
 
     def __init__(self, record: ControllerRecord) -> None:
         super().__init__(record)
-        if not record.outputs:
-            raise ParamError(f"{self.owner} needs at least one <Output>")
-        self.size = len(record.outputs)
-        measures = sum(1 for port in record.inputs if port.role == "measure")
-        if measures not in (0, self.size):
-            raise ParamError(
-                f"{self.owner}: give one 'measure' input per output ({self.size}), in the same order, not {measures}"
-            )
+        self.size = measured_size(record, self.owner)
         self.deceleration: float = read_params(record.params, self.PARAMS, owner=self.owner)["deceleration"]
         self._outputs: Row | None = None  # None: take the measures at the next step
 
@@ -161,8 +154,7 @@ class RampStop(MultiOutputController):
     def step_outputs(self, inputs: Mapping[str, Any], dt: float) -> Row:
         """Every output one period further toward 0 (starting from the measured speeds)."""
         if self._outputs is None:
-            measured = [float(v) for v in role_values(inputs, "measure")]
-            self._outputs = tuple(measured) if len(measured) == self.size else (0.0,) * self.size
+            self._outputs = measured_row(inputs, self.size)
         self._outputs = self._ramp(self._outputs, dt if dt > 0.0 else self.record.period)
         return self._outputs
 

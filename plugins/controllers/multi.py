@@ -111,3 +111,24 @@ class MultiOutputController(Controller):
             return (float(output),) * size if size == 1 else None
         row = tuple(float(v) for v in output)
         return row if len(row) == size else None
+
+
+def measured_size(record: ControllerRecord, owner: str) -> int:
+    """How many outputs a controller has that starts from one ``measure`` input per output (or none).
+
+    Raises:
+        ParamError: no output, or a number of measures that is neither 0 nor one per output.
+    """
+    if not record.outputs:
+        raise ParamError(f"{owner} needs at least one <Output>")
+    size = len(record.outputs)
+    measures = sum(1 for port in record.inputs if port.role == "measure")
+    if measures not in (0, size):
+        raise ParamError(f"{owner}: give one 'measure' input per output ({size}), in the same order, not {measures}")
+    return size
+
+
+def measured_row(inputs: Mapping[str, Any], size: int) -> Row:
+    """The ``measure`` inputs as a row of ``size`` outputs (zeros when they are not all there)."""
+    measured = [float(v) for v in role_values(inputs, "measure")]
+    return tuple(measured) if len(measured) == size else (0.0,) * size
