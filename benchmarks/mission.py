@@ -113,6 +113,7 @@ def run_once(
     timeout: float | None = None,
     env: Mapping[str, str] | None = None,
     lockstep: float | None = None,
+    record: str | None = None,
 ) -> tuple[int | None, float]:
     """Run ``ckm-run`` on ``config`` with ``plan`` into ``run_dir``; (exit code or None on a timeout, wall s).
 
@@ -126,6 +127,8 @@ def run_once(
         command += ["--time-scale", f"{time_scale:g}"]
     if lockstep is not None:
         command += ["--lockstep", f"{lockstep:g}"]
+    if record:
+        command += ["--record", record]
     if timeout is None:
         pace = LOCKSTEP_WALL_PER_SIM_S if lockstep is not None else 1.0 / (time_scale or 1.0)
         timeout = duration * pace + MARGIN_S
@@ -150,13 +153,13 @@ def run_once(
 
 def _run(
     config: Path, plan: str, run_dir: Path, scenario: Scenario | None, duration: float, scale: float | None, logs: Path,
-    lockstep: float | None = None,
+    lockstep: float | None = None, record: str | None = None,
 ) -> tuple[int | None, float]:
     """One run of the benchmark, disturbed as ``scenario`` says: split over processes to kill an agent."""
     log = logs / f"{run_dir.name}.log"
     if scenario is None or scenario.kill_agent is None:
         return run_once(config, plan, run_dir, duration=duration, time_scale=scale, log=log, env=environment(scenario),
-                        lockstep=lockstep)  # fmt: skip
+                        lockstep=lockstep, record=record)  # fmt: skip
     started = time.monotonic()
     log.parent.mkdir(parents=True, exist_ok=True)
     code = run_split(config, plan, run_dir, scenario, duration=duration, time_scale=scale, log=log,
@@ -234,6 +237,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--lockstep", type=float, help="ckm-run --lockstep STEP (simulated s): lock-step time")
     parser.add_argument("--ports", type=int, nargs=2, metavar=("DISCOVERY", "BASE"),
                         help="run a copy on these network ports (its <Network> discoveryPort and basePort)")
+    parser.add_argument("--record", metavar="TOPICS",
+                        help="ckm-run --record TOPICS in every run (to see afterwards why one failed)")
     parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the sensor noise (0: none)")
     parser.add_argument(
         "--scenario",
@@ -271,6 +276,8 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
             check(scenario, args.config, args.plans)
             if args.lockstep is not None and scenario.kill_agent is not None:
                 raise ValueError("--lockstep cannot run a split run (a killed agent): its processes share no clock")
+            if args.record and scenario.kill_agent is not None:
+                raise ValueError("--record cannot record a split run (a killed agent): one process per node")
     except (ckmconf.ConfigError, ValueError, OSError) as error:
         parser.error(str(error))
     # lock-step time has no scale: the clock waits for the machine (ckm-run refuses both)
@@ -289,7 +296,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
         for plan in args.plans:
             name = f"{plan}-seed{seed}"
             code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs",
-                              args.lockstep)  # fmt: skip
+                              args.lockstep, args.record)  # fmt: skip
             record = collect(out / "runs" / name, code, finals[plan])
             record["object_home"] = object_home(config, out / "runs" / name)
             record["success"] = record["success"] and record["object_home"] is not False

@@ -173,6 +173,9 @@ def test_bench_runs_a_plan_and_its_summary_is_what_the_recordings_say(
     assert (out / "mission-states.png").stat().st_size > 5_000
 
 
+SIGNAL = "/plan/fetch-together/object-spotted"
+
+
 def test_a_lockstep_bench_runs_without_the_default_time_scale(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -185,6 +188,19 @@ def test_a_lockstep_bench_runs_without_the_default_time_scale(
     assert result["time_scale"] is None and result["plans"][0]["success_rate"] == 1.0
     command = (out / "runs" / "fetch-together-seed1.log").read_text().splitlines()[0]
     assert "--lockstep 0.01" in command and "--time-scale" not in command
+
+
+def test_record_reaches_every_run_s_ckm_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # the plan-only system has no topic: ckm-run's own refusal shows the option got there
+    out = tmp_path / "bench"
+    argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "1"]
+    argv += ["--duration", "30", "--lockstep", "0.01", "--no-randomise", "--out", str(out), "--record", SIGNAL]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["plans"][0]["success_rate"] == 0.0
+    command, *rest = (out / "runs" / "fetch-together-seed1.log").read_text().splitlines()
+    assert command.endswith(f"--record {SIGNAL}")
+    assert f"--record: no topic '{SIGNAL}' here" in "\n".join(rest)
 
 
 def test_a_run_stopped_at_its_timeout_or_failing_is_no_success(tmp_path: Path) -> None:
@@ -376,6 +392,7 @@ def test_the_examples_carrier_does_not_handle_a_lost_walker(tmp_path: Path, caps
         (["--scenario", "nope"], "no scenario 'nope' (scenarios: blocked-path, moved-object, dropped-object, lost"),
         (["--kill-agent", "nobody"], "plan fetch-together has no agent 'nobody' (agents: walker, carrier)"),
         (["--kill-after", "2"], "--kill-after goes with --kill-agent"),
+        (["--kill-agent", "walker", "--record", SIGNAL], "--record cannot record a split run"),
         (["--scenario", "moved-object", "--kill-after", "2"], "scenario 'moved-object' kills no agent"),
     ],
 )
