@@ -242,6 +242,7 @@ def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Pat
     with contextlib.suppress(OSError, ValueError):
         killed = json.loads((run_dir / "scenario.json").read_text()).get("killed")
     if scenario.kill_agent is None:
+        run_dir.mkdir(parents=True, exist_ok=True)  # a ckm-run that refused its arguments made none
         (run_dir / "scenario.json").write_text(json.dumps({"scenario": scenario.to_dict(), "split": False}, indent=1))
     record["scenario"] = scenario.name
     record["disturbances"] = fired

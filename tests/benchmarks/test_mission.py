@@ -17,10 +17,12 @@ from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
 from benchmarks.mission import collect, layout_config, run_once, success_finals
 from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
 from benchmarks.mission_report import summarise, wilson
+from benchmarks.mission_scenarios import BUILT_IN, judge
 from plugins.sim.plan import WorldPlan
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.report import build_report
 from runtime.verification.verify import verify_safely
+from tests.conftest import CONFIGS
 from tests.runtime.network.conftest import private_network
 
 LAB = Path("configs/usecase/lab.xml")
@@ -436,3 +438,12 @@ def test_a_split_run_shares_one_world_server_on_the_runs_clock(
     assert 0 < final["time"] < 0.75 * record["wall_s"]  # the world's clock ran at the run's scale (0.5)
     gave_up = next(e for e in read_run(run_dir).events if e.kind == "exit" and e.fields["state"] == "NAV")
     assert gave_up.fields["to"] == "gave_up" and gave_up.t < 20  # lost after 1.5 s, not NAV's 60 s timeout
+
+
+def test_a_disturbed_run_whose_ckm_run_made_no_directory_is_judged_a_failure(tmp_path: Path) -> None:
+    # ckm-run refused its arguments (a bad --record topic) before making the run directory
+    run_dir = tmp_path / "runs" / "cooperative-seed1"
+    record = collect(run_dir, 2, {"turtlebot": "succeeded"})
+    judge(BUILT_IN["blocked-path"], run_dir, record, CONFIGS / "usecase" / "lab.xml", {"turtlebot": "succeeded"})
+    assert record["handled"] is False and record["disturbed"] is False
+    assert json.loads((run_dir / "scenario.json").read_text())["scenario"]["name"] == "blocked-path"
