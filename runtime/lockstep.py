@@ -59,11 +59,10 @@ from .lockstep_clock import (
     VARIABLE,
     WORDS,
     SharedClock,
-    _alive,
     to_ns,
-    unheld,
 )
 from .lockstep_frames import Settling
+from .lockstep_os import alive, sender, unheld
 
 HOLD = "CKM_LOCKSTEP_HOLD"  # set for a ckm-run process the run starts: it holds the clock from its start
 START_WAIT = 60.0  # wall seconds the clock waits for a started ckm-run process to join it
@@ -91,6 +90,7 @@ class Master:
         path = clock.directory / "m"
         path.unlink(missing_ok=True)
         self.sock.bind(str(path))
+        self.waker = sender(0.02)  # a process whose queue stays full misses this move's wake-up (its POLL)
         unheld(threading.Thread(target=self._run, name="ckm-lockstep-master", daemon=True)).start()
 
     def _run(self) -> None:
@@ -123,7 +123,7 @@ class Master:
                         clock.fire_due()
                         continue
                     with contextlib.suppress(OSError):
-                        self.sock.sendto(b".", str(clock.directory / f"p{int(pid)}"))
+                        self.waker.sendto(b".", str(clock.directory / f"p{int(pid)}"))
                 continue
             try:
                 self.sock.recv(16)
@@ -142,7 +142,7 @@ class Master:
                 checked = wall
                 for index in np.flatnonzero(live):
                     pid = int(blocks[index, 0])
-                    if not _alive(pid):
+                    if not alive(pid):
                         LOG.warning("lock-step clock: process %d ended; its threads no longer hold the clock", pid)
                         blocks[index, 1:] = IDLE
                         blocks[index, 0] = 0

@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from .lockstep_os import alive, sender, unheld
+
 LOG = logging.getLogger("ckm.lockstep")
 VARIABLE = "CKM_LOCKSTEP"  # "DIRECTORY STEP_NS MASTER_PID MONO0 WALL0"
 BLOCKS = 64  # processes of a run
@@ -102,6 +104,7 @@ class SharedClock:
         self.threads: dict[int, threading.Thread] = {}
         self.local = threading.local()
         self.sock: socket.socket | None = None
+        self.poker: socket.socket | None = None  # its own, blocking: the ticker's socket changes modes
         self.before_fire: Callable[[int], None] | None = None  # frames handed over at a move (lockstep_frames)
 
     # ------------------------------------------------------------------ time
@@ -127,7 +130,7 @@ class SharedClock:
         try:
             for index in range(BLOCKS):
                 pid = int(self.blocks[index, 0])
-                if pid == 0 or not _alive(pid):
+                if pid == 0 or not alive(pid):
                     self.blocks[index, 1:] = IDLE
                     self.guids[index] = 0  # a dead process's transports and counts are not ours
                     self.counts[index] = 0
@@ -144,6 +147,7 @@ class SharedClock:
         path.unlink(missing_ok=True)
         self.sock.bind(str(path))
         self.sock.settimeout(POLL)
+        self.poker = sender(POLL)
         unheld(threading.Thread(target=self._tick, name="ckm-lockstep-ticker", daemon=True)).start()
         return index
 
@@ -180,9 +184,7 @@ class SharedClock:
         if block is not None and int(self.blocks[block, 0]) == os.getpid():
             self.blocks[block, 1:] = IDLE
             self.blocks[block, 0] = 0
-            if self.sock is not None:
-                with contextlib.suppress(OSError):
-                    self.sock.sendto(b".", str(self.directory / "m"))
+            self.poke()
 
     def release_slot(self, slot: int) -> None:
         """Free a participant's slot (its thread ended)."""
@@ -252,9 +254,9 @@ class SharedClock:
 
     def poke(self) -> None:
         """Tell the master a slot changed (it may now advance)."""
-        if self.sock is not None:
+        if self.poker is not None:
             with contextlib.suppress(OSError):
-                self.sock.sendto(b".", str(self.directory / "m"))
+                self.poker.sendto(b".", str(self.directory / "m"))
 
     # ------------------------------------------------------------------ waits
 
@@ -326,7 +328,7 @@ class SharedClock:
             except TimeoutError:
                 if self.newborns:
                     sock.settimeout(self._lapse())
-                if not _alive(self.master):
+                if not alive(self.master):
                     self._orphan()
                     return
             except OSError:
@@ -382,24 +384,3 @@ class SharedClock:
     def after_fork(self) -> None:
         """In a forked child: nothing of the parent's block is ours."""
         self._reset()
-
-
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` still runs (a zombie, ended but not yet reaped by its parent, does not)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return True
-    return stat[stat.rfind(")") + 2 :][:1] not in ("Z", "X")
-
-
-def unheld(thread: threading.Thread) -> threading.Thread:
-    """``thread`` does not hold the clock as a newborn when started (the clock's own threads: D220)."""
-    thread.ckm_unheld = True  # type: ignore[attr-defined]
-    return thread

@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .lockstep_clock import _REAL, DELIVERY, GUIDS, IDLE, LINKS, LOG, RUNNING, SharedClock, unheld
+from .lockstep_clock import _REAL, DELIVERY, GUIDS, IDLE, LINKS, LOG, RUNNING, SharedClock
+from .lockstep_os import unheld
 
 FRAME_WAIT = 2.0  # wall seconds the master waits for a frame sent but not arrived before forgiving it
 LINK_WAIT = 20.0  # wall seconds a new transport holds the clock for the run's other transports at most

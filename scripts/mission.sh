@@ -48,5 +48,5 @@ status=0
     --log-dir "$run/run" --record "$topics" --record-format mcap+sqlite3 || status=$?
 cp "$run/validation.json" "$run/run/validation.json"
 .venv/bin/ckm-mission report "$run/run" --html --config "$config" || [ "$status" -ne 0 ] || status=1
-echo "report: $run/run/report.html"
+# ckm-mission report has printed where the report is
 exit "$status"
