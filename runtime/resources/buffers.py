@@ -18,7 +18,10 @@ can write its next frame in place. Five threads:
   empty, which the next acquire↔process switch hands on to the acquisition for reuse.
 - ``supply``: every ``supply_period`` calls ``supply(Supplied)`` with the supply slot's result,
   the newest complete one; with no newer result it supplies the same one again (``repeated``)
-  unless ``repeat=False``, so a publisher keeps its fixed rate.
+  unless ``repeat=False``, so a publisher keeps its fixed rate. ``supply_period=None`` supplies
+  each result as soon as the process↔supply switch hands it over (``repeat=False`` then): a Smart
+  Resource's stream publishes what it computed at once, where a short fixed poll woke its supply
+  thread 8 times per frame for nothing (D234).
 
 The switching threads swap as soon as a switch is due; before the acquisition (or the supply)
 takes its slot again it lets a due switch happen first, a wait bounded by the switching thread's
@@ -119,13 +122,15 @@ class TripleBuffer(Generic[T, R]):
         supply: Callable[[Supplied[R]], None],
         *,
         acquire_period: float,
-        supply_period: float,
+        supply_period: float | None,
         repeat: bool = True,
         name: str = "triple-buffer",
         wait: float = 0.1,
     ) -> None:
-        if not (acquire_period > 0 and supply_period > 0 and wait > 0):
+        if not (acquire_period > 0 and (supply_period is None or supply_period > 0) and wait > 0):
             raise ValueError("triple buffer: periods and wait must be greater than 0")
+        if supply_period is None and repeat:
+            raise ValueError("triple buffer: a supply on arrival (no supply period) cannot repeat a result")
         self._acquire = acquire
         self._process = process
         self._supply = supply
@@ -141,6 +146,7 @@ class TripleBuffer(Generic[T, R]):
         self._to_switch_ap = threading.Condition(self._lock)
         self._to_process = threading.Condition(self._lock)
         self._to_switch_ps = threading.Condition(self._lock)
+        self._to_supply = threading.Condition(self._lock)  # a result switched in (supply on arrival)
         self._switched = threading.Condition(self._lock)
         self._stopping = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -170,7 +176,8 @@ class TripleBuffer(Generic[T, R]):
         """Stop every thread, waiting at most ``timeout`` seconds in all; True if all of them ended."""
         self._stopping.set()
         with self._lock:
-            for condition in (self._to_switch_ap, self._to_process, self._to_switch_ps, self._switched):
+            conditions = (self._to_switch_ap, self._to_process, self._to_switch_ps, self._switched, self._to_supply)
+            for condition in conditions:
                 condition.notify_all()
         end = time.monotonic() + timeout
         for thread in self._threads:
@@ -276,7 +283,13 @@ class TripleBuffer(Generic[T, R]):
         while not self._stopping.is_set():
             item: Supplied[R] | None = None
             with self._lock:
-                self._let_switch(self._ps_pending)  # so that the newest complete result is the one supplied
+                if self.supply_period is None:  # on arrival: until a result is switched in
+                    while not self._stopping.is_set() and self._slots[self._sup].state is not SlotState.DONE:
+                        self._to_supply.wait(self._wait)
+                    if self._stopping.is_set():
+                        return
+                else:
+                    self._let_switch(self._ps_pending)  # so that the newest complete result is the one supplied
                 slot = self._slots[self._sup]
                 fresh = slot.state is SlotState.DONE
                 if fresh or (self.repeat and slot.state is SlotState.SUPPLIED):
@@ -299,7 +312,8 @@ class TripleBuffer(Generic[T, R]):
                         self._stats.supplied += 1
                         self._stats.repeated += 1 if item.repeated else 0
                     self._to_switch_ps.notify()
-            deadline = self._pace(deadline + self.supply_period, self.supply_period, "supply")
+            if self.supply_period is not None:
+                deadline = self._pace(deadline + self.supply_period, self.supply_period, "supply")
 
     # ------------------------------------------------------------------ processing and the two switches
 
@@ -350,6 +364,7 @@ class TripleBuffer(Generic[T, R]):
                     self._proc, self._sup = self._sup, self._proc
                     self._stats.switches_ps += 1
                     self._to_switch_ap.notify()
+                    self._to_supply.notify()
                     self._switched.notify_all()
                 else:
                     self._to_switch_ps.wait(self._wait)

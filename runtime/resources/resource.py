@@ -125,7 +125,7 @@ class SmartResourceRuntime(ServiceInstances):
                 profiles=tuple(profiles),
             )
             period = self._frame_period or min((s.rate for s in services if s.rate), default=DEFAULT_FRAME_PERIOD)
-            supply = self._supply_period or period / 8  # a short poll: publication adds little latency
+            supply = self._supply_period  # None: each result published as soon as it is computed (D234)
             stream = Stream(root, Topology(part, self._registry), period, supply, self._source_for(root, services))
             self.streams[root] = stream
             for service in services:

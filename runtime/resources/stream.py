@@ -36,7 +36,7 @@ class _Input:
 class Stream:
     """The profiles rooted at one acquisition plugin (§3.2.2): a Topology, a triple buffer and its instances."""
 
-    def __init__(self, root: str, topology: Topology, period: float, supply: float, source: Source) -> None:
+    def __init__(self, root: str, topology: Topology, period: float, supply: float | None, source: Source) -> None:
         self.root, self.topology, self.period, self.source = root, topology, period, source
         self.instances: dict[str, Instance] = {}
         self.lock = threading.Lock()

@@ -215,3 +215,60 @@ def test_a_buffer_can_restart_and_stop_before_start_is_harmless() -> None:
     assert buffer.stats().processed > 0
     with pytest.raises(ValueError, match="greater than 0"):
         TripleBuffer(lambda _: 1, lambda x: x, lambda _: None, acquire_period=0.0, supply_period=0.001)
+
+
+def test_a_supply_on_arrival_hands_over_every_result_once_never_torn_and_only_when_there_is_one() -> None:
+    """supply_period=None (a Smart Resource's stream, D234): each processed frame reaches the consumer
+    once, soon after it is computed, in order and whole; with nothing new the supply never runs."""
+    producer, checker = Producer(), Checker()
+    problems: list[str] = []
+
+    def process(frame: Frame) -> Frame:
+        if not _consistent(frame):
+            problems.append(f"torn input {int(frame[0])}")
+        time.sleep(0.002)
+        return frame
+
+    buffer = TripleBuffer(producer, process, checker, acquire_period=0.0005, supply_period=None, repeat=False)
+    buffer.start()
+    deadline = time.monotonic() + 20.0
+    while buffer.stats().processed < 300 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert buffer.stop(timeout=5.0)
+    stats = buffer.stats()
+    assert problems == [] and checker.problems == []
+    assert stats.processed >= 300
+    assert len(checker.frames) == len(set(checker.frames)) == stats.supplied  # each once, none repeated
+    assert stats.repeated == 0 and stats.idle == 0 and stats.overruns["supply"] == 0
+    # every result reached the consumer unless a newer one replaced it first (one may be left in process)
+    assert stats.supplied + stats.skipped >= stats.processed - 1
+
+
+def test_a_supply_on_arrival_waits_for_a_result_and_wakes_when_one_comes() -> None:
+    gate = threading.Event()
+    supplied: list[Supplied[int]] = []
+    arrived = threading.Event()
+
+    def process(frame: int) -> int:
+        gate.wait(10.0)
+        return frame
+
+    def supply(item: Supplied[int]) -> None:
+        supplied.append(item)
+        arrived.set()
+
+    buffer = TripleBuffer(lambda _: 7, process, supply, acquire_period=0.001, supply_period=None, repeat=False)
+    buffer.start()
+    try:
+        time.sleep(0.2)
+        assert supplied == [] and buffer.stats().idle == 0  # nothing computed: nothing supplied, no empty ticks
+        gate.set()
+        assert arrived.wait(5.0)
+        assert supplied[0].value == 7 and not supplied[0].repeated
+    finally:
+        assert buffer.stop(timeout=5.0)
+
+
+def test_a_supply_on_arrival_cannot_repeat() -> None:
+    with pytest.raises(ValueError, match="cannot repeat"):
+        TripleBuffer(lambda _: 1, lambda x: x, lambda _: None, acquire_period=0.001, supply_period=None)
