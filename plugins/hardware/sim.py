@@ -18,7 +18,8 @@ bus in, joints          a tuple of the named joints' positions, each as above
 analog/bus out, joint   joint target (``mode``), value = (raw − offset) × scale; ``mirror``: a second
                         joint driven alike (the gripper's other finger); ``initial``: the raw value the
                         joint stands at when the robot is spawned (a servo's power-on position)
-digital in, contact     1 while ``link`` touches an obstacle (bumper)
+digital in, contact     1 while ``link`` touches an obstacle within ``arc`` (rad, centred ahead) of its
+                        heading (a bumper: the Kobuki's three cover the front half, π; D236)
 stream in, lidar        ``size`` ranges (m) over ``fov`` from ``link``
 stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
 analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
@@ -83,6 +84,8 @@ _SPEC = Params(
     P("noise", 0.0, "Standard deviation of the noise added to each read.", min=0.0),
     P("fov", 1.0123, "Horizontal field of view (camera, lidar).", unit="rad", above=0.0),
     P("rangeMin", 0.02, "Lidar minimum range.", unit="m", min=0.0),
+    P("arc", 6.2832, "Contact sensor: the arc, centred ahead, where a touch presses it (2π: anywhere).",
+      unit="rad", above=0.0),
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
 )

@@ -4,7 +4,8 @@ Inputs (a mapping): ``scan`` (LaserScan of LaserSensor.Scan) and ``odom`` (Odome
 MobileBase.Displacement). Each frame (0.8 s in the use case, Table 7.8):
 
 1. localize: one step of Algorithm 3 (``filter=reliability``) or of the AMCL-like baseline
-   (``filter=mcl``) on the odometry increment and the scan (plugins/navigation/localizer.py);
+   (``filter=mcl``) on the odometry increment and the scan (plugins/navigation/localizer.py),
+   without the beams that hit something the map lacks (``unmapped``, D235);
 2. plan on the Environment's map with the A* planner of plugins/environment (§6.1.2), the robot's
    footprint inflated by ``inflation``: when the goal is set, when the robot strays more than
    ``strayDistance`` from the path, or when scan points fall on the path ahead (they become
@@ -114,6 +115,9 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
           min=0.0),
         P("escape", 0.6, "How far a start inside an inflated obstacle looks for free space.", unit="m", min=0.0),
         P("goalEscape", 0.3, "How far a goal inside an inflated obstacle may move to free space.", unit="m", min=0.0),
+        P("unmapped", 0.3, "A beam this much shorter than the map's ray from the predicted pose, ending this far "
+          "from any mapped obstacle, hit something the map lacks: the filter ignores it (0: use every beam).",
+          unit="m", min=0.0),
         P("seed", 0, "Random seed of the filter.", min=0),
         P("cloudSize", 200, "Particles in each published ParticleCloud (0: none).", min=0),
     )
@@ -160,7 +164,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         self.zoom = None if env.zoom is None else NavigationZoom(self.model, env.zoom)
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])
         self.localizer = Localizer(grid, p["filter"], particles=p["particles"], beams=p["beams"], laser=self.laser,
-                                   range_max=RANGE_MAX, seed=p["seed"], owner=self.owner)
+                                   range_max=RANGE_MAX, seed=p["seed"], owner=self.owner, unmapped=p["unmapped"])
         initial = self._place(p["initialPose"], "parameter 'initialPose'") if p["initialPose"].strip() else None
         self.localizer.reset(None if initial is None else (initial[0], initial[1], initial[2] or 0.0),
                              self.spread if initial is None or initial[2] is not None else (self.spread[0], math.pi))

@@ -8,8 +8,10 @@ before the acceleration limits of :class:`Limiter`.
   κ = 2·sin(α)/d (α its bearing, d its distance). The speed is the top speed, capped so the
   robot can still stop at the path's end braking at half the limit (v ≤ √(a·remaining)) and
   so that |κ·v| stays within ``max_angular``; a carrot more than ``turn_in_place`` rad off the heading is first faced by
-  turning in place (the Kobuki is differential drive). At the end (within ``tolerance``) the
-  robot turns in place to the path's final yaw, if it has one.
+  turning in place (the Kobuki is differential drive). A new path is first faced to within
+  ``face`` rad, turning in place (D237): a re-plan after a bumper hit starts beside the obstacle, and
+  an arc toward a carrot up to ``turn_in_place`` off swept the base's front into it again. At the
+  end (within ``tolerance``) the robot turns in place to the path's final yaw, if it has one.
 - :class:`RelativeMove`: rotate / drive / rotate to a goal pose fixed in the odometry frame when
   the goal arrived. A goal behind the robot (BACK's) is driven backwards rather than turned to.
   While driving, the heading is kept on the goal point by a proportional term, and the speed
@@ -42,6 +44,7 @@ class Gains:
     lookahead: float = 0.35
     heading_gain: float = 2.5
     turn_in_place: float = 1.0
+    face: float = 0.35
     tolerance: float = 0.03
     yaw_tolerance: float = 0.03
     min_speed: float = 0.03
@@ -92,6 +95,7 @@ class PathFollower:
         self.remaining = remaining_length(self.points, 0, self.points[0]) if self.points else 0.0
         self.done = not self.points
         self.aligning = False
+        self.facing = True  # a new path: face its carrot before driving (D237)
 
     def update(self, points: Sequence[Point], yaw: float | None, speed: float) -> None:
         """The same path re-anchored (Navigation's new map→odom correction): keep going on it."""
@@ -102,7 +106,8 @@ class PathFollower:
     def state(self) -> dict[str, Any]:
         """Where the follower is (msgpack-able), for :meth:`from_state`."""
         return {"points": [list(p) for p in self.points], "yaw": self.yaw, "speed": self.speed,
-                "segment": self.segment, "remaining": self.remaining, "done": self.done, "aligning": self.aligning}
+                "segment": self.segment, "remaining": self.remaining, "done": self.done, "aligning": self.aligning,
+                "facing": self.facing}
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], gains: Gains) -> PathFollower:
@@ -110,6 +115,7 @@ class PathFollower:
         made = cls([(float(x), float(y)) for x, y in state["points"]], state["yaw"], float(state["speed"]), gains)
         made.segment, made.remaining = int(state["segment"]), float(state["remaining"])
         made.done, made.aligning = bool(state["done"]), bool(state["aligning"])
+        made.facing = bool(state.get("facing", False))
         return made
 
     def command(self, pose: Pose) -> Command:
@@ -135,6 +141,9 @@ class PathFollower:
             carrot = end
         local = relative(pose, (carrot[0], carrot[1], 0.0))
         alpha = math.atan2(local[1], local[0])
+        if self.facing and abs(alpha) > g.face:
+            return 0.0, turn(alpha, g)
+        self.facing = False
         if abs(alpha) > g.turn_in_place:
             return 0.0, turn(alpha, g)
         distance = max(math.hypot(local[0], local[1]), 1e-6)

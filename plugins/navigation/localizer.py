@@ -10,7 +10,14 @@ baseline (``mcl``) — for LaserScan and Odometry messages:
   bearing from the centre, so the filters' "beams from the pose" model stays exact);
 - the filter moves its particles by the odometry increment and weighs them by the scan;
 - the map→odom correction is E ⊕ odom⁻¹ (E the estimate in the map frame): what re-anchors a
-  map-frame path in the odometry frame, and what dead-reckons the estimate between scans.
+  map-frame path in the odometry frame, and what dead-reckons the estimate between scans;
+- beams that hit something the map lacks are ignored (decision D235): seen from the dead-reckoned
+  pose, a beam more than ``unmapped`` metres shorter than the map's ray in its direction whose
+  endpoint is more than ``unmapped`` metres from every mapped obstacle (a crate dropped in the
+  corridor, a person). A 0.5 m crate 1 m ahead fills a quarter of the scan; scored as unexplained,
+  it lowered every particle's coherence below Algorithm 3's trust level, random particles replaced
+  the weak ones and the estimate jumped metres away. When more than half of the valid beams look
+  so, the prediction is more likely off than the world crowded, and every beam is kept.
 """
 
 from __future__ import annotations
@@ -22,9 +29,10 @@ import numpy as np
 import numpy.typing as npt
 
 from plugins.localization.estimate import Estimate
-from plugins.localization.likelihood import FieldModel
+from plugins.localization.likelihood import FieldModel, endpoint_distances
 from plugins.localization.mcl import AmclFilter, MclSettings
 from plugins.localization.raster import GridMap
+from plugins.localization.raycast import cast
 from plugins.localization.reliability_filter import ReliabilityFilter, ReliabilitySettings
 
 from .frames import Pose, compose, inverse, wrap
@@ -32,6 +40,8 @@ from .laser_scan import NO_RETURN, valid_beams
 
 Array = npt.NDArray[np.float64]
 FILTERS = ("reliability", "mcl")
+UNMAPPED_SHARE = 0.5
+"""More of the valid beams than this look unmapped: trust them all (the prediction is off, D235)."""
 
 
 def tuple_pose(values: Any) -> Pose:
@@ -45,13 +55,16 @@ class Localizer:
 
     def __init__(
         self, grid: GridMap, kind: str, *, particles: int, beams: int, laser: Pose, range_max: float, seed: int,
-        owner: str = "localizer",
+        owner: str = "localizer", unmapped: float = 0.0,
     ) -> None:
         if kind not in FILTERS:
             raise ValueError(f"{owner}: filter {kind!r} is not one of {', '.join(FILTERS)}")
         self.grid, self.kind, self.beams, self.laser, self.owner = grid, kind, beams, laser, owner
         rng = np.random.default_rng(seed)
         reach = range_max + float(np.hypot(laser[0], laser[1])) + 0.05  # a valid beam, seen from the centre
+        self.reach, self.unmapped = reach, unmapped
+        self.ignored = 0
+        """Beams of the last scan ignored as hitting something the map lacks (D235)."""
         self.filter: AmclFilter | ReliabilityFilter
         if kind == "mcl":
             settings = MclSettings(particles=particles, min_particles=min(500, particles),
@@ -93,6 +106,22 @@ class Localizer:
         theta = laser[2] + a
         return np.stack([laser[0] + r * np.cos(theta), laser[1] + r * np.sin(theta)], axis=1)
 
+    def unmapped_beams(self, ranges: Array, bearings: Array, odom: Pose) -> npt.NDArray[np.bool_]:
+        """Per beam: did it hit something the map lacks, seen from the dead-reckoned pose (D235)?"""
+        mask = np.zeros(ranges.shape, dtype=bool)
+        valid = np.isfinite(ranges)
+        if not self.unmapped > 0 or self.correction is None or not valid.any():
+            return mask
+        pose = np.array(compose(self.correction, odom), dtype=np.float64)[None, :]
+        r, b = ranges[valid], bearings[valid]
+        expected = cast(self.grid, pose, b, self.reach)[0]
+        far = endpoint_distances(self.grid, pose, r, b)[0]
+        short = (r < expected - self.unmapped) & (far > self.unmapped)
+        if short.sum() > UNMAPPED_SHARE * valid.sum():
+            return mask
+        mask[np.flatnonzero(valid)[short]] = True
+        return mask
+
     def update(self, odom: Pose, scan: Mapping[str, Any] | None) -> Estimate | None:
         """One step: the filter on the odometry increment and ``scan``; without a scan, dead reckoning."""
         if scan is None:
@@ -102,6 +131,9 @@ class Localizer:
             self.odom = odom
             return self.estimate
         ranges, bearings = self.robot_beams(scan)
+        unmapped = self.unmapped_beams(ranges, bearings, odom)
+        self.ignored = int(unmapped.sum())
+        ranges = np.where(unmapped, np.inf, ranges)
         self.filter.angles = bearings  # this scan's beams (both filters read them at each update)
         self.estimate = self.filter.update(np.array(odom, dtype=np.float64), ranges)
         pose = self.estimate.pose

@@ -156,7 +156,7 @@ class ChannelDevice:
         if sensor == "imu":
             return Imu(robot, v["link"], noise=v["noise"], seed=v["seed"])
         if sensor == "contact":
-            return Bumper(robot, v["link"], self.sim.world.floor)
+            return Bumper(robot, v["link"], self.sim.world.floor, arc=v["arc"])
         if sensor in ("altimeter", "pose"):
             return robot.link(v["link"])
         if v.get("joints"):

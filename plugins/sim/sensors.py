@@ -150,13 +150,24 @@ class Imu:
 
 
 class Bumper:
-    """1 while a link of the robot touches a body other than the floor and itself, else 0."""
+    """1 while a link of the robot touches a body other than the floor and itself within ``arc`` (rad,
+    centred on the link's heading) of it, else 0 (D236: the Kobuki's three bumpers cover its front half;
+    a touch on its back does not press them)."""
 
-    def __init__(self, robot: Robot, link: str, floor: int) -> None:
-        self.robot, self.link, self.floor = robot, robot.link(link), floor
+    def __init__(self, robot: Robot, link: str, floor: int, arc: float = 2 * math.pi) -> None:
+        self.robot, self.link, self.floor, self.arc = robot, robot.link(link), floor, arc
 
     def pressed(self) -> bool:
-        """Whether the link is in contact with an obstacle now."""
+        """Whether the link is in contact with an obstacle within the arc now."""
         contacts = p.getContactPoints(bodyA=self.robot.body, linkIndexA=self.link,
                                       physicsClientId=self.robot.world.client)
-        return any(c[2] not in (self.floor, self.robot.body) for c in contacts)
+        touching = [c[5] for c in contacts if c[2] not in (self.floor, self.robot.body)]
+        if not touching or self.arc >= 2 * math.pi:
+            return bool(touching)
+        (x, y, _), (qx, qy, qz, qw) = self.robot.link_pose(self.link)
+        heading = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        for cx, cy, _ in touching:  # positionOnA: where the link is touched, in the world
+            bearing = math.atan2(cy - y, cx - x) - heading
+            if abs(math.atan2(math.sin(bearing), math.cos(bearing))) <= self.arc / 2:
+                return True
+        return False

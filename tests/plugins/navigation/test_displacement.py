@@ -220,3 +220,28 @@ def test_a_cancelled_navigations_empty_path_leaves_a_running_move_alone() -> Non
     assert status["id"] == 1 and status["state"] == "moving"
     replanned = robot.frame(service, path=path([[robot.x, robot.y], [1.0, 0.0]], path_id=4))
     assert replanned["move_status"]["state"] == "failed"
+
+
+def test_a_new_path_is_faced_turning_in_place_before_the_base_drives() -> None:
+    """D237: the carrot of a new path 45° to the left (within turn_in_place) is faced first, v = 0,
+    to within 0.35 rad; then pure pursuit drives. A re-anchored copy (same id) is not faced again."""
+    robot, service = Unicycle(), base()
+    route = path([[0.0, 0.0], [0.6, 0.6], [2.0, 0.6]])
+    while robot.frames < 200:
+        robot.frame(service, path=route)
+        if robot.commands[-1][0] > 0:
+            break
+    turning = robot.commands[:-1]
+    assert len(turning) >= 5 and all(v == 0.0 and w > 0 for v, w in turning)  # turned left in place ...
+    assert robot.yaw > math.pi / 4 - 0.35 - 0.05  # ... until the carrot was within 0.35 rad
+    for _ in range(40):
+        robot.frame(service, path=route)
+    assert all(v > 0 for v, _ in robot.commands[-40:])  # driving, not stopping to face again
+    shifted = path([[robot.x, robot.y], [2.0, 0.65]])  # Navigation's re-anchored copy: same id
+    robot.frame(service, path=shifted)
+    assert robot.commands[-1][0] > 0
+    for _ in range(300):
+        robot.frame(service, path=shifted)
+        if robot.twist == (0.0, 0.0):
+            break
+    assert math.hypot(robot.x - 2.0, robot.y - 0.65) < 0.05

@@ -209,3 +209,29 @@ def test_rgb_and_depth_channels_of_one_camera_share_a_render(clock_and_scope: tu
     clock.advance(0.1)
     depth.read()
     assert sum(camera.renders for camera in cameras) == 2  # a new step, a new render
+
+
+def test_a_front_bumper_feels_a_touch_ahead_but_not_one_behind(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
+    """D236: the Kobuki's bumpers cover its front half (arc π); a contact sensor with no arc feels any touch."""
+    import pybullet as p
+
+    clock, scope = clock_and_scope
+    front, anywhere = open_all(
+        scope,
+        channel("f", "in", "digital", body="turtlebot", pose="2.0 2.0 0", sensor="contact", arc="3.1416"),
+        channel("a", "in", "digital", body="turtlebot", sensor="contact"),
+    )
+    clock.advance(0.2)
+    assert front.read() == 0.0 and anywhere.read() == 0.0
+    sim = find_world(scope)
+    assert sim is not None
+    cid = sim.world.client
+    x, y, _ = sim.robots["turtlebot"].planar_pose()
+    wall = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.05, 0.4, 0.1], physicsClientId=cid)
+    ahead = p.createMultiBody(0, wall, basePosition=[x + 0.175 + 0.05 - 0.002, y, 0.1], physicsClientId=cid)
+    clock.advance(0.02)
+    assert front.read() == 1.0 and anywhere.read() == 1.0
+    p.resetBasePositionAndOrientation(ahead, [x - 0.175 - 0.05 + 0.002, y, 0.1], [0, 0, 0, 1], physicsClientId=cid)
+    clock.advance(0.02)
+    assert anywhere.read() == 1.0  # touched on its back ...
+    assert front.read() == 0.0  # ... which the front bumper does not cover
