@@ -19,8 +19,7 @@ from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import read_params
 from runtime.verification.manifest import NUMBER, P, Params, Ports
 
-from .common import check_state
-from .diffdrive import _toward
+from .common import check_state, toward
 from .multi import MultiOutputController, Row, measured_row, measured_size
 
 
@@ -80,7 +79,7 @@ class BackOff(MultiOutputController):
         if self._outputs is None:
             self._outputs = measured_row(inputs, self.size)
         target = self._target(self._active)
-        self._outputs = tuple(_toward(v, target, self.acceleration * dt) for v in self._outputs)
+        self._outputs = tuple(toward(v, target, self.acceleration * dt) for v in self._outputs)
         self._active += dt
         return self._outputs
 
@@ -91,7 +90,7 @@ class BackOff(MultiOutputController):
             return []
         for _ in range(self.record.horizon):
             target = self._target(active)
-            outputs = tuple(_toward(v, target, self.acceleration * self.record.period) for v in outputs)
+            outputs = tuple(toward(v, target, self.acceleration * self.record.period) for v in outputs)
             active += self.record.period
             rows.append(outputs)
         return rows

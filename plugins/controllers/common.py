@@ -1,4 +1,4 @@
-"""What the PID and the GPC share: output limits, inputs by role, state checks."""
+"""What the controllers share: output limits, inputs by role, clamping and rate limits, state checks."""
 
 from __future__ import annotations
 
@@ -48,6 +48,11 @@ def measure_and_setpoint(inputs: Mapping[str, float], *, owner: str) -> tuple[fl
 def clamp(value: float, low: float, high: float) -> float:
     """``value`` limited to [low, high]."""
     return min(max(value, low), high)
+
+
+def toward(current: float, target: float, step: float) -> float:
+    """``current`` moved toward ``target`` by at most ``step`` (a rate limit)."""
+    return current + clamp(target - current, -step, step)
 
 
 def check_state(state: Mapping[str, Any], kind: str, keys: tuple[str, ...]) -> None:

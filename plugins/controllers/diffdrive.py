@@ -27,13 +27,8 @@ from ckmconf.model.kernel import Controller as ControllerRecord
 from runtime.kernel.interfaces import ParamError, read_params
 from runtime.verification.manifest import MAPPING, NUMBER, REQUIRED, P, Params, Ports
 
-from .common import check_state, clamp
+from .common import check_state, clamp, toward
 from .multi import MultiOutputController, Row, field, measured_row, measured_size
-
-
-def _toward(current: float, target: float, step: float) -> float:
-    """``current`` moved toward ``target`` by at most ``step``."""
-    return current + clamp(target - current, -step, step)
 
 
 class DiffDrive(MultiOutputController):
@@ -95,7 +90,7 @@ class DiffDrive(MultiOutputController):
             linear, angular = (float(v) for v in command)
             self._target = self.wheel_speeds(linear, angular)
         step = self.max_accel * self.scale * (dt if dt > 0.0 else self.record.period)
-        self._wheels = tuple(_toward(w, t, step) for w, t in zip(self._wheels, self._target, strict=True))
+        self._wheels = tuple(toward(w, t, step) for w, t in zip(self._wheels, self._target, strict=True))
         return self._wheels
 
     def future_outputs(self) -> list[Row]:
@@ -103,7 +98,7 @@ class DiffDrive(MultiOutputController):
         rows, wheels = [], self._wheels
         step = self.max_accel * self.scale * self.record.period
         for _ in range(self.record.horizon):
-            wheels = tuple(_toward(w, t, step) for w, t in zip(wheels, self._target, strict=True))
+            wheels = tuple(toward(w, t, step) for w, t in zip(wheels, self._target, strict=True))
             rows.append(wheels)
         return rows
 
