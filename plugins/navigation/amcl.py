@@ -110,6 +110,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         P("blockPoints", 3, "Scan points on the path ahead that make it blocked.", min=1),
         P("obstacleTimeout", 30.0, "Forget a scan obstacle not seen again for this long (0: only when seen "
           "through).", unit="s", min=0.0),
+        P("obstacleClearance", 0.1, "Extra clearance the plan keeps from scan obstacles (D238).", unit="m", min=0.0),
         P("clearMargin", 0.1, "A beam reaching this far beyond a scan obstacle's point clears it.", unit="m", min=0.0),
         P("replanGain", 0.2, "After scan obstacles cleared, take a new plan if it is this much shorter.", unit="m",
           min=0.0),
@@ -159,7 +160,8 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         p = self.params
         footprint = Footprint.round(p["robotRadius"] + p["inflation"], p["robotHeight"])
         self.routes = Routes(env, footprint, p["planResolution"], p["escape"], p["goalEscape"],
-                             ScanObstacles(margin=p["clearMargin"], timeout=p["obstacleTimeout"]))
+                             ScanObstacles(margin=p["clearMargin"], timeout=p["obstacleTimeout"],
+                                           clearance=p["obstacleClearance"]))
         self.model = self.routes.model
         self.zoom = None if env.zoom is None else NavigationZoom(self.model, env.zoom)
         grid = GridMap.from_environment(env, p["resolution"], scan_height=p["laserHeight"])

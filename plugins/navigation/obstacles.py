@@ -14,6 +14,10 @@ keeps each hit point with the time it was last seen and forgets it (decision D15
 
 A still standing obstacle is not seen through: the beam aimed at a point of its surface stops on
 it (or on its near side, seen from elsewhere), and its hits keep refreshing the points in view.
+
+The plan keeps ``clearance`` more from these points than from the map's obstacles (D238): they show
+only the faces the laser saw (a corner lies up to a beam's spacing beyond the last hit), and they
+are placed with the localization's few centimetres of error.
 """
 
 from __future__ import annotations
@@ -35,10 +39,11 @@ Array = npt.NDArray[np.float64]
 class ScanObstacles:
     """Hit points (map frame) with the time each was last seen; cleared by ray casting or a time-out."""
 
-    def __init__(self, merge: float = 0.05, margin: float = 0.1, timeout: float = 30.0) -> None:
-        if not merge > 0 or margin < 0 or timeout < 0:
-            raise ValueError(f"scan obstacles: merge {merge} must be > 0, margin {margin} and timeout {timeout} >= 0")
-        self.merge, self.margin, self.timeout = merge, margin, timeout
+    def __init__(self, merge: float = 0.05, margin: float = 0.1, timeout: float = 30.0, clearance: float = 0.0) -> None:
+        if not merge > 0 or margin < 0 or timeout < 0 or clearance < 0:
+            raise ValueError(f"scan obstacles: merge {merge} must be > 0, margin {margin}, timeout {timeout} and "
+                             f"clearance {clearance} >= 0")
+        self.merge, self.margin, self.timeout, self.clearance = merge, margin, timeout, clearance
         self.points: Array = np.zeros((0, 2))
         self.seen: Array = np.zeros(0)
 
@@ -92,10 +97,11 @@ class ScanObstacles:
         return result
 
     def shapes(self) -> list[Polygon]:
-        """The points as polygons (``merge`` around each, touching ones merged): avoided areas for the planner."""
+        """The points as polygons (``merge`` + ``clearance`` around each, touching ones merged): avoided areas
+        for the planner."""
         if not len(self.points):
             return []
-        blob = MultiPoint([tuple(p) for p in self.points]).buffer(self.merge, quad_segs=4)
+        blob = MultiPoint([tuple(p) for p in self.points]).buffer(self.merge + self.clearance, quad_segs=4)
         parts = [blob] if isinstance(blob, Polygon) else list(getattr(blob, "geoms", []))
         return [g for g in parts if isinstance(g, Polygon)]
 

@@ -55,3 +55,23 @@ def test_a_start_on_the_edge_of_an_inflation_with_no_straight_way_out_leaves_by_
         stuck.plan(here, (7.6, 5.501))
     way = Routes(environment, Footprint.round(0.2, 0.5), 0.1, 0.6, 0.3, ScanObstacles()).plan(here, (7.6, 5.501))
     assert way[0] == here and math.dist(way[1], here) <= 0.6 and way[-1] == (7.6, 5.501)
+
+
+@pytest.mark.parametrize("clearance", [0.0, 0.1])
+def test_a_plan_keeps_the_obstacle_clearance_from_scan_points(clearance: float) -> None:
+    """D238: scan obstacles show only what the laser saw, placed with the localization's error: the plan
+    keeps ``clearance`` more from them than the footprint (0.2) and the points' own 5 cm."""
+    import shapely
+
+    environment = load(CONFIGS / "usecase" / "environment.xml").environment
+    assert environment is not None
+    way = Routes(environment, Footprint.round(0.2, 0.5), 0.1, 0.6, 0.3, ScanObstacles(clearance=clearance))
+    face = [(3.0, 2.4 + 0.02 * k) for k in range(26)]  # a crate's face across the way, 0.5 m wide
+    way.avoid(face)
+    plan = way.plan((2.0, 2.65), (4.0, 2.65))
+    gap = shapely.LineString(plan).distance(shapely.MultiPoint(face))
+    assert gap >= 0.2 + 0.05 + clearance - 0.01
+    if clearance:
+        assert gap < 0.2 + 0.05 + clearance + 0.1  # round it, not far off
+    with pytest.raises(ValueError, match="clearance"):
+        ScanObstacles(clearance=-0.1)
