@@ -193,8 +193,7 @@ class ChannelDevice:
         if sensor == "altimeter":
             return self._noisy(self.robot.link_pose(self.device)[0][2])
         if sensor == "pose":  # ground truth: never noisy
-            (x, y, _), (qx, qy, qz, qw) = self.robot.link_pose(self.device)
-            return (x, y, math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)))
+            return self.robot.planar_pose(self.device)
         if v.get("joints"):
             return tuple(self._noisy(self._joint_value(j)) for j in self.device)
         return self._noisy(self._joint_value(self.device[0]))

@@ -77,11 +77,10 @@ class Robot:
         state = p.getLinkState(self.body, link, computeForwardKinematics=True, physicsClientId=cid)
         return tuple(state[4]), tuple(state[5])
 
-    def planar_pose(self) -> tuple[float, float, float]:
-        """Ground-truth (x, y, yaw) of the base."""
-        position, orientation = self.link_pose(-1)
-        yaw = p.getEulerFromQuaternion(orientation)[2]
-        return position[0], position[1], yaw
+    def planar_pose(self, link: int = -1) -> tuple[float, float, float]:
+        """Ground-truth (x, y, yaw) of a link's frame (the base's for -1) in the world."""
+        (x, y, _), (qx, qy, qz, qw) = self.link_pose(link)
+        return x, y, math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
 @dataclass

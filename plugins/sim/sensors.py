@@ -164,8 +164,7 @@ class Bumper:
         touching = [c[5] for c in contacts if c[2] not in (self.floor, self.robot.body)]
         if not touching or self.arc >= 2 * math.pi:
             return bool(touching)
-        (x, y, _), (qx, qy, qz, qw) = self.robot.link_pose(self.link)
-        heading = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        x, y, heading = self.robot.planar_pose(self.link)
         for cx, cy, _ in touching:  # positionOnA: where the link is touched, in the world
             bearing = math.atan2(cy - y, cx - x) - heading
             if abs(math.atan2(math.sin(bearing), math.cos(bearing))) <= self.arc / 2:

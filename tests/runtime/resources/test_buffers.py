@@ -68,17 +68,25 @@ class Checker:
             self.frames.append(item.frame)
 
 
+class PassThrough:
+    """The processor: checks its input whole, takes ``delay`` seconds, returns the input itself."""
+
+    def __init__(self, delay: float) -> None:
+        self.delay = delay
+        self.problems: list[str] = []
+
+    def __call__(self, frame: Frame) -> Frame:
+        if not _consistent(frame):
+            self.problems.append(f"torn input {int(frame[0])}")
+        time.sleep(self.delay)
+        return frame
+
+
 def test_never_torn_under_stress() -> None:
     """A few thousand frames; the processor returns its input itself, so the consumer reads the very
     buffer the producer writes in place: only the slot rotation keeps them apart."""
-    producer, checker = Producer(), Checker()
-    problems: list[str] = []
-
-    def process(frame: Frame) -> Frame:
-        if not _consistent(frame):
-            problems.append(f"torn input {int(frame[0])}")
-        time.sleep(0.003)
-        return frame
+    producer, checker, process = Producer(), Checker(), PassThrough(0.003)
+    problems = process.problems
 
     buffer = TripleBuffer(producer, process, checker, acquire_period=0.0005, supply_period=0.0007)
     buffer.start()
@@ -220,15 +228,8 @@ def test_a_buffer_can_restart_and_stop_before_start_is_harmless() -> None:
 def test_a_supply_on_arrival_hands_over_every_result_once_never_torn_and_only_when_there_is_one() -> None:
     """supply_period=None (a Smart Resource's stream, D234): each processed frame reaches the consumer
     once, soon after it is computed, in order and whole; with nothing new the supply never runs."""
-    producer, checker = Producer(), Checker()
-    problems: list[str] = []
-
-    def process(frame: Frame) -> Frame:
-        if not _consistent(frame):
-            problems.append(f"torn input {int(frame[0])}")
-        time.sleep(0.002)
-        return frame
-
+    producer, checker, process = Producer(), Checker(), PassThrough(0.002)
+    problems = process.problems
     buffer = TripleBuffer(producer, process, checker, acquire_period=0.0005, supply_period=None, repeat=False)
     buffer.start()
     deadline = time.monotonic() + 20.0
