@@ -62,7 +62,7 @@ from .lockstep_clock import (
     to_ns,
 )
 from .lockstep_frames import Settling
-from .lockstep_os import alive, sender, unheld
+from .lockstep_os import alive, drain, sender, unheld
 
 HOLD = "CKM_LOCKSTEP_HOLD"  # set for a ckm-run process the run starts: it holds the clock from its start
 START_WAIT = 60.0  # wall seconds the clock waits for a started ckm-run process to join it
@@ -127,14 +127,7 @@ class Master:
                 continue
             try:
                 self.sock.recv(16)
-                self.sock.setblocking(False)
-                try:
-                    while True:
-                        self.sock.recv(16)
-                except OSError:
-                    pass
-                finally:
-                    self.sock.settimeout(0.02)
+                drain(self.sock, 0.02)
             except OSError:  # a timeout: look again (a poke may have been lost)
                 pass
             wall = _REAL["monotonic"]()

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .lockstep_os import alive, sender, unheld
+from .lockstep_os import alive, drain, sender, unheld
 
 LOG = logging.getLogger("ckm.lockstep")
 VARIABLE = "CKM_LOCKSTEP"  # "DIRECTORY STEP_NS MASTER_PID MONO0 WALL0"
@@ -317,14 +317,7 @@ class SharedClock:
         while True:
             try:
                 sock.recv(16)
-                sock.setblocking(False)
-                try:
-                    while True:
-                        sock.recv(16)
-                except OSError:
-                    pass
-                finally:
-                    sock.settimeout(self._lapse() if self.newborns else POLL)
+                drain(sock, self._lapse() if self.newborns else POLL)
             except TimeoutError:
                 if self.newborns:
                     sock.settimeout(self._lapse())

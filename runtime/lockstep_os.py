@@ -24,6 +24,18 @@ def sender(timeout: float) -> socket.socket:
     return sock
 
 
+def drain(sock: socket.socket, timeout: float) -> None:
+    """Read every datagram already queued on ``sock`` (a wake-up says only "look"), then wait with ``timeout`` again."""
+    sock.setblocking(False)
+    try:
+        while True:
+            sock.recv(16)
+    except OSError:
+        pass
+    finally:
+        sock.settimeout(timeout)
+
+
 def alive(pid: int) -> bool:
     """Whether process ``pid`` still runs (a zombie, ended but not yet reaped by its parent, does not)."""
     try:
