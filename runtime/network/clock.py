@@ -93,6 +93,10 @@ class SyncTimeExchange:
         """A new link to ``guid``: open with a burst of :data:`BURST` exchanges (:meth:`tick`)."""
         self._burst[guid] = BURST
 
+    def bursting(self) -> bool:
+        """Whether a new link's opening burst still has exchanges to make (one per :meth:`tick`)."""
+        return bool(self._burst)
+
     def tick(self) -> None:
         """One exchange with each peer still in its opening burst."""
         for guid, left in list(self._burst.items()):

@@ -50,6 +50,10 @@ class ReconnectSchedule:
             self._connecting.add(guid)
         return due
 
+    def pending(self) -> bool:
+        """Whether an attempt is scheduled or under way (the peer's timer then looks often)."""
+        return bool(self._retry_at or self._connecting)
+
     def attempted(self, guid: int) -> None:
         """The attempt to connect to ``guid`` is over (the link, if any, goes on by itself)."""
         self._connecting.discard(guid)

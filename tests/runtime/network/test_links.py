@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ckmconf.model import Network
+from runtime.network import multipeer
 from runtime.network.api import NetworkError, Sample, TopicQoS
 from runtime.network.discovery import HEARTBEAT
 from runtime.network.discovery import HELLO as DISCOVERY_HELLO
@@ -594,3 +595,35 @@ def test_a_subscriber_stalling_for_one_second_loses_no_reliable_samples() -> Non
         assert sent == count, f"{count - sent} samples not sent: the link was dropped"
         assert wait_until(lambda: len(got) >= count, 30)
         assert got == list(range(count))
+
+
+def test_the_timer_looks_seldom_once_linked_and_often_while_a_link_forms(
+    pair: tuple[MultiPeerTransport, MultiPeerTransport],
+) -> None:
+    """D239: the peer's timer polls every IDLE_POLL once the links are up and the clock-sync burst
+    is over, every BUSY_POLL while an attempt is scheduled (a dropped link comes back at once)."""
+    low, high = pair
+    assert wait_until(lambda: not low.peer.sync.bursting() and not high.peer.sync.bursting(), 10)
+    ticks: list[float] = []
+    original = low.peer.router.tick
+
+    def counted() -> None:
+        ticks.append(time.monotonic())
+        original()
+
+    low.peer.router.tick = counted  # type: ignore[method-assign]
+    time.sleep(0.5)
+    idle = len(ticks)
+    assert 1 <= idle <= 0.5 / multipeer.IDLE_POLL * 2, f"{idle} looks in 0.5 s once linked"
+    assert low.peer.poll_interval() == multipeer.IDLE_POLL
+    old = low.peer.links[high.guid]
+    intervals: list[float] = []
+    old.sock.shutdown(socket.SHUT_RDWR)
+
+    def relinked() -> bool:
+        intervals.append(low.peer.poll_interval())
+        return low.peer.links.get(high.guid) not in (None, old)
+
+    assert wait_until(relinked, 10), "not reconnected"
+    assert multipeer.BUSY_POLL in intervals, "no quick looks while the link came back"
+    assert wait_until(lambda: low.peer.poll_interval() == multipeer.IDLE_POLL, 10)
