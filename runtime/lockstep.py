@@ -59,6 +59,7 @@ from .lockstep_clock import (
     VARIABLE,
     WORDS,
     SharedClock,
+    next_instant,
     to_ns,
 )
 from .lockstep_frames import Settling
@@ -114,7 +115,7 @@ class Master:
                 due = int(blocks[live, 1:].min()) if live.any() else IDLE
                 if due <= now or words[PENDING]:
                     continue
-                words[0] = min(due, now + clock.step_ns)
+                words[0] = next_instant(blocks[live, 1:], now, clock.step_ns)  # due, and those just after it
                 self.moves += 1
                 moved = _REAL["monotonic"]()
                 here = os.getpid()

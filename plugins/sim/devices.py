@@ -84,14 +84,19 @@ class SimWorld(SimulationHook):
 
     def frame(self, camera: Camera, width: int, height: int) -> Frame:
         """A render of ``camera`` at this world step: the RGB and the depth channels of one camera
-        (same link, field of view and size) read at the same step share one render (D89)."""
-        key = (camera.robot.body, camera.link, camera.fov, width, height)
+        (same viewpoint, field of view and size) read at the same step share one render (D89, D240)."""
+        key = (camera.robot.body, camera.view, camera.fov, width, height)
         cached = self._frames.get(key)
         if cached is not None and cached[0] == self.world.steps:
             return cached[1]
         frame = camera.render(width, height)
         self._frames[key] = (self.world.steps, frame)
         return frame
+
+    def kept_frame(self, key: tuple[int, int, float, int, int]) -> Frame | None:
+        """The frame of ``key`` rendered at this world step, if one was (None otherwise)."""
+        cached = self._frames.get(key)
+        return cached[1] if cached is not None and cached[0] == self.world.steps else None
 
     def keep_frame(self, key: tuple[int, int, float, int, int], step: int, frame: Frame) -> None:
         """Remember a frame rendered elsewhere (the server's render worker) for ``step``."""
@@ -204,7 +209,7 @@ class ChannelDevice:
         if self.spec.values.get("sensor") not in ("rgb", "depth"):
             return None
         v = self.spec.values
-        return (self.device.robot.body, self.device.link, self.device.fov, v["width"], v["height"])
+        return (self.device.robot.body, self.device.view, self.device.fov, v["width"], v["height"])
 
     def from_frame(self, frame: Frame) -> np.ndarray:
         """A camera channel's read of ``frame``: its colour, or its depth in mm."""

@@ -77,6 +77,29 @@ class Robot:
         state = p.getLinkState(self.body, link, computeForwardKinematics=True, physicsClientId=cid)
         return tuple(state[4]), tuple(state[5])
 
+    def viewpoint(self, link: int) -> int:
+        """The lowest-numbered link that is always exactly where ``link`` is: joined to it by fixed
+        joints only and at its pose now (D240). A camera on either sees the same image, so the two
+        share one render (the Xtion's RGB and depth optical frames coincide in the model)."""
+        cid = self.world.client
+
+        def rigid_root(index: int) -> int:
+            while index >= 0 and p.getJointInfo(self.body, index, physicsClientId=cid)[2] == p.JOINT_FIXED:
+                index = p.getJointInfo(self.body, index, physicsClientId=cid)[16]
+            return index
+
+        root, (position, orientation) = rigid_root(link), self.link_pose(link)
+        for other in sorted(self.links.values()):
+            if other == link:
+                break
+            if rigid_root(other) != root:
+                continue
+            there, turned = self.link_pose(other)
+            same_turn = min(math.dist(turned, orientation), math.dist(turned, [-q for q in orientation])) < 1e-9
+            if math.dist(there, position) < 1e-9 and same_turn:  # q and -q: one rotation
+                return other
+        return link
+
     def planar_pose(self, link: int = -1) -> tuple[float, float, float]:
         """Ground-truth (x, y, yaw) of a link's frame (the base's for -1) in the world."""
         (x, y, _), (qx, qy, qz, qw) = self.link_pose(link)

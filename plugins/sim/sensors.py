@@ -85,6 +85,7 @@ class Camera:
 
     def __init__(self, robot: Robot, link: str, *, fov: float = 1.0123, near: float = 0.05, far: float = 10.0) -> None:
         self.robot, self.link = robot, robot.link(link)
+        self.view = robot.viewpoint(self.link)  # the link whose renders this camera shares (D240)
         self.fov, self.near, self.far = fov, near, far
         self.renders = 0
 

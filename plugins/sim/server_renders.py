@@ -30,7 +30,9 @@ class RenderDispatch:
 
     def _dispatch(self) -> None:
         """Hand the waiting camera reads to the idle render workers (each with the others asking for
-        the same frame), at the world's current step."""
+        the same frame), at the world's current step. A read of a frame already made at this step, or
+        in flight for it, shares that render (the RGB and depth channels of one camera, D89, D240)."""
+        self._share()
         idle = [worker for worker in self.renderers if not worker.busy]
         while idle and self._cameras:
             worker = idle.pop(0)
@@ -50,6 +52,26 @@ class RenderDispatch:
                     self._finish(flight, None)
                     continue
             self._flights[worker] = flight
+
+    def _share(self) -> None:
+        if not self._cameras:
+            return
+        waiting: list[tuple[Client, ChannelDevice]] = []
+        with self.sim.lock:
+            self.sim.sync()
+            step, now = self.sim.world.steps, self.sim.world.time
+            for client, device in self._cameras:
+                key = device.camera
+                assert key is not None
+                frame = self.sim.kept_frame(key)
+                flight = next((f for f in self._flights.values() if f.key == key and f.step == step), None)
+                if frame is not None:
+                    client.later(functools.partial(frame_reply, device, frame, now))
+                elif flight is not None:
+                    flight.waiters.append((client, device))
+                else:
+                    waiting.append((client, device))
+        self._cameras = waiting
 
     def _landed(self, worker: RenderWorker) -> None:
         flight, result = self._flights.pop(worker), worker.result()

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
 
 from plugins.sim.arm import Arm
+from plugins.sim.devices import SimWorld
 from plugins.sim.sensors import Camera, Lidar
 from plugins.sim.world import World
 
@@ -61,3 +63,21 @@ def test_one_render_gives_colour_and_depth_at_the_asked_resolution(world: World)
         assert frame.rgb.shape == (height, width, 3)
         assert np.all(frame.depth > 0.0) and np.all(frame.depth <= camera.far + 1e-6)
     assert camera.renders == 2
+
+
+def test_the_xtions_rgb_and_depth_frames_coincide_and_share_one_render() -> None:
+    """D240: the model's RGB and depth optical frames are at one pose on one rigid body, so the two
+    channels' reads at a step are one render; a camera on the moving arm has its own viewpoint."""
+    sim = SimWorld(time.monotonic, None, 3, "", "")
+    try:
+        tb = sim.robot("turtlebot", "", "2 2 0.7")  # turned: float32 quaternions, no exact 1
+        rgb, depth = Camera(tb, "camera_rgb_optical_frame"), Camera(tb, "camera_depth_optical_frame")
+        assert rgb.view == depth.view == rgb.link != depth.link
+        assert Camera(tb, "gripper_tool_link").view == tb.link("gripper_tool_link")
+        assert Camera(tb, "camera_link").view == tb.link("camera_link")  # rigid with them, but elsewhere
+        colour = sim.frame(rgb, 80, 60)
+        assert sim.frame(depth, 80, 60) is colour and rgb.renders + depth.renders == 1
+        sim.world.step(1)
+        assert sim.frame(depth, 80, 60) is not colour and depth.renders == 1
+    finally:
+        sim.world.close()

@@ -19,9 +19,11 @@ import socket
 import subprocess
 import sys
 from collections.abc import Iterator
+from multiprocessing import Pipe
 from multiprocessing.connection import Client
 from pathlib import Path
 
+import numpy as np
 import psutil
 import pytest
 
@@ -31,7 +33,11 @@ from ckmconf.model import HWChannel, Param
 from plugins.hardware.sim import SimBackend
 from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
 from plugins.sim.client import ENV_ADDRESS, ENV_KEY, Link, RemoteDevice
+from plugins.sim.devices import SimWorld
 from plugins.sim.plan import WorldPlan
+from plugins.sim.render import RenderWorker
+from plugins.sim.server import WorldServer
+from plugins.sim.serving import Client as ServedClient
 from plugins.sim.session import READY, ServerProcess, world_session
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
@@ -329,3 +335,41 @@ def test_a_node_run_session_names_its_files_and_cleans_up(
     final = json.loads((run_dir / "sim-final-rover.json").read_text())  # where the robots left the world
     assert set(final["positions"]) >= {"rover", "turtlebot"} and final["time"] >= 0.0
     assert all(len(xyz) == 3 for xyz in final["positions"].values())
+
+
+def test_the_rgb_and_depth_reads_of_one_viewpoint_at_one_step_are_one_render(config: Path) -> None:
+    """D240: the Xtion's RGB and depth optical frames coincide. A depth read made while the RGB read's
+    frame is in flight joins it; one made after it landed, at the same step, is served from it."""
+    depth = channel_of(config, "wrist")
+    rgb = dataclasses.replace(depth, name="wrist_rgb", size=14400, params=tuple(
+        Param(name=p.name, value={"sensor": "rgb", "link": "camera_rgb_optical_frame"}.get(p.name, p.value))
+        for p in depth.params
+    ))  # fmt: skip
+    plan = WorldPlan.of(list(ckmconf.load(config).nodes))
+    assert plan is not None
+    sim = SimWorld(lambda: 0.0, None, plan.seed, plan.textures, plan.world)  # a clock that stands still
+    for name, (model, pose) in plan.bodies.items():
+        sim.robot(name, model, pose)
+    worker = RenderWorker(plan)
+    server = WorldServer(sim, b"test key", renderers=[worker])
+    near, far = Pipe()
+    client = ServedClient(1, far)
+    server.clients.append(client)
+    try:
+        assert worker.await_ready(STARTUP)
+        devices = [client.devices[server._open(client, SimBackend(c).spec())] for c in (rgb, depth)]
+        assert devices[0].camera == devices[1].camera  # one viewpoint, field of view and size
+        for device in devices:  # the depth read comes while the colour frame is being made
+            server._cameras.append((client, device))
+            server._dispatch()
+        assert [len(f.waiters) for f in server._flights.values()] == [2]
+        server._landed(worker)
+        colour, depth_mm = (near.recv()["value"] for _ in devices)
+        assert colour.shape == (60, 80, 3) and depth_mm.shape == (60, 80) and depth_mm.min() > 0
+        server._cameras.append((client, devices[1]))  # again, at the same step: the frame kept
+        server._dispatch()
+        assert not server._flights and worker.busy is False
+        assert np.array_equal(near.recv()["value"], depth_mm)
+    finally:
+        server.close()
+        sim.world.close()
