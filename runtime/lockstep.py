@@ -91,8 +91,16 @@ class Master:
         path = clock.directory / "m"
         path.unlink(missing_ok=True)
         self.sock.bind(str(path))
+        self._addresses: dict[int, str] = {}
         self.waker = sender(0.02)  # a process whose queue stays full misses this move's wake-up (its POLL)
         unheld(threading.Thread(target=self._run, name="ckm-lockstep-master", daemon=True)).start()
+
+    def _address(self, pid: int) -> str:
+        """Where process ``pid``'s ticker listens (made once per process: a move wakes about ten)."""
+        address = self._addresses.get(pid)
+        if address is None:
+            address = self._addresses[pid] = str(self.clock.directory / f"p{pid}")
+        return address
 
     def _run(self) -> None:
         clock, blocks, words = self.clock, self.clock.blocks, self.clock.words
@@ -124,7 +132,7 @@ class Master:
                         clock.fire_due()
                         continue
                     with contextlib.suppress(OSError):
-                        self.waker.sendto(b".", str(clock.directory / f"p{int(pid)}"))
+                        self.waker.sendto(b".", self._address(int(pid)))
                 continue
             try:
                 self.sock.recv(16)

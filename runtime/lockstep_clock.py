@@ -117,6 +117,7 @@ class SharedClock:
         self.local = threading.local()
         self.sock: socket.socket | None = None
         self.poker: socket.socket | None = None  # its own, blocking: the ticker's socket changes modes
+        self._master_address = str(self.directory / "m")
         self.before_fire: Callable[[int], None] | None = None  # frames handed over at a move (lockstep_frames)
 
     # ------------------------------------------------------------------ time
@@ -268,7 +269,7 @@ class SharedClock:
         """Tell the master a slot changed (it may now advance)."""
         if self.poker is not None:
             with contextlib.suppress(OSError):
-                self.poker.sendto(b".", str(self.directory / "m"))
+                self.poker.sendto(b".", self._master_address)
 
     # ------------------------------------------------------------------ waits
 

@@ -174,6 +174,7 @@ class Scheduler:
         self._thread: threading.Thread | None = None
         # (end, duration) of the runs of the last IDLE_WINDOW: trimmed on every run, so bounded.
         self._busy: deque[tuple[float, float]] = deque(maxlen=BUSY_LIMIT)
+        self._busy_total = 0.0  # their durations summed, kept as runs come and go: idle_share is O(1)
 
     # ------------------------------------------------------------------ tasks
 
@@ -209,12 +210,14 @@ class Scheduler:
         now = self.clock()
         with self._lock:
             self._trim_busy(now)
-            busy = sum(duration for _, duration in self._busy)
+            busy = self._busy_total if self._busy else 0.0  # no runs left: no float residue either
         return max(0.0, 1.0 - busy / IDLE_WINDOW)
 
     def _trim_busy(self, now: float) -> None:
         while self._busy and self._busy[0][0] < now - IDLE_WINDOW:
-            self._busy.popleft()
+            self._busy_total -= self._busy.popleft()[1]
+        if not self._busy:
+            self._busy_total = 0.0
 
     def statistics(self, tasks: list[Task] | None = None) -> dict[str, dict[str, Any]]:
         """The figures of ``tasks`` (default: every task it runs), read under the lock the scheduler
@@ -298,7 +301,10 @@ class Scheduler:
             stats.jitter.append(lateness)
             stats.max_jitter = max(stats.max_jitter, abs(lateness))
             stats.exec_time.append(end - start)
+            if len(self._busy) == BUSY_LIMIT:  # the deque drops its oldest run as this one comes
+                self._busy_total -= self._busy[0][1]
             self._busy.append((end, end - start))
+            self._busy_total += end - start
             self._trim_busy(end)
             # The next release is absolute; releases already past are misses, not a burst of runs.
             task.release = release + task.period

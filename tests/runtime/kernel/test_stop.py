@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import ckmconf
 from runtime.kernel import node as node_module
+from runtime.kernel import scheduler as scheduler_module
 from runtime.kernel.node import NodeRuntime
 from runtime.kernel.scheduler import BUSY_LIMIT, IDLE_WINDOW, SAMPLES_KEPT, Ring, Scheduler, Task
 from runtime.network import Transport, open_transport
@@ -114,6 +115,8 @@ def test_the_scheduler_keeps_only_the_last_idle_window_of_runs() -> None:
             busy = list(scheduler._busy)
         assert busy and busy[0][0] >= busy[-1][0] - IDLE_WINDOW  # trimmed on every run
         assert scheduler._busy.maxlen == BUSY_LIMIT
+        # the running total idle_share reads is the window's sum (kept as runs come and go)
+        assert scheduler._busy_total == pytest.approx(sum(d for _, d in busy), abs=1e-9)
     finally:
         scheduler.stop()
     assert len(task.stats.jitter) <= task.stats.jitter.maxlen and len(task.stats.exec_time) <= SAMPLES_KEPT
@@ -141,3 +144,21 @@ def test_a_node_keeps_a_bounded_number_of_events_and_sends_every_one_to_its_sink
         node.report("test", {"n": n})
     assert len(node.events) <= node_module.EVENTS_KEPT
     assert seen == list(range(node_module.EVENTS_KEPT + 500))
+
+
+def test_the_idle_shares_running_total_follows_runs_dropped_by_the_bound(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The busy runs' total is kept as they come, leave the window and are pushed out of the bound."""
+    monkeypatch.setattr(scheduler_module, "BUSY_LIMIT", 4)
+    now = [0.0]
+    scheduler = Scheduler("bounded", clock=lambda: now[0])
+    durations = [0.1, 0.2, 0.05, 0.3, 0.15, 0.25]
+
+    def run() -> None:
+        now[0] += durations[task.stats.releases]
+
+    task = scheduler.add(Task("timed", 0.5, run))
+    for _ in durations:
+        scheduler._execute(task, now[0])
+    assert scheduler.idle_share() == pytest.approx(1.0 - sum(durations[-4:]) / IDLE_WINDOW)
+    now[0] += IDLE_WINDOW + 1.0  # every run out of the window
+    assert scheduler.idle_share() == 1.0 and scheduler._busy_total == 0.0
