@@ -8,7 +8,7 @@ A :class:`Spec` is what a device needs of its HWChannel record (kind, direction,
 read Params, paths resolved), JSON-able so a client can send it to the server. A
 :class:`ChannelDevice` reads or writes one device; the caller holds the world's lock and has synced
 it (``sim.sync()``) first. Large reads (lidar ranges, images) come back as numpy arrays: the backend
-flattens them into the channel's tuple (:func:`to_value`), after the server has shipped them whole.
+flattens them into the channel's flat array (:func:`to_value`), after the server has shipped them whole.
 """
 
 from __future__ import annotations
@@ -231,8 +231,8 @@ class ChannelDevice:
             self.grasp.command((raw - v["offset"]) * v["scale"])
 
 
-def to_value(sample: Sample) -> float | tuple[float, ...]:
-    """A device read as the channel's value: arrays flattened row-major into a tuple."""
+def to_value(sample: Sample) -> float | tuple[float, ...] | np.ndarray:
+    """A device read as the channel's value: arrays flattened row-major, kept arrays (D243)."""
     if isinstance(sample, np.ndarray):
-        return tuple(sample.ravel().tolist())
+        return sample.ravel()
     return sample

@@ -61,10 +61,10 @@ class SensorService:
         """Read the channel, adapt and publish the value (sensory perception service, §3.1.2.1)."""
         raw = self.backend.read()
         if self.shape is None:
-            value: Any = self.chain(float(raw if not isinstance(raw, tuple) else raw[0]), time.monotonic())
+            value: Any = self.chain(float(raw[0] if isinstance(raw, tuple | np.ndarray) else raw), time.monotonic())
         elif self.chains:
             now = time.monotonic()
-            elements = raw if isinstance(raw, tuple) else (raw,)
+            elements = raw if isinstance(raw, tuple | np.ndarray) else (raw,)
             value = [chain(float(x), now) for chain, x in zip(self.chains, elements, strict=True)]
         else:
             value = raw

@@ -7,6 +7,7 @@ import math
 import time
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
 import ckmconf
@@ -93,11 +94,11 @@ def test_joint_position_lidar_bumper_camera_imu(clock_and_scope: tuple[ManualClo
     assert turret == pytest.approx(0.0, abs=0.01) and shoulder == pytest.approx(0.5, abs=0.02)
     assert servo.read() == 150.0
     ranges = laser.read()
-    assert isinstance(ranges, tuple) and len(ranges) == 181
+    assert isinstance(ranges, np.ndarray) and ranges.shape == (181,)  # a scan read whole, flat (D243)
     assert ranges[90] == pytest.approx(6.0 - 3.25, abs=0.02)  # straight ahead: the wall at x = 6
     assert bumper.read() == 0.0
     image = depth.read()
-    assert isinstance(image, tuple) and len(image) == 80 * 60 and min(image) > 0.0
+    assert isinstance(image, np.ndarray) and image.shape == (80 * 60,) and image.min() > 0.0
     accel = imu.read()
     assert isinstance(accel, tuple) and accel[5] == pytest.approx(9.81, abs=0.3)
     assert height.read() == pytest.approx(0.25, abs=0.01)
@@ -168,7 +169,7 @@ def test_gripper_mirror_and_effort_mode(clock_and_scope: tuple[ManualClock, Plan
     assert isinstance(turning, float) and turning > 1.0  # the torque turned the wheel
 
 
-def _lidar_reads(seed: str) -> list[tuple[float, ...]]:
+def _lidar_reads(seed: str) -> list[list[float]]:
     clock = ManualClock()
     motor, laser = open_all(
         PlantScope(clock),
@@ -182,8 +183,8 @@ def _lidar_reads(seed: str) -> list[tuple[float, ...]]:
     for _ in range(5):
         clock.advance(0.2)
         value = laser.read()
-        assert isinstance(value, tuple)
-        reads.append(value)
+        assert isinstance(value, np.ndarray) and value.shape == (90,)
+        reads.append(value.tolist())
     return reads
 
 
@@ -202,8 +203,8 @@ def test_rgb_and_depth_channels_of_one_camera_share_a_render(clock_and_scope: tu
     )
     clock.advance(0.1)
     colour, distance = rgb.read(), depth.read()
-    assert isinstance(colour, tuple) and isinstance(distance, tuple)
-    assert len(colour) == 3600 and all(0 <= c <= 255 for c in colour) and len(distance) == 1200
+    assert isinstance(colour, np.ndarray) and isinstance(distance, np.ndarray)  # frames read whole, flat (D243)
+    assert colour.shape == (3600,) and colour.dtype == np.uint8 and distance.shape == (1200,)
     cameras = [b.device for b in (rgb, depth)]  # type: ignore[attr-defined]
     assert sum(camera.renders for camera in cameras) == 1
     clock.advance(0.1)

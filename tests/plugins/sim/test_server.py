@@ -270,13 +270,13 @@ def test_client_mode_reads_what_the_in_process_world_reads(
             for backend in remote:
                 backend.stop()
         log = server.log.read_text()
-    assert isinstance(served_ranges, tuple) and isinstance(ranges, tuple) and len(served_ranges) == 91
+    assert isinstance(served_ranges, np.ndarray) and isinstance(ranges, np.ndarray) and served_ranges.shape == (91,)
     assert served_ranges == pytest.approx(ranges, abs=0.002)  # the same device code on the same world
-    assert isinstance(served_depth, tuple) and isinstance(depth, tuple) and len(served_depth) == 4800
+    assert isinstance(served_depth, np.ndarray) and isinstance(depth, np.ndarray) and served_depth.shape == (4800,)
     assert min(depth) < 5000  # it sees something: the rover, the floor, the walls
     differences = [abs(a - b) for a, b in zip(served_depth, depth, strict=True)]
     assert sum(differences) / len(differences) < 5.0  # mm: the mirror's render is the world's
-    assert isinstance(away, tuple) and len(away) == 4800 and min(away) > 0.0
+    assert isinstance(away, np.ndarray) and away.shape == (4800,) and away.min() > 0.0
     assert "this camera renders in the physics thread" in log
 
 
