@@ -120,10 +120,13 @@ class Master:
                 if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
                     _REAL["sleep"](IDLE_PACE)
                 # again, after the frames settled: an arrived frame sets its DELIVERY slot before its count
-                due = int(blocks[live, 1:].min()) if live.any() else IDLE
+                # one copy for the check and the move: a slot another thread sets meanwhile (RUNNING, -1)
+                # must not become where the clock goes
+                deadlines = blocks[live, 1:].copy()
+                due = int(deadlines.min()) if deadlines.size else IDLE
                 if due <= now or words[PENDING]:
                     continue
-                words[0] = next_instant(blocks[live, 1:], now, clock.step_ns)  # due, and those just after it
+                words[0] = next_instant(deadlines, now, clock.step_ns)  # due, and those just after it
                 self.moves += 1
                 moved = _REAL["monotonic"]()
                 here = os.getpid()
@@ -284,6 +287,9 @@ def _patch(clock: SharedClock) -> None:
         if slot is None or clock.orphaned is not None:
             born()
             wall_join(self, timeout)
+            return
+        if self._started.is_set() and not self.is_alive():  # ended: no wait, so the clock stays held
+            wall_join(self, timeout)  # (marked free here, a descheduled joiner let the clock run on, D244)
             return
         with clock.lock:  # the thread's end marks it RUNNING again (D220): the clock cannot move before it returns
             if self.is_alive() and self in joiners:

@@ -51,10 +51,11 @@ def next_instant(deadlines: npt.NDArray[np.int64], now: int, step: int) -> int:
     the earliest (D241); ``step`` ahead if nobody is due before. Processes compute the same period's
     releases a few hundred ns apart (each from its own start); one move ends them all, where one
     per release cost a round of wake-ups each: 273 moves per simulated second, not 111."""
-    due, limit = (int(deadlines.min()) if deadlines.size else IDLE), now + step
+    ahead = deadlines[deadlines > now]  # never back: a slot at RUNNING (-1) or a wait already due is no target
+    due, limit = (int(ahead.min()) if ahead.size else IDLE), now + step
     if due > limit:  # nobody due within a step (IDLE: nobody waits for a time)
         return limit
-    return int(deadlines[deadlines <= due + MERGE_NS].max())  # a cluster may end up to MERGE_NS past the step
+    return int(ahead[ahead <= due + MERGE_NS].max())  # a cluster may end up to MERGE_NS past the step
 NEWBORN_WAIT = 0.5  # wall seconds a thread started by a participant holds the clock before its first wait at most
 
 

@@ -59,3 +59,5 @@ def test_the_clock_moves_once_for_wake_ups_a_few_microseconds_apart() -> None:
     assert next_instant(np.array([19_999_700, 20_000_000], dtype=np.int64), 9_999_700, step) == 20_000_000
     assert next_instant(np.array([[IDLE, IDLE]], dtype=np.int64), 7, step) == 7 + step
     assert next_instant(np.empty((0, 3), dtype=np.int64), 7, step) == 7 + step
+    # a slot set to RUNNING (-1) or a wait already due never takes the clock back
+    assert next_instant(np.array([-1, 5, 300_000], dtype=np.int64), 5, step) == 300_000
