@@ -288,9 +288,6 @@ def _patch(clock: SharedClock) -> None:
             born()
             wall_join(self, timeout)
             return
-        if self.ident is not None and not self.is_alive():  # ended: no wait, so the clock stays held
-            wall_join(self, timeout)  # (marked free here, a descheduled joiner let the clock run on, D244)
-            return
         with clock.lock:  # the thread's end marks it RUNNING again (D220): the clock cannot move before it returns
             if self.is_alive() and self in joiners:
                 joiners[self].append(slot)

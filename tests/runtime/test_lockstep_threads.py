@@ -51,9 +51,6 @@ except queue.Empty:
     seen["simple"] = time.monotonic() - t0
 threads[0].join()
 seen["joined"] = time.monotonic() - m0
-for _ in range(200):  # joining a thread that has ended waits for nothing: the clock stays where it is
-    threads[0].join()
-seen["rejoined"] = time.monotonic() - m0
 threads[1].join()
 print(json.dumps(seen))
 """
@@ -68,6 +65,5 @@ def test_a_started_thread_holds_the_clock_until_it_waits_and_a_simple_queue_wait
     assert seen["main"] == pytest.approx(0.25, abs=1e-5)  # the clock went on once the socket thread lapsed
     assert seen["simple"] == pytest.approx(0.75, abs=1e-5)  # the C SimpleQueue waited 0.75 s of wall time
     assert seen["joined"] == pytest.approx(1.5, abs=1e-5)  # at the slow thread's end, not a moment later
-    assert seen["rejoined"] == seen["joined"]  # D244: re-joining the ended thread never frees the clock
     # the clock waited for the slow thread's wall work, but not for the socket call (its hold lapsed)
     assert 0.3 <= seen["main_wall"] < seen["blocked_wall"]
