@@ -19,7 +19,9 @@ pick_python() {
 if [ ! -x .venv/bin/python ]; then
     "$(pick_python)" -m venv .venv
 fi
-stamp=$(cat pyproject.toml constraints.txt examples/ckm-example-plugins/pyproject.toml | sha256sum | cut -c1-16)
+# the checkout's path is in the stamp: an editable install made from another checkout (a worktree sharing
+# this .venv) points there, and its console scripts at that checkout's interpreter path
+stamp=$( (cat pyproject.toml constraints.txt examples/ckm-example-plugins/pyproject.toml; pwd -P) | sha256sum | cut -c1-16)
 if [ "$(cat .venv/.ckm-installed 2>/dev/null || true)" != "$stamp" ]; then
     .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
     .venv/bin/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e ".[dev]"
