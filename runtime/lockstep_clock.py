@@ -43,6 +43,7 @@ WORDS = HEADER + BLOCKS * ROW + BLOCKS * GUIDS + BLOCKS * BLOCKS * FIELDS  # the
 # slots of no thread (D220): frames arrived, handed to their subscribers at the next instant; threads started
 # by a participant, until their first wait; transports waiting for the run's other transports
 DELIVERY, NEWBORN, LINKS = SLOTS - 1, SLOTS - 2, SLOTS - 3
+NEWBORN_WAIT = 0.5  # wall seconds a thread started by a participant holds the clock before its first wait at most
 MERGE_NS = 5_000  # waits due within 5 µs of the earliest end at one move of the clock (D241)
 
 
@@ -56,7 +57,6 @@ def next_instant(deadlines: npt.NDArray[np.int64], now: int, step: int) -> int:
     if due > limit:  # nobody due within a step (IDLE: nobody waits for a time)
         return limit
     return int(ahead[ahead <= due + MERGE_NS].max())  # a cluster may end up to MERGE_NS past the step
-NEWBORN_WAIT = 0.5  # wall seconds a thread started by a participant holds the clock before its first wait at most
 
 
 _REAL: dict[str, Callable[..., Any]] = {}  # the wall clocks, kept before any patch

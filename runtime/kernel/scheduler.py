@@ -210,7 +210,7 @@ class Scheduler:
         now = self.clock()
         with self._lock:
             self._trim_busy(now)
-            busy = self._busy_total if self._busy else 0.0  # no runs left: no float residue either
+            busy = self._busy_total  # _trim_busy zeroes it with the last run: no float residue
         return max(0.0, 1.0 - busy / IDLE_WINDOW)
 
     def _trim_busy(self, now: float) -> None:
