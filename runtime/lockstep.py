@@ -120,13 +120,13 @@ class Master:
                 if due == IDLE:  # nobody waits for a time: move on, but at no more than STEP per IDLE_PACE
                     _REAL["sleep"](IDLE_PACE)
                 # again, after the frames settled: an arrived frame sets its DELIVERY slot before its count
-                # one copy for the check and the move: a slot another thread sets meanwhile (RUNNING, -1)
-                # must not become where the clock goes
-                deadlines = blocks[live, 1:].copy()
-                due = int(deadlines.min()) if deadlines.size else IDLE
+                due = int(blocks[live, 1:].min()) if live.any() else IDLE
                 if due <= now or words[PENDING]:
                     continue
-                words[0] = next_instant(deadlines, now, clock.step_ns)  # due, and those just after it
+                # read once more: a DELIVERY slot an arriving frame set meanwhile (now + 1) is honoured, and
+                # next_instant ignores a slot that turned RUNNING (D244: one copy for both made the loaded
+                # partitioned rover's trajectory differ 2 runs in 7)
+                words[0] = next_instant(blocks[live, 1:], now, clock.step_ns)  # due, and those just after it
                 self.moves += 1
                 moved = _REAL["monotonic"]()
                 here = os.getpid()
