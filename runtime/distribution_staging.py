@@ -57,7 +57,9 @@ class ScopedTransport(Transport):
         """A publisher of the agent's transport."""
         return self.inner.publisher(qos)
 
-    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
+    def subscribe(
+        self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None, *, passive: bool = False
+    ) -> Subscription:
         """A subscription of the agent's transport whose callback stays muted until :meth:`start`."""
         gated = None
         if callback is not None:
@@ -66,7 +68,7 @@ class ScopedTransport(Transport):
                 if self.open.is_set():
                     callback(sample)
 
-        subscription = self.inner.subscribe(qos, gated)
+        subscription = self.inner.subscribe(qos, gated, passive=passive)
         self._subscriptions.append(subscription)
         return subscription
 
@@ -77,6 +79,10 @@ class ScopedTransport(Transport):
     def peers(self) -> list[int]:
         """The peers of the agent's transport."""
         return self.inner.peers()
+
+    def subscribed(self, topic: str) -> bool:
+        """Whether the agent's transport has a subscriber asking for ``topic`` (D245)."""
+        return self.inner.subscribed(topic)
 
     def wait_for_subscribers(self, topic: str, count: int, timeout: float) -> bool:
         """As the agent's transport does."""

@@ -107,6 +107,7 @@ class Sensor(Record):
     priority: int = attr(default=50)
     partition: str | None = attr(default=None)
     extrapolation: Literal["none", "hold", "linear", "quadratic"] = attr(default="linear")
+    lazy: bool = attr(default=False)
     adaptation: Adaptation | None = child(default=None)
 
 

@@ -172,6 +172,7 @@ class Service(Record):
     config_topic: str | None = attr(default=None)
     quality_topic: str | None = attr(default=None)
     alarm_topic: str | None = attr(default=None)
+    lazy: bool = attr(default=False)
     inputs: tuple[ServiceInput, ...] = children()
     outputs: tuple[ServiceOutput, ...] = children()
     parameters: tuple[Parameter, ...] = children()

@@ -46,6 +46,7 @@ class MonitorService:
         crashes: Callable[[str], int],
         report: Callable[[str, dict[str, Any]], None],
         react: Callable[[Alarm], None],
+        asked: Callable[[str], bool] = lambda topic: True,
     ) -> None:
         self.monitor = monitor
         self.node = node
@@ -54,10 +55,26 @@ class MonitorService:
         self.crashes = crashes
         self.report = report
         self.react = react
+        self.asked = asked  # does a subscriber ask for a topic the monitor only observes (D245)
+        self._asked_since: dict[str, float] = {}
         self.alarms = {a.name: AlarmState(a) for a in monitor.alarms}
         self._misses: dict[str, int] = {}
         self._crashes: dict[str, int] = {}
         psutil.cpu_percent(None)  # the first reading only starts the measurement
+
+    def _staleness(self, topic: str) -> float:
+        """Seconds since the topic's newest sample. A topic of a lazy producer, which the monitor
+        only observes, is stale only while a subscriber asks for it, counted from the ask (D245)."""
+        subscription = self.subscriptions.get(topic)
+        sample = subscription.history()[-1] if subscription is not None and subscription.history() else None
+        now = time.time()
+        age = math.inf if sample is None else now - (sample.stamp - sample.offset)
+        if subscription is None or not subscription.passive:
+            return age
+        if not self.asked(topic):
+            self._asked_since.pop(topic, None)
+            return 0.0
+        return min(age, now - self._asked_since.setdefault(topic, now))
 
     def active(self, name: str) -> bool:
         """Whether alarm ``name`` is raised now (False for an unknown name)."""
@@ -77,9 +94,7 @@ class MonitorService:
         if kind == "memory":
             return float(psutil.virtual_memory().percent) / 100
         if kind == "staleness":
-            subscription = self.subscriptions.get(alarm.topic or "")
-            sample = subscription.history()[-1] if subscription is not None and subscription.history() else None
-            return math.inf if sample is None else time.time() - (sample.stamp - sample.offset)
+            return self._staleness(alarm.topic or "")
         if kind == "partition-crash":
             total = self.crashes(alarm.partition or "")
             new = total - self._crashes.get(alarm.name, 0)

@@ -77,6 +77,8 @@ class NodeRuntime:
     ) -> None:
         """``partition``: None runs every component; a name runs only that partition's components,
         and "" only the components outside any partition (the node's main process)."""
+        # the whole node's lazy sensors, its partitions' too: the monitor only observes their topics (D245)
+        self._lazy_sensor_topics = {s.topic for s in node.sensors if s.lazy}
         if partition is not None:
             node = _only_partition(node, partition)
         self.partition = partition
@@ -142,12 +144,15 @@ class NodeRuntime:
             chain = build_chain(sensor.adaptation, self.registry, inverse=False)
             qos = self.topic(sensor.topic)
             publisher = self.transport.publisher(qos)
+            asked = functools.partial(self.transport.subscribed, qos.name) if sensor.lazy else None
             channel = channels[sensor.channel]
             if not is_vector(channel, self._backend_classes[channel.name]):
                 refusals = scalar_refusals(sensor, channel, qos.type, self._ros_config)
                 if refusals:  # verify's sentence at the same FILE:LINE:COL (D193)
                     raise self._error(sensor, refusals[0], "topic")
-                self.sensors[sensor.name] = SensorService(sensor, self.backends[sensor.channel], chain, publisher)
+                self.sensors[sensor.name] = SensorService(
+                    sensor, self.backends[sensor.channel], chain, publisher, asked=asked
+                )
                 continue
             # decision D99: the whole read, shaped for the topic; a chain adapts each element apart
             refusal = chain_refusal(channel, self._backend_classes[channel.name]) if sensor.adaptation else None
@@ -160,7 +165,7 @@ class NodeRuntime:
             chains = [build_chain(sensor.adaptation, self.registry, inverse=False) for _ in range(channel.size)]
             self.sensors[sensor.name] = SensorService(
                 sensor, self.backends[sensor.channel], chain, publisher,
-                shape=shape, chains=chains if sensor.adaptation is not None else None,
+                shape=shape, chains=chains if sensor.adaptation is not None else None, asked=asked,
             )
         for actuator in node.actuators:
             # kernel.xsd: an actuator's steps are applied in order, engineering units → raw.
@@ -184,6 +189,7 @@ class NodeRuntime:
                 crashes=lambda partition: self.partitions.crashes(partition) if self.partitions is not None else 0,
                 report=self.report,
                 react=self._react,
+                asked=lambda topic: self.transport.subscribed(self.topic(topic).name),
             )
             self.switching.monitor = self.monitor
 
@@ -200,8 +206,15 @@ class NodeRuntime:
 
     def _watch(self, topic: str) -> Subscription:
         if topic not in self._watched:
-            self._watched[topic] = self.transport.subscribe(self.topic(topic))
+            # a lazy producer's topic is only observed: the watch must not keep it producing (D245)
+            passive = topic in self._lazy_topics()
+            self._watched[topic] = self.transport.subscribe(self.topic(topic), passive=passive)
         return self._watched[topic]
+
+    def _lazy_topics(self) -> set[str]:
+        """Topics of this node's lazy sensors and of every lazy service's outputs (D245)."""
+        services = {o.topic for r in self.system.resources for v in r.services if v.lazy for o in v.outputs}
+        return self._lazy_sensor_topics | services
 
     def _control_service(self, record: ControllerRecord, extrapolation: dict[str, str]) -> ControlService:
         try:

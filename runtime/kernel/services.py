@@ -48,6 +48,7 @@ class SensorService:
         *,
         shape: Shaper | None = None,
         chains: Sequence[Chain] | None = None,
+        asked: Callable[[], bool] | None = None,
     ) -> None:
         self.record = record
         self.backend = backend
@@ -56,9 +57,17 @@ class SensorService:
         self.shape = shape
         self.chains = list(chains or [])
         self.samples: deque[tuple[float, Any]] = deque(maxlen=8)  # (wall time, engineering value)
+        self.asked = asked  # a lazy sensor's question: does a subscriber ask for the topic (D245)
+        self.rested = 0  # periods a lazy sensor did not read
 
     def tick(self) -> None:
-        """Read the channel, adapt and publish the value (sensory perception service, §3.1.2.1)."""
+        """Read the channel, adapt and publish the value (sensory perception service, §3.1.2.1).
+
+        A lazy sensor (``<Sensor lazy>``) reads nothing while no subscriber asks for its topic (D245).
+        """
+        if self.asked is not None and not self.asked():
+            self.rested += 1
+            return
         raw = self.backend.read()
         if self.shape is None:
             value: Any = self.chain(float(raw[0] if isinstance(raw, tuple | np.ndarray) else raw), time.monotonic())

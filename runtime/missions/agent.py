@@ -38,6 +38,7 @@ and is raised again from :meth:`run` for the caller.
 
 from __future__ import annotations
 
+import collections
 import functools
 import logging
 import threading
@@ -49,7 +50,7 @@ from typing import Any
 from ckmconf.model import System
 from ckmconf.model.missions import Plan
 
-from ..network.api import Sample, TopicQoS, Transport
+from ..network.api import Sample, Subscription, TopicQoS, Transport
 from ..registry import Registry, default_registry
 from ..resources import codec
 from .behaviors import Behavior, BehaviorContext
@@ -75,7 +76,8 @@ class LiveFactory:
         self.system, self.transport, self.signals = system, transport, signals
         self.registry = registry or default_registry()
         self.handles: dict[str, NetworkServiceHandle] = {}
-        self._inputs: dict[str, Any] = {}
+        self._inputs: dict[str, Subscription] = {}
+        self._asking: collections.Counter[Subscription] = collections.Counter()  # active states reading each
         self._publishers: dict[str, Any] = {}
         # Every behavior's topics are joined now, not when its state is first entered: a state's
         # one-shot output (SPOT's target) must reach the next state's input, subscribed before it.
@@ -96,8 +98,8 @@ class LiveFactory:
         return self.handles[ref]
 
     def _topic_reader(self, topic: str) -> Callable[[], Any]:
-        if topic not in self._inputs:
-            self._inputs[topic] = self.transport.subscribe(TopicQoS(topic, "ckm/behavior-input"))
+        if topic not in self._inputs:  # observed only, until a state reading it is entered (D245)
+            self._inputs[topic] = self.transport.subscribe(TopicQoS(topic, "ckm/behavior-input"), passive=True)
         subscription = self._inputs[topic]
 
         def read() -> Any:
@@ -130,10 +132,22 @@ class LiveFactory:
                 outputs[out.name] = functools.partial(self.signals.supply, out.signal)
             elif out.topic is not None:
                 outputs[out.name] = self._publisher(out.topic)
-        context = BehaviorContext(services=services, inputs=inputs, outputs=outputs, now=now)
+        read = [o for handle in services.values() for o in handle.outputs] + [
+            self._inputs[port.topic] for port in record.inputs if port.topic is not None
+        ]
+        context = BehaviorContext(
+            services=services, inputs=inputs, outputs=outputs, now=now,
+            demand=functools.partial(self._demand, read),
+        )  # fmt: skip
         cls = self.registry.resolve("behavior", record.kind, record)
         instance: Behavior = cls(record, context)
         return instance
+
+    def _demand(self, subscriptions: list[Subscription], wanted: bool) -> None:
+        """Ask for what an entered state reads, and stop asking once no active state reads it (D245)."""
+        for subscription in subscriptions:
+            self._asking[subscription] += 1 if wanted else -1
+            subscription.demand(self._asking[subscription] > 0)
 
     def related(self, ref: str) -> NetworkServiceHandle | None:
         """A service eq. 5.1 weighs that no behavior of this state uses: its published quality."""

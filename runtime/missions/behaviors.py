@@ -68,6 +68,9 @@ class BehaviorContext:
     now: Callable[[], float]
     """Seconds since the state was entered (simulated time off-line)."""
     events: list[dict[str, Any]] = field(default_factory=list)
+    demand: Callable[[bool], None] = lambda wanted: None
+    """Told True when the state is entered and False when it is left: the agent then asks for the
+    topics the behavior reads, so lazy sensors and services work for it only meanwhile (D245)."""
 
     def log(self, message: str, **detail: Any) -> None:
         """Keep a note for the mission log (written as a ``log`` record of the state, §7.5)."""

@@ -118,6 +118,7 @@ class MissionRun:
         elif state.behavior is not None:
             entered = self.entered
             self.behavior = engine.factory(state.behavior, path, lambda: engine.now() - entered)
+            self.behavior.context.demand(True)
             self.behavior.start()
         engine.emit(path, "entry")  # after the behavior's start, which may supply the signal's payload
 
@@ -129,6 +130,7 @@ class MissionRun:
             self.child.exit(None, None, "stopped")
         if self.behavior is not None:
             self.behavior.stop()
+            self.behavior.context.demand(False)
         path = self.state_path()
         if self.status.done or (self.child is not None and self.child.outcome is not None):
             self.engine.emit(path, "done")

@@ -49,13 +49,12 @@ class NetworkServiceHandle:
         self.errors: list[str] = []
         qos = topics(resource, service)
         self._config = transport.publisher(qos["config"])
-        self._subscriptions = [
-            transport.subscribe(qos["quality"], self._on_quality),
-            *(
-                transport.subscribe(TopicQoS(o.topic, "ckm/service-data"), self._output(o.name))
-                for o in service.outputs
-            ),
+        # the outputs are observed only until a state using the service asks for them (D245)
+        self.outputs = [
+            transport.subscribe(TopicQoS(o.topic, "ckm/service-data"), self._output(o.name), passive=True)
+            for o in service.outputs
         ]
+        self._subscriptions = [transport.subscribe(qos["quality"], self._on_quality), *self.outputs]
 
     def _output(self, name: str) -> Any:
         def store(sample: Sample) -> None:

@@ -74,16 +74,36 @@ class Subscription:
     """A subscriber's end of a topic: an optional callback (a listener, §3.1.4.4) and the last ``history`` samples."""
 
     def __init__(
-        self, qos: TopicQoS, callback: Callable[[Sample], None] | None, on_close: Callable[[Subscription], None]
+        self,
+        qos: TopicQoS,
+        callback: Callable[[Sample], None] | None,
+        on_close: Callable[[Subscription], None],
+        *,
+        passive: bool = False,
+        on_demand: Callable[[Subscription], None] | None = None,
     ):
         self.qos = qos
         self.callback = callback
         self.received = 0
         self.last_arrival = time.monotonic()  # or the last missed-deadline report
+        self.passive = passive
+        """An observer (a staleness watch, an idle reader): it gets what flows, but a lazy producer
+        does not produce for it (decision D245)."""
         self._samples: deque[Sample] = deque(maxlen=qos.history)
         self._lock = threading.Lock()
         self._on_close = on_close
+        self._on_demand = on_demand
         self._arrived = threading.Condition(self._lock)
+
+    def demand(self, wanted: bool) -> None:
+        """Ask for the topic (``True``) or only observe it (``False``, passive); the transport tells
+        the producers, so a lazy sensor or service runs only while someone asks (D245)."""
+        if self.passive != wanted:
+            return
+        self.passive = not wanted
+        self.last_arrival = time.monotonic()  # a deadline runs from when the topic is asked for
+        if self._on_demand is not None:
+            self._on_demand(self)
 
     def deliver(self, sample: Sample) -> None:
         """Store an arrived sample in the history, wake waiters, then call the callback (transport side)."""
@@ -157,8 +177,22 @@ class Transport(abc.ABC):
         """A publisher for the topic described by ``qos``."""
 
     @abc.abstractmethod
-    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
-        """Subscribe to ``qos.name``; ``callback`` (if any) runs on a transport thread per sample."""
+    def subscribe(
+        self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None, *, passive: bool = False
+    ) -> Subscription:
+        """Subscribe to ``qos.name``; ``callback`` (if any) runs on a transport thread per sample.
+
+        A ``passive`` subscription observes the topic without asking for it (D245): see
+        :meth:`subscribed`.
+        """
+
+    def subscribed(self, topic: str) -> bool:
+        """Whether a subscriber here or at a peer asks for ``topic`` (one not passive).
+
+        A lazy producer (``<Sensor lazy>``, ``<Service lazy>``) works only while this holds
+        (decision D245). A transport that cannot tell answers True: lazy producers then always work.
+        """
+        return True
 
     @abc.abstractmethod
     def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:

@@ -41,9 +41,12 @@ class MultiPeerTransport(SubscriptionTable, Transport):
         self.peer = MultiPeer(network, name=name, key=key)
         self._subs: dict[str, list[Subscription]] = {}
         self._remote_subs: dict[str, set[int]] = {}
+        self._remote_demand: dict[str, set[int]] = {}  # the peers asking for each topic (not passive, D245)
+        self._announced: tuple[list[str], list[str]] | None = None
         self._seq: dict[str, int] = {}
         self._callbacks: list[Callable[[NetworkEvent], None]] = []
         self._lock = threading.RLock()
+        self._links_lock = threading.Lock()
         self._deadlines = DeadlineWatchdog(self._watched, self._emit, "ckm-deadlines")
         self.dropped_stale = 0
         self.dropped_busy = 0
@@ -87,15 +90,30 @@ class MultiPeerTransport(SubscriptionTable, Transport):
         """A publisher sending locally and as TOPICDATA to the subscribed peers only."""
         return Publisher(qos, self._publish)
 
-    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
-        """Subscribe locally; the first subscription of a topic announces it in TOPICLINKS."""
-        subscription = Subscription(qos, callback, self._unsubscribe)
+    def subscribe(
+        self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None, *, passive: bool = False
+    ) -> Subscription:
+        """Subscribe locally; a topic's first subscription, and its first asking for it, announce it in TOPICLINKS."""
+        subscription = Subscription(qos, callback, self._unsubscribe, passive=passive, on_demand=self._demand_changed)
         with self._lock:
             first = not self._subs.get(qos.name)
+            asked = not passive and not self._asked(qos.name)
             self._subs.setdefault(qos.name, []).append(subscription)
-        if first and qos.name != EVENTS_TOPIC:
+        if (first or asked) and qos.name != EVENTS_TOPIC:
             self._announce_links()
         return subscription
+
+    def subscribed(self, topic: str) -> bool:
+        """Whether a subscription here, or a peer's (TOPICLINKS), asks for ``topic`` (D245)."""
+        with self._lock:
+            return self._asked(topic) or bool(self._remote_demand.get(topic))
+
+    def _asked(self, topic: str) -> bool:
+        return any(not s.passive for s in self._subs.get(topic, ()))
+
+    def _demand_changed(self, subscription: Subscription) -> None:
+        if subscription.qos.name != EVENTS_TOPIC:
+            self._announce_links()
 
     def on_event(self, callback: Callable[[NetworkEvent], None]) -> None:
         """Call ``callback`` for every network event."""
@@ -201,34 +219,46 @@ class MultiPeerTransport(SubscriptionTable, Transport):
         self._links(guid, body)
 
     def _links(self, guid: int, body: list[Any]) -> None:
-        if len(body) != 2 or body[0] != "subs" or not isinstance(body[1], list):
+        # ["subs", topics] or ["subs", topics, asked]: the topics the peer asks for, not only observes (D245)
+        if (
+            len(body) not in (2, 3)
+            or body[0] != "subs"
+            or not all(isinstance(part, list) for part in body[1:])
+        ):
             LOG.warning("ignoring a malformed TOPICLINKS frame from %s", guid)
             return
         topics = {t for t in body[1] if isinstance(t, str)}
+        asked = topics if len(body) == 2 else topics & {t for t in body[2] if isinstance(t, str)}
         with self._lock:
-            for name, guids in self._remote_subs.items():
-                if name not in topics:
-                    guids.discard(guid)
-            for name in topics:
-                self._remote_subs.setdefault(name, set()).add(guid)
+            for table, names in ((self._remote_subs, topics), (self._remote_demand, asked)):
+                for name, guids in table.items():
+                    if name not in names:
+                        guids.discard(guid)
+                for name in names:
+                    table.setdefault(name, set()).add(guid)
 
     def _announce_links(self, guids: list[int] | None = None) -> None:
-        with self._lock:
-            topics = sorted(name for name, subs in self._subs.items() if subs and name != EVENTS_TOPIC)
-        if self._ledger is None:
-            self.peer.broadcast(FrameType.TOPICLINKS, ["subs", topics], guids)
-            return
-        for guid in guids if guids is not None else self.peer.reachable():  # one by one: each is counted
-            self._send(guid, FrameType.TOPICLINKS, ["subs", topics])
+        with self._links_lock:  # states computed and sent in one order: the peers end at the newest
+            with self._lock:
+                topics = sorted(name for name, subs in self._subs.items() if subs and name != EVENTS_TOPIC)
+                asked = [name for name in topics if self._asked(name)]
+            if guids is None and self._announced == (topics, asked):
+                return  # every peer has it already (a demand toggled back and forth, a second subscriber)
+            if guids is None:
+                self._announced = (topics, asked)
+            body = ["subs", topics, asked]
+            if self._ledger is None:
+                self.peer.broadcast(FrameType.TOPICLINKS, body, guids)
+                return
+            for guid in guids if guids is not None else self.peer.reachable():  # one by one: each is counted
+                self._send(guid, FrameType.TOPICLINKS, body)
 
     def _unsubscribe(self, subscription: Subscription) -> None:
         with self._lock:
             subs = self._subs.get(subscription.qos.name, [])
             if subscription in subs:
                 subs.remove(subscription)
-            last = not subs
-        if last:
-            self._announce_links()
+        self._announce_links()  # sent only if the topic or its demand went
 
     # ------------------------------------------------------------------ events and deadlines
 
@@ -237,8 +267,9 @@ class MultiPeerTransport(SubscriptionTable, Transport):
             self._announce_links([event.guid])
         elif event.kind in ("unlinked", "lost"):
             with self._lock:
-                for guids in self._remote_subs.values():
-                    guids.discard(event.guid)
+                for table in (self._remote_subs, self._remote_demand):
+                    for guids in table.values():
+                        guids.discard(event.guid)
             if event.kind == "lost":
                 self.peer.clock.forget(event.guid)
         self._emit(NetworkEvent(event.kind, event.guid, None, event.reason or event.name))

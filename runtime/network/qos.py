@@ -121,6 +121,21 @@ class SubscriptionTable:
             local = list(self._subs.get(EVENTS_TOPIC, ()))
         emit_event(event, self._callbacks, local, self.guid)
 
+    def subscribed(self, topic: str) -> bool:
+        """Transport.subscribed: True unless the transport can tell (CKMultiPeer does, D245)."""
+        return True
+
     def _watched(self) -> list[Subscription]:
+        """The subscriptions whose deadline runs: a passive one only while someone asks for its topic (D245)."""
+        now = time.monotonic()
+        watched = []
         with self._lock:
-            return [s for subs in self._subs.values() for s in subs if s.qos.deadline is not None]
+            for name, subs in self._subs.items():
+                for subscription in subs:
+                    if subscription.qos.deadline is None:
+                        continue
+                    if subscription.passive and not self.subscribed(name):
+                        subscription.last_arrival = now  # re-armed: its deadline runs from the next ask
+                        continue
+                    watched.append(subscription)
+        return watched

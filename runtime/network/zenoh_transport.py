@@ -151,11 +151,16 @@ class ZenohTransport(SubscriptionTable, Transport):
             key_expr(qos.name)  # refuse a bad name now, not at the first publish
         return Publisher(qos, self._publish)
 
-    def subscribe(self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None) -> Subscription:
-        """Subscribe to ``qos.name``; the Zenoh subscriber and token follow the local subscriptions."""
+    def subscribe(
+        self, qos: TopicQoS, callback: Callable[[Sample], None] | None = None, *, passive: bool = False
+    ) -> Subscription:
+        """Subscribe to ``qos.name``; the Zenoh subscriber and token follow the local subscriptions.
+
+        ``passive`` is kept but not told to the producers: :meth:`subscribed` is always True here (D245).
+        """
         if qos.name != EVENTS_TOPIC:
             key_expr(qos.name)
-        subscription = Subscription(qos, callback, self._unsubscribe)
+        subscription = Subscription(qos, callback, self._unsubscribe, passive=passive)
         with self._lock:
             self._subs.setdefault(qos.name, []).append(subscription)
         self._sync_topic(qos.name)

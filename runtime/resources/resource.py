@@ -43,7 +43,7 @@ from ckmconf.model.resources import TCM_PERIOD, Service, SmartResource
 
 from ..network.api import Publisher, Subscription, TopicQoS, Transport
 from ..registry import Registry
-from .api import DIRECTORY_TOPIC, describe, preferred_scenario, topics, typed_default
+from .api import DIRECTORY_TOPIC, client_topic, describe, preferred_scenario, topics, typed_default
 from .instance import Instance
 from .selection import SelectorFactory
 from .serving import ServiceInstances
@@ -126,30 +126,45 @@ class SmartResourceRuntime(ServiceInstances):
             )
             period = self._frame_period or min((s.rate for s in services if s.rate), default=DEFAULT_FRAME_PERIOD)
             supply = self._supply_period  # None: each result published as soon as it is computed (D234)
-            stream = Stream(root, Topology(part, self._registry), period, supply, self._source_for(root, services))
+            lazy = all(s.lazy for s in services)
+            source, inputs = self._source_for(root, services, passive=lazy)
+            asked = functools.partial(self._asked, root) if lazy else None
+            stream = Stream(root, Topology(part, self._registry), period, supply, source, asked=asked, inputs=inputs)
             self.streams[root] = stream
             for service in services:
                 self._service_stream[service.name] = stream
 
-    def _source_for(self, root: str, services: list[Service]) -> Source:
-        """The stream's acquisition: a given source, or the newest sample of its input topics.
+    def _asked(self, root: str) -> bool:
+        """Whether a subscriber asks for an output of one of the stream's instances (a lazy stream, D245)."""
+        stream = self.streams[root]
+        return any(
+            self.transport.subscribed(client_topic(o.topic, i.client))
+            for i in list(stream.instances.values())
+            for o in i.service.outputs
+        )
+
+    def _source_for(self, root: str, services: list[Service], *, passive: bool) -> tuple[Source, list[Subscription]]:
+        """The stream's acquisition and its input subscriptions: a given source, or the newest sample
+        of its input topics (observed only, ``passive``, until a lazy stream is asked for, D245).
 
         See :func:`runtime.resources.stream.newest_of` for what the input topics give.
         """
         source = self._sources.get(root)
         if source is not None:
-            return source
+            return source, []
         inputs = {i.name: i.topic for s in services for i in s.inputs}
         if not inputs:  # verify reports it first: "has no Input: its stream … would have nothing to process"
             raise ConfigError.of(
                 services[0], f"resource {self.resource.name}: stream {root!r} has no input topic and no source"
             )
         subscriptions = {
-            name: self.transport.subscribe(TopicQoS(self.wire_name(topic), "ckm/raw", reliability="best-effort"))
+            name: self.transport.subscribe(
+                TopicQoS(self.wire_name(topic), "ckm/raw", reliability="best-effort"), passive=passive
+            )
             for name, topic in inputs.items()
         }
         self._inputs.update({f"{root}/{name}": sub for name, sub in subscriptions.items()})
-        return newest_of(subscriptions)
+        return newest_of(subscriptions), list(subscriptions.values())
 
     # ------------------------------------------------------------------ lifecycle
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,8 +36,22 @@ class _Input:
 class Stream:
     """The profiles rooted at one acquisition plugin (§3.2.2): a Topology, a triple buffer and its instances."""
 
-    def __init__(self, root: str, topology: Topology, period: float, supply: float | None, source: Source) -> None:
+    def __init__(
+        self,
+        root: str,
+        topology: Topology,
+        period: float,
+        supply: float | None,
+        source: Source,
+        *,
+        asked: Callable[[], bool] | None = None,
+        inputs: Sequence[Subscription] = (),
+    ) -> None:
         self.root, self.topology, self.period, self.source = root, topology, period, source
+        self.asked = asked  # a lazy stream's question: does a subscriber ask for an output (D245)
+        self.inputs = list(inputs)  # asked for only while the stream works (passive while it rests)
+        self.asking = asked is None
+        self.rested = 0  # periods a lazy stream took nothing
         self.instances: dict[str, Instance] = {}
         self.lock = threading.Lock()
         self._seq = 0
@@ -55,14 +69,32 @@ class Stream:
         )
 
     def statistics(self) -> dict[str, Any]:
-        """Frames processed, frames whose processing raised, frames the triple buffer dropped."""
-        return {"frames": self.topology.frames, "errors": self.errors, "dropped": self.buffer.stats().dropped}
+        """Frames processed, frames whose processing raised, frames the triple buffer dropped, periods rested."""
+        return {
+            "frames": self.topology.frames,
+            "errors": self.errors,
+            "dropped": self.buffer.stats().dropped,
+            "rested": self.rested,
+        }
 
     def _acquire(self, reuse: _Input | None) -> _Input:
+        if self.asked is not None and not self._rouse():
+            self.rested += 1
+            self.source()  # what arrives meanwhile is taken and dropped: waking, the stream starts afresh
+            return _Input(-1, time.time(), None)
         data = self.source()
         if data is not None:
             self._seq += 1
         return _Input(self._seq if data is not None else -1, time.time(), data)
+
+    def _rouse(self) -> bool:
+        """Whether a subscriber asks for an output now; ask for the inputs, or stop asking, to match (D245)."""
+        wanted = self.asked is not None and self.asked()
+        if wanted != self.asking:
+            self.asking = wanted
+            for subscription in self.inputs:
+                subscription.demand(wanted)
+        return wanted
 
     def _process(self, item: _Input) -> tuple[_Input, Frame, float] | None:
         if item.data is None or item.seq == self._last_processed:

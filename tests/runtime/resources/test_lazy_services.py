@@ -1,0 +1,73 @@
+"""A lazy Smart Resource service (``<Service lazy>``, D245) works only while a subscriber asks for its
+output, and asks for its inputs only meanwhile, so lazy producers upstream rest too. Over a real
+transport on loopback."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Any
+
+from ckmconf.loader import load
+from ckmconf.model.resources import SmartResource
+from runtime.network import TopicQoS, Transport
+from runtime.registry import Registry
+from runtime.resources.resource import SmartResourceRuntime
+from tests import waiting
+from tests.runtime.resources.test_service_api import FUSION, SourcePlugin
+
+until = functools.partial(waiting.until, interval=0.01)
+
+
+def fusion(tmp_path: Path, lazy: bool) -> SmartResource:
+    path = tmp_path / "fusion.xml"
+    path.write_text(FUSION.replace('<Service name="Fusion"', f'<Service name="Fusion" lazy="{str(lazy).lower()}"'))
+    record = load(path).resource("Global")
+    assert record is not None and record.services[0].lazy is lazy
+    return record
+
+
+def registry() -> Registry:
+    made = Registry(load_entry_points=False)
+    made.register("plugin", "test-source", SourcePlugin)
+    return made
+
+
+def test_a_lazy_service_works_only_while_its_output_is_asked_for(
+    tmp_path: Path, pair: tuple[Transport, Transport]
+) -> None:
+    server, remote = pair
+    with SmartResourceRuntime(fusion(tmp_path, lazy=True), server, registry=registry()) as runtime:
+        stream = runtime.streams["merge"]
+        a = remote.publisher(TopicQoS("/a", "ckm/raw"))
+        assert remote.wait_for_subscribers("/a", 1, 10)  # linked: it observes /a …
+        assert not remote.subscribed("/a")  # … but does not ask for it
+        a.publish(1)
+        assert until(lambda: stream.rested > 20)
+        assert stream.topology.frames == 0  # nothing taken while nobody asks
+
+        received: list[Any] = []
+        fused = remote.subscribe(TopicQoS("/fused", "ckm/service-data", history=64), lambda s: received.append(s.value))
+        assert until(lambda: remote.subscribed("/a"))  # asked for its output, it asks for its inputs
+        a.publish(2)
+        assert until(lambda: {"a": 2, "b": None} in received)
+        assert {"a": 1, "b": None} not in received  # what came while it rested is not processed late
+
+        fused.demand(False)  # the reader only observes now: the service rests again
+        assert until(lambda: not remote.subscribed("/a"))
+        frames, count = stream.topology.frames, len(received)
+        rested = stream.rested
+        a.publish(3)
+        assert until(lambda: stream.rested > rested + 20)
+        assert stream.topology.frames == frames and len(received) == count
+        assert runtime.statistics()["streams"]["merge"]["rested"] >= stream.rested - 1
+
+
+def test_a_service_not_lazy_asks_for_its_inputs_from_the_start(
+    tmp_path: Path, pair: tuple[Transport, Transport]
+) -> None:
+    server, remote = pair
+    with SmartResourceRuntime(fusion(tmp_path, lazy=False), server, registry=registry()) as runtime:
+        remote.publisher(TopicQoS("/a", "ckm/raw"))
+        assert until(lambda: remote.subscribed("/a") and remote.subscribed("/b"))
+        assert runtime.streams["merge"].asked is None and runtime.streams["merge"].rested == 0
