@@ -88,6 +88,8 @@ _SPEC = Params(
       unit="rad", above=0.0),
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
+    P("latency", 0.0, "Camera: time from the exposure to the frame's arrival; the world runs on while the "
+      "frame renders, in lock-step too (D246).", unit="s", min=0.0),
 )
 
 
@@ -118,6 +120,10 @@ class SimBackend(Backend):
             raise ParamError(f"{self.owner}: give Param 'sensor' or 'joint'/'joints' to choose the device")
         if channel.direction == "out" and not v["joint"]:
             raise ParamError(f"{self.owner}: an out channel drives a joint: give Param 'joint'")
+        if v["latency"] and v["sensor"] not in ("rgb", "depth"):
+            raise ParamError(f"{self.owner}: Param 'latency' is a camera's (sensor rgb or depth), not "
+                             f"{v['sensor'] or 'a joint'}'s")
+        self.latency = float(v["latency"])
         if v["grasp"] and (channel.direction != "out" or v["mode"] != "position" or not v["mirror"]):
             raise ParamError(f"{self.owner}: Param 'grasp' makes a gripper: only for an out channel in mode "
                              "'position' whose 'joint' and 'mirror' are its two fingers")
@@ -200,6 +206,20 @@ class SimBackend(Backend):
         with sim.lock:
             sim.sync()
             return to_value(device.read())
+
+    def request(self) -> Any:
+        """A camera's frame of the world now (D246): ordered from the world server, rendered while the
+        world runs on; in process, rendered now."""
+        if self.remote is not None:
+            return self.remote.order()
+        return self.read()
+
+    def collect(self, token: Any) -> Value:
+        """The frame :meth:`request` ordered (the world server's ticket), waiting for it if need be."""
+        if self.remote is not None:
+            return to_value(self.remote.collect(token))
+        value: Value = token
+        return value
 
     def write(self, value: Value) -> None:
         """Drive the device (joint target, wheel duty…) with one raw value, at the clock's time."""

@@ -153,6 +153,15 @@ class RemoteDevice:
         value: Sample = self.link.request({"op": "read", "handle": self.handle})["value"]
         return value
 
+    def order(self) -> int:
+        """Order a camera's frame of the world now, rendered while the world runs on; its ticket (D246)."""
+        return int(self.link.request({"op": "render", "handle": self.handle})["ticket"])
+
+    def collect(self, ticket: int) -> Sample:
+        """The frame ordered with ``ticket``, waiting for it if it is not made yet."""
+        value: Sample = self.link.request({"op": "frame", "handle": self.handle, "ticket": ticket})["value"]
+        return value
+
     def write(self, raw: float) -> None:
         """Write ``raw`` to the device in the world server (no reply unless it fails)."""
         # silent: an actuator's write waits for no round trip (its error comes with the next one); in

@@ -99,8 +99,10 @@ class SimWorld(SimulationHook):
         return cached[1] if cached is not None and cached[0] == self.world.steps else None
 
     def keep_frame(self, key: tuple[int, int, float, int, int], step: int, frame: Frame) -> None:
-        """Remember a frame rendered elsewhere (the server's render worker) for ``step``."""
-        self._frames[key] = (step, frame)
+        """Remember a frame rendered elsewhere (the server's render worker) for ``step`` (not over a newer one)."""
+        kept = self._frames.get(key)
+        if kept is None or kept[0] <= step:
+            self._frames[key] = (step, frame)
 
     def robot(self, name: str, model: str, pose: str) -> Robot:
         """The robot ``name``, loaded on first use (at ``pose`` "x y yaw", else beside the map's centre)."""

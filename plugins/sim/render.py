@@ -102,9 +102,10 @@ class RenderWorker:
         self.close()
         return False
 
-    def submit(self, world: World, job: Job) -> None:
-        """Send the worker ``world``'s movable state and the render ``job`` (the answer comes with :meth:`result`)."""
-        self.conn.send((snapshot(world), job))
+    def submit(self, world: World, job: Job, state: list[BodyState] | None = None) -> None:
+        """Send the worker ``world``'s movable state (or a ``state`` taken earlier: an ordered render,
+        D246) and the render ``job`` (the answer comes with :meth:`result`)."""
+        self.conn.send((snapshot(world) if state is None else state, job))
         self.busy = True
 
     def result(self) -> Frame | str:

@@ -16,7 +16,8 @@ sets how many (default 2), 0 renders them here. Before each read or write the wo
 server's clock (real time, ``time.monotonic``; started by the first request), as D88 does in
 process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`Spec`) → ``handle``;
 ``read``/``write``/``close`` (``handle``; ``value`` to write, ``"reply": false`` for a silent write,
-answered only if it fails); ``state`` (time, steps, robots' true
+answered only if it fails); ``render`` → ``ticket`` then ``frame`` (``handle``, ``ticket``) → the
+camera's frame of the step it was ordered at (D246); ``state`` (time, steps, robots' true
 planar poses); ``ping``. A bad request (malformed, unknown op, handle, body, joint, link) is
 answered ``{"error": …, "type": …}`` naming the channel; it never stops the server.
 ``--scenario FILE`` (default ``$CKM_SIM_SCENARIO``) disturbs the world as the run goes
@@ -73,6 +74,8 @@ class WorldServer(RenderDispatch):
         self.sim = sim
         self.renderers = list(renderers)
         self._cameras: list[tuple[Client, ChannelDevice]] = []  # camera reads waiting for a worker
+        self._ordered = []  # renders ordered, waiting for a worker (D246)
+        self._tickets = itertools.count(1)
         self._flights: dict[RenderWorker, Flight] = {}
         self._unmirrored: set[tuple[int, int, float, int, int]] = set()  # renders the worker could not make
         self.authkey = authkey
@@ -179,7 +182,7 @@ class WorldServer(RenderDispatch):
         """Whether the request reads a camera (the one costly kind of request)."""
         try:
             message = json.loads(data)
-            device = client.devices.get(message.get("handle")) if message.get("op") == "read" else None
+            device = client.devices.get(message.get("handle")) if message.get("op") in ("read", "render") else None
         except (ValueError, AttributeError, TypeError):
             return False
         return device is not None and device.spec.values.get("sensor") in ("rgb", "depth")
@@ -205,8 +208,8 @@ class WorldServer(RenderDispatch):
                 return {"time": self.sim.world.time}
             if op == "state":
                 return self._state()
-            if op not in ("read", "write", "close"):
-                raise ValueError(f"unknown op {op!r} (open, read, write, close, state, ping)")
+            if op not in ("read", "write", "close", "render", "frame"):
+                raise ValueError(f"unknown op {op!r} (open, read, render, frame, write, close, state, ping)")
             handle = message.get("handle")
             device = client.devices.get(handle) if isinstance(handle, int) else None
             if device is None or not isinstance(handle, int):
@@ -214,7 +217,13 @@ class WorldServer(RenderDispatch):
             name = device.spec.name
             if op == "close":
                 del client.devices[handle]
+                for ticket in [t for t, o in client.orders.items() if o.device is device]:
+                    del client.orders[ticket]  # its renders are not collected: dropped (a made one lands unread)
                 return {}
+            if op == "render":
+                return self._order(client, device)
+            if op == "frame":
+                return self._collect(client, device, message.get("ticket"))
             if op == "read" and self.renderers and device.camera not in (None, *self._unmirrored):
                 self._cameras.append((client, device))
                 return None

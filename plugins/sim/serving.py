@@ -26,6 +26,7 @@ class Client:
     conn: Connection
     devices: dict[int, ChannelDevice] = field(default_factory=dict)
     outbox: queue.SimpleQueue[Callable[[], Reply] | None] | None = None
+    orders: dict[int, Order] = field(default_factory=dict)  # renders ordered, by ticket, not yet collected
 
     def later(self, make: Callable[[], Reply]) -> None:
         """Send ``make()`` from the sender thread (made, and pickled, there)."""
@@ -58,10 +59,24 @@ def frame_reply(device: ChannelDevice, frame: Frame, time: float) -> Reply:
 
 
 @dataclass
+class Order:
+    """A render ordered (``op: render``) at one world step and collected later (``op: frame``, D246)."""
+
+    ticket: int
+    device: ChannelDevice
+    step: int
+    time: float
+    frame: Frame | None = None
+    error: Reply | None = None  # why there is no frame
+    awaited: bool = False  # the client asked for the frame before it was made
+
+
+@dataclass
 class Flight:
-    """A frame the render worker is making, and the camera reads waiting for it."""
+    """A frame the render worker is making, the camera reads waiting for it and the renders ordered."""
 
     key: tuple[int, int, float, int, int]
     step: int
     time: float
     waiters: list[tuple[Client, ChannelDevice]]
+    orders: list[tuple[Client, Order]] = field(default_factory=list)

@@ -38,9 +38,23 @@ class Backend(abc.ABC):
         """Open the device (no I/O before this)."""
         return None  # optional hook
 
+    latency: float = 0.0
+    """Seconds from a read's request to its value (a simulated camera's transfer, D246). With a
+    latency the sensor reads in two phases: :meth:`request` at its instant, :meth:`collect` that
+    much later, the value stamped at the request; the world runs on meanwhile."""
+
     @abc.abstractmethod
     def read(self) -> Value:
         """The current raw value of an input channel."""
+
+    def request(self) -> Any:
+        """Start a read now (a backend with a ``latency``); what :meth:`collect` takes. By default the value."""
+        return self.read()
+
+    def collect(self, token: Any) -> Value:
+        """The value of the read :meth:`request` started (waiting for it if need be)."""
+        value: Value = token
+        return value
 
     @abc.abstractmethod
     def write(self, value: Value) -> None:

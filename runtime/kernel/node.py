@@ -292,6 +292,8 @@ class NodeRuntime:
         self._step("take the Smart Resource statistics", self.hosting.keep_statistics)
         for resource in self.resources.values():
             self._step(f"stop Smart Resource {resource.resource.name}", resource.stop)
+        for sensor in self.sensors.values():
+            self._step(f"stop sensor {sensor.record.name}", sensor.stop)
         for channel, backend in self.backends.items():
             self._step(f"close channel {channel}", backend.stop)
 

@@ -9,6 +9,7 @@ which plays them if commands stop, then the actuator's fallback actions, then it
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 import time
 from collections import deque
@@ -24,7 +25,7 @@ from ckmconf.model.kernel import Controller as ControllerRecord
 from ..network.api import Publisher, Subscription, TopicQoS
 from ..resources import codec
 from .extrapolate import extrapolate
-from .interfaces import Backend, Controller
+from .interfaces import Backend, Controller, Value
 from .vectors import Shaper
 
 LOG = logging.getLogger("ckm.kernel")
@@ -59,25 +60,60 @@ class SensorService:
         self.samples: deque[tuple[float, Any]] = deque(maxlen=8)  # (wall time, engineering value)
         self.asked = asked  # a lazy sensor's question: does a subscriber ask for the topic (D245)
         self.rested = 0  # periods a lazy sensor did not read
+        self._orders: queue.Queue[tuple[Any, float, float, float] | None] | None = None  # reads in flight (D246)
+        self.failure: Exception | None = None  # a collect's error, raised by the next tick
 
     def tick(self) -> None:
         """Read the channel, adapt and publish the value (sensory perception service, §3.1.2.1).
 
         A lazy sensor (``<Sensor lazy>``) reads nothing while no subscriber asks for its topic (D245).
+        A backend with a ``latency`` (a simulated camera, D246) is asked now; its value is taken,
+        adapted and published ``latency`` later by the sensor's collector thread, stamped now.
         """
         if self.asked is not None and not self.asked():
             self.rested += 1
             return
-        raw = self.backend.read()
+        if self.backend.latency <= 0:
+            self._publish(self.backend.read(), None)
+            return
+        failure, self.failure = self.failure, None
+        if failure is not None:  # a collect that failed fails this task, where the scheduler sees it
+            raise failure
+        token, stamp = self.backend.request(), time.time()
+        if self._orders is None:
+            self._orders = queue.Queue()
+            threading.Thread(target=self._collect, name=f"{self.record.name}-collect", daemon=True).start()
+        self._orders.put((token, stamp, time.monotonic(), time.monotonic() + self.backend.latency))
+
+    def _collect(self) -> None:
+        assert self._orders is not None
+        while (order := self._orders.get()) is not None:
+            token, stamp, then, due = order
+            delay = due - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)  # on the run's clock: in lock-step the world runs on meanwhile
+            try:
+                self._publish(self.backend.collect(token), stamp, then)
+            except Exception as exc:
+                self.failure = exc
+
+    def stop(self) -> None:
+        """End the collector thread (a backend with a latency); reads still in flight are dropped."""
+        if self._orders is not None:
+            self._orders.put(None)
+
+    def _publish(self, raw: Value, stamp: float | None, now: float | None = None) -> None:
+        """Adapt, shape and publish one read, stamped ``stamp`` (None: now)."""
         if self.shape is None:
-            value: Any = self.chain(float(raw[0] if isinstance(raw, tuple | np.ndarray) else raw), time.monotonic())
+            now = time.monotonic() if now is None else now
+            value: Any = self.chain(float(raw[0] if isinstance(raw, tuple | np.ndarray) else raw), now)
         elif self.chains:
-            now = time.monotonic()
+            now = time.monotonic() if now is None else now
             elements = raw if isinstance(raw, tuple | np.ndarray) else (raw,)
             value = [chain(float(x), now) for chain, x in zip(self.chains, elements, strict=True)]
         else:
             value = raw
-        stamp = time.time()
+        stamp = time.time() if stamp is None else stamp
         if self.shape is not None:
             value = self.shape(value, stamp)
         self.samples.append((stamp, value))
