@@ -48,7 +48,7 @@ from benchmarks.mission_compact import compact
 from benchmarks.mission_random import NS, Jitter, Q, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
 from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, object_home, run_split
-from runtime.missions.recording import RunError, read_run
+from runtime.missions.recording import Run, RunError, read_run
 from runtime.missions.report import build_report
 
 __all__ = ["collect", "describe", "layout_config", "on_ports", "run", "run_once"]
@@ -82,6 +82,7 @@ def collect(run_dir: Path, exit_code: int | None, finals: dict[str, str]) -> dic
         "success": False,
         "outcomes": dict.fromkeys(finals),
         "mission_s": None,
+        "mission_wall_s": None,
         "states": {},
         "thesis": {},
         "error": None,
@@ -96,10 +97,21 @@ def collect(run_dir: Path, exit_code: int | None, finals: dict[str, str]) -> dic
         record["outcomes"][name] = agent.outcome
     begin = min(a.begin for a in recorded.agents.values())
     record["mission_s"] = round(max(a.finish for a in recorded.agents.values()) - begin, 6)
+    record["mission_wall_s"] = mission_wall(recorded)
     record["states"] = state_figures(report)
     record["thesis"] = {k: round(v, 6) for k, v in thesis_figures(report).items()}
     record["success"] = exit_code == 0 and all(record["outcomes"].get(a) == f for a, f in finals.items())
     return record
+
+
+def mission_wall(recorded: Run) -> float | None:
+    """Wall seconds from the first agent's start to the last agent's end, on the machine's own clock
+    (the events' ``real``, D248): the mission without the run's start-up and shutdown."""
+    starts = [e.get("real") for e in recorded.events if e.kind == "start"]
+    ends = [e.get("real") for e in recorded.events if e.kind == "end"]
+    starts = [t for t in starts if isinstance(t, int | float)]
+    ends = [t for t in ends if isinstance(t, int | float)]
+    return round(max(ends) - min(starts), 3) if starts and ends and max(ends) > min(starts) else None
 
 
 def run_once(

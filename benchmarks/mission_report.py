@@ -20,6 +20,8 @@ Per plan (decision D163):
 - **thesis**: each Table 7.9 row (:mod:`runtime.missions.report_thesis`) next to the mean time of
   the states it stands for;
 - **realtime factor**: recorded mission seconds / wall seconds of the ``ckm-run`` processes.
+- **mission realtime factor**: recorded mission seconds / wall seconds from the first agent's start
+  to the last agent's end (their ``real`` stamps, D248): the same without start-up and shutdown.
 """
 
 from __future__ import annotations
@@ -111,6 +113,8 @@ def summarise(plan: str, results: Sequence[dict[str, Any]]) -> dict[str, Any]:
                 {"state": row.state, "thesis_s": round(sum(row.times), 3), "mean_s": _mean(ours), "runs": len(ours)}
             )
     wall = sum(r["wall_s"] for r in recorded)
+    phased = [r for r in recorded if r.get("mission_wall_s")]
+    phase = sum(r["mission_wall_s"] for r in phased)
     disturbed = [r for r in results if r.get("disturbed")]  # a --scenario's runs it did disturb
     return {
         "plan": plan,
@@ -122,6 +126,7 @@ def summarise(plan: str, results: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "median_mission_s": _median([r["mission_s"] for r in successes]),
         "mean_all_mission_s": _mean([r["mission_s"] for r in recorded]),
         "realtime_factor": round(sum(r["mission_s"] for r in recorded) / wall, 4) if wall > 0 else None,
+        "mission_realtime_factor": round(sum(r["mission_s"] for r in phased) / phase, 4) if phase > 0 else None,
         "states_from": "successful" if successes else "all",
         "disturbed": len(disturbed),
         "handled": sum(1 for r in disturbed if r.get("handled")),
@@ -155,6 +160,7 @@ def describe(result: dict[str, Any]) -> list[tuple[str, str]]:
         )
     )
     rows.append(("realtime factor", " | ".join(_num(p["realtime_factor"], 3) for p in plans)))
+    rows.append(("mission realtime factor", " | ".join(_num(p.get("mission_realtime_factor"), 3) for p in plans)))
     scenario = result.get("scenario")
     if scenario:
         kill = ""

@@ -5,7 +5,9 @@ service qualities and signals to ``RUN_DIR/mission-AGENT.jsonl``: one JSON objec
 the common keys ``t`` (seconds since the recorder was created, on a monotonic clock), ``agent``
 and ``kind``. The kinds and their keys:
 
-- ``start``: mission, plan, wall · ``end``: outcome, wall
+- ``start``: mission, plan, wall, real · ``end``: outcome, wall, real (``real``: the machine's own
+  clock, epoch seconds, which a scaled or lock-step run clock does not move: how long the mission took
+  on the wall, D248)
 - ``agent-lost``: lost · ``agent-found``: found · ``agent-finished``: finished, outcome
 - ``signal-dropped``: name, to (a finished agent), outcome (its) · ``error``: error, where
 - ``log``: path, message, and what the behavior logged with it (``BehaviorContext.log``)
@@ -135,6 +137,8 @@ class RunRecorder:
                 return False
             if kind in ("start", "end") and "wall" not in fields:
                 fields["wall"] = self._wall()
+            if kind in ("start", "end") and "real" not in fields:  # the machine's clock, which no run clock moves
+                fields["real"] = time.clock_gettime(time.CLOCK_REALTIME)
             event = {"t": round(self.elapsed(), 6), "agent": self.agent, "kind": kind, **fields}
             line = json.dumps(_finite(event), separators=(",", ":"), default=_jsonable, allow_nan=False) + "\n"
             fd = self._open()

@@ -172,6 +172,11 @@ def test_bench_runs_a_plan_and_its_summary_is_what_the_recordings_say(
     look = next(s for s in plan["states"] if s["name"] == "walker: SEARCH/LOOK")
     assert look["mean_s"] == pytest.approx(1.0, abs=0.3)  # the timer behavior's duration
     assert 0 < plan["realtime_factor"] <= 1.0
+    # the mission alone (D248): from the first start to the last end on the machine's clock, no start-up
+    assert all(0 < r["mission_wall_s"] < r["wall_s"] for r in result["results"])
+    phase = sum(r["mission_wall_s"] for r in result["results"])
+    assert plan["mission_realtime_factor"] == pytest.approx(sum(missions) / phase, rel=1e-3)
+    assert plan["mission_realtime_factor"] > plan["realtime_factor"]
     assert (out / "mission-states.png").stat().st_size > 5_000
 
 
