@@ -107,10 +107,10 @@ def collect(run_dir: Path, exit_code: int | None, finals: dict[str, str]) -> dic
 def mission_wall(recorded: Run) -> float | None:
     """Wall seconds from the first agent's start to the last agent's end, on the machine's own clock
     (the events' ``real``, D248): the mission without the run's start-up and shutdown."""
-    starts = [e.get("real") for e in recorded.events if e.kind == "start"]
-    ends = [e.get("real") for e in recorded.events if e.kind == "end"]
-    starts = [t for t in starts if isinstance(t, int | float)]
-    ends = [t for t in ends if isinstance(t, int | float)]
+    def stamps(kind: str) -> list[float]:
+        return [t for e in recorded.events if e.kind == kind and isinstance(t := e.get("real"), int | float)]
+
+    starts, ends = stamps("start"), stamps("end")
     return round(max(ends) - min(starts), 3) if starts and ends and max(ends) > min(starts) else None
 
 

@@ -190,14 +190,8 @@ class RenderDispatch:
         if self.renderers:
             return
         ordered, self._ordered = self._ordered, []
-        for client, order, key, _ in ordered:  # none left: rendered here, of the world now
-            try:
-                with self.sim.lock:
-                    self.sim.sync()
-                    frame = self.sim.frame(order.device.device, *key[3:])
-                self._deliver(Flight(key, order.step, order.time, [], [(client, order)]), frame)
-            except Exception as exc:  # never the server's end
-                order.error = {"error": f"sim channel {order.device.spec.name!r}: {exc}", "type": type(exc).__name__}
+        for client, order, key, _ in ordered:  # none left: rendered here, of the world now, as a failed flight is
+            self._finish(Flight(key, order.step, order.time, [], [(client, order)]), None)
         waiting, self._cameras = self._cameras, []
         for client, device in waiting:  # none left: served here, in order
             try:
