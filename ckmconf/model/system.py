@@ -73,6 +73,11 @@ class System(Content):
         found = next((s for s in resource.services if s.name == service_name), None)
         return (resource, found) if found is not None else None
 
+    def lazy_topics(self) -> set[str]:
+        """Topics published only while asked for (D245): of lazy ``<Sensor>``s and lazy ``<Service>``s' outputs."""
+        sensors = {s.topic for n in self.nodes for s in n.sensors if s.lazy}
+        return sensors | {o.topic for r in self.resources for v in r.services if v.lazy for o in v.outputs}
+
     def behavior(self, name: str) -> Behavior | None:
         """The ``<Behavior>`` named ``name``, None if absent."""
         return next((b for b in self.behaviors if b.name == name), None)

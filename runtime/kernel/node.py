@@ -78,7 +78,6 @@ class NodeRuntime:
         """``partition``: None runs every component; a name runs only that partition's components,
         and "" only the components outside any partition (the node's main process)."""
         # the whole node's lazy sensors, its partitions' too: the monitor only observes their topics (D245)
-        self._lazy_sensor_topics = {s.topic for s in node.sensors if s.lazy}
         if partition is not None:
             node = _only_partition(node, partition)
         self.partition = partition
@@ -207,14 +206,9 @@ class NodeRuntime:
     def _watch(self, topic: str) -> Subscription:
         if topic not in self._watched:
             # a lazy producer's topic is only observed: the watch must not keep it producing (D245)
-            passive = topic in self._lazy_topics()
+            passive = topic in self.system.lazy_topics()
             self._watched[topic] = self.transport.subscribe(self.topic(topic), passive=passive)
         return self._watched[topic]
-
-    def _lazy_topics(self) -> set[str]:
-        """Topics of this node's lazy sensors and of every lazy service's outputs (D245)."""
-        services = {o.topic for r in self.system.resources for v in r.services if v.lazy for o in v.outputs}
-        return self._lazy_sensor_topics | services
 
     def _control_service(self, record: ControllerRecord, extrapolation: dict[str, str]) -> ControlService:
         try:

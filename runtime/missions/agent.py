@@ -78,6 +78,7 @@ class LiveFactory:
         self.handles: dict[str, NetworkServiceHandle] = {}
         self._inputs: dict[str, Subscription] = {}
         self._asking: collections.Counter[Subscription] = collections.Counter()  # active states reading each
+        self._lazy_topics = system.lazy_topics()
         self._publishers: dict[str, Any] = {}
         # Every behavior's topics are joined now, not when its state is first entered: a state's
         # one-shot output (SPOT's target) must reach the next state's input, subscribed before it.
@@ -101,9 +102,12 @@ class LiveFactory:
         if topic not in self._inputs:  # observed only, until a state reading it is entered (D245)
             self._inputs[topic] = self.transport.subscribe(TopicQoS(topic, "ckm/behavior-input"), passive=True)
         subscription = self._inputs[topic]
+        # what a lazy producer published before it rested is not news (D249); a one-shot value
+        # of any other topic, published before the state reading it was entered, still is (D166)
+        fresh = topic in self._lazy_topics
 
         def read() -> Any:
-            sample = subscription.latest()
+            sample = subscription.latest(since_ask=fresh)
             return None if sample is None else codec.decode(sample.value)
 
         return read

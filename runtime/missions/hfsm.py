@@ -25,6 +25,7 @@ time in the off-line validation (the same code runs both).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
@@ -122,15 +123,25 @@ class MissionRun:
             self.behavior.start()
         engine.emit(path, "entry")  # after the behavior's start, which may supply the signal's payload
 
-    def exit(self, to: str | None, condition: str | None, reason: str) -> None:
-        """Leave the active state: stop its child and behavior, emit its ``done``/``exit`` signals, record it."""
+    def exit(
+        self, to: str | None, condition: str | None, reason: str, released: list[Callable[[], None]] | None = None
+    ) -> None:
+        """Leave the active state: stop its child and behavior, emit its ``done``/``exit`` signals, record it.
+
+        The behavior stops asking for its topics at once, or, given ``released``, when the caller
+        has entered the next state: a topic both read is then asked for throughout (D249).
+        """
         if self.state is None:
             return
         if self.child is not None and self.child.outcome is None:
-            self.child.exit(None, None, "stopped")
+            self.child.exit(None, None, "stopped", released)
         if self.behavior is not None:
             self.behavior.stop()
-            self.behavior.context.demand(False)
+            release = functools.partial(self.behavior.context.demand, False)
+            if released is None:
+                release()
+            else:
+                released.append(release)
         path = self.state_path()
         if self.status.done or (self.child is not None and self.child.outcome is not None):
             self.engine.emit(path, "done")
@@ -169,12 +180,17 @@ class MissionRun:
             return False
         for transition, condition in self.transitions:
             if transition.from_ == self.state.name and evaluate(condition, env):
-                self.exit(transition.to, transition.when, "transition")
-                if transition.to in self.finals:
-                    self.outcome = transition.to
-                    self.engine.record("outcome", mission=self.mission.name, path=self.path, outcome=transition.to)
-                else:
-                    self.enter(transition.to)
+                released: list[Callable[[], None]] = []
+                self.exit(transition.to, transition.when, "transition", released)
+                try:
+                    if transition.to in self.finals:
+                        self.outcome = transition.to
+                        self.engine.record("outcome", mission=self.mission.name, path=self.path, outcome=transition.to)
+                    else:
+                        self.enter(transition.to)
+                finally:
+                    for release in released:
+                        release()
                 return True
         return False
 

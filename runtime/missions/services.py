@@ -37,7 +37,7 @@ class NetworkServiceHandle:
         self.service = service
         self.stale = stale
         self._lock = threading.Lock()
-        self._outputs: dict[str, Any] = {}
+        self._outputs: dict[str, tuple[Any, int]] = {}  # value, and the ask it was heard in (0: none)
         self._measures: dict[str, float] = {}
         self._samples: dict[str, collections.deque[float]] = {}
         self._heard = -1e9
@@ -50,10 +50,14 @@ class NetworkServiceHandle:
         qos = topics(resource, service)
         self._config = transport.publisher(qos["config"])
         # the outputs are observed only until a state using the service asks for them (D245)
-        self.outputs = [
-            transport.subscribe(TopicQoS(o.topic, "ckm/service-data"), self._output(o.name), passive=True)
+        self._by_output = {
+            o.name: transport.subscribe(TopicQoS(o.topic, "ckm/service-data"), self._output(o.name), passive=True)
             for o in service.outputs
-        ]
+        }
+        self.outputs = list(self._by_output.values())
+        # a lazy service's results from before it rested are not news when it is asked again (D249)
+        self.lazy = service.lazy and bool(self.outputs)
+        self._asks = self._ask_count()
         self._subscriptions = [transport.subscribe(qos["quality"], self._on_quality), *self.outputs]
 
     def _output(self, name: str) -> Any:
@@ -62,8 +66,10 @@ class NetworkServiceHandle:
                 value = codec.decode(sample.value)
             except ValueError:
                 return  # a malformed sample is not a value
+            subscription = self._by_output.get(name)
+            ask = 0 if subscription is None or subscription.passive else subscription.asks
             with self._lock:
-                self._outputs[name] = value
+                self._outputs[name] = (value, ask)
                 self._heard = time.monotonic()
 
         return store
@@ -74,6 +80,7 @@ class NetworkServiceHandle:
             return
         with self._lock:
             self._heard = time.monotonic()
+            self._forget_rested()
             if message.get("type") == "ack" and isinstance(message.get("id"), int):
                 self.acks[message["id"]] = message
                 if not message.get("accepted"):
@@ -81,7 +88,7 @@ class NetworkServiceHandle:
             measures = message.get("measures")
             if message.get("type") == "quality" and isinstance(message.get("scenario"), str):
                 self.scenario = message["scenario"]
-            if message.get("type") == "quality" and isinstance(measures, dict):
+            if message.get("type") == "quality" and isinstance(measures, dict) and self._awake():
                 for name, value in measures.items():
                     if isinstance(value, int | float) and not isinstance(value, bool):
                         self._measures[name] = float(value)
@@ -137,19 +144,42 @@ class NetworkServiceHandle:
                 self._pending = (message, left - 1)
             self._config.publish(message)
 
+    def _ask_count(self) -> int:
+        return sum(s.asks for s in self.outputs)
+
+    def _forget_rested(self) -> None:
+        """Asked again: a lazy service's measures from before are forgotten (D249). Under the lock."""
+        asks = self._ask_count()
+        if self.lazy and asks != self._asks:
+            self._measures.clear()
+            self._samples.clear()
+        self._asks = asks
+
+    def _awake(self) -> bool:
+        """Whether a lazy service published a result since it was last asked for: its quality
+        messages meanwhile repeat the measures of its last result before it rested (D249)."""
+        return not self.lazy or any(s.heard_since_ask() for s in self.outputs)
+
     def output(self, name: str) -> Any:
-        """Newest value the service published on output ``name`` (None before the first)."""
+        """Newest value the service published on output ``name`` (None before the first; for a
+        lazy service, None until its first since the output was last asked for, D249)."""
         with self._lock:
-            return self._outputs.get(name)
+            value, ask = self._outputs.get(name, (None, 0))
+        subscription = self._by_output.get(name)
+        if self.lazy and subscription is not None and (subscription.passive or ask != subscription.asks):
+            return None
+        return value
 
     def measures(self) -> dict[str, float]:
         """Newest value of each quality measure the service reported (§4.2.1.1)."""
         with self._lock:
+            self._forget_rested()
             return dict(self._measures)
 
     def samples(self, measure: str) -> list[float]:
         """Recent values of ``measure`` (the service state of eq. 5.1)."""
         with self._lock:
+            self._forget_rested()
             return list(self._samples.get(measure, ()))
 
     def running(self) -> bool:

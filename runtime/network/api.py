@@ -89,6 +89,9 @@ class Subscription:
         self.passive = passive
         """An observer (a staleness watch, an idle reader): it gets what flows, but a lazy producer
         does not produce for it (decision D245)."""
+        self.asks = 0 if passive else 1
+        """How many times the topic was asked for (D245): a reader sees a new count as a new ask."""
+        self._asked_at: int | None = None if passive else 0  # samples received when last asked for
         self._samples: deque[Sample] = deque(maxlen=qos.history)
         self._lock = threading.Lock()
         self._on_close = on_close
@@ -100,8 +103,12 @@ class Subscription:
         the producers, so a lazy sensor or service runs only while someone asks (D245)."""
         if self.passive != wanted:
             return
-        self.passive = not wanted
-        self.last_arrival = time.monotonic()  # a deadline runs from when the topic is asked for
+        with self._lock:
+            self.passive = not wanted
+            if wanted:
+                self._asked_at = self.received
+                self.asks += 1
+            self.last_arrival = time.monotonic()  # a deadline runs from when the topic is asked for
         if self._on_demand is not None:
             self._on_demand(self)
 
@@ -115,10 +122,19 @@ class Subscription:
         if self.callback is not None:
             self.callback(sample)
 
-    def latest(self) -> Sample | None:
-        """The newest sample still within its lifespan, if any."""
+    def heard_since_ask(self) -> bool:
+        """Whether a sample arrived since the topic was last asked for (never, for one never asked)."""
+        with self._lock:
+            return self._asked_at is not None and self.received > self._asked_at
+
+    def latest(self, *, since_ask: bool = False) -> Sample | None:
+        """The newest sample still within its lifespan, if any; with ``since_ask``, only one that
+        arrived since the topic was last asked for: what a lazy producer published before it
+        rested is not news when it wakes (D249)."""
         with self._lock:
             sample = self._samples[-1] if self._samples else None
+            if since_ask and (self._asked_at is None or self.received <= self._asked_at):
+                sample = None
         if (
             sample is not None
             and self.qos.lifespan is not None

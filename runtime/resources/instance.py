@@ -232,8 +232,9 @@ class Instance:
     # ------------------------------------------------------------------ data
 
     def deliver(self, value: Any, stamp: float, now_wall: float, latency: float | None = None) -> None:
-        """Publish a fresh result (``stamp``: its acquisition time, wall clock; ``latency``: its
-        processing time) and record its measures."""
+        """Record the measures of a fresh result (``stamp``: its acquisition time, wall clock;
+        ``latency``: its processing time), then publish it: a quality message sent after the
+        result carries its measures (D249)."""
         ports = self.outputs
         if len(ports) == 1:
             items = [(next(iter(ports.values())), value)]
@@ -241,9 +242,6 @@ class Instance:
             items = [(ports[name], v) for name, v in value.items() if name in ports]
         else:
             items = []
-        for publisher, item in items:
-            publisher.publish(codec.encode(item), stamp=stamp)
-        self.published += 1
         self.observe("deadline", now_wall - stamp)
         if latency is not None:
             self.observe("latency", latency)
@@ -257,3 +255,10 @@ class Instance:
                     with self._lock:
                         self.tcm.observe(name, float(field_value))
                         self.measures.add(name, float(field_value))
+        for publisher, item in items:
+            publisher.publish(codec.encode(item), stamp=stamp)
+        self.published += 1
+
+    def resume(self) -> None:
+        """A lazy stream wakes (D245): the rest is no period between two results (D249)."""
+        self._last_publication = None

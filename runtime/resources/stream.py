@@ -94,6 +94,11 @@ class Stream:
             self.asking = wanted
             for subscription in self.inputs:
                 subscription.demand(wanted)
+            if wanted:
+                with self.lock:
+                    instances = list(self.instances.values())
+                for instance in instances:
+                    instance.resume()
         return wanted
 
     def _process(self, item: _Input) -> tuple[_Input, Frame, float] | None:
@@ -128,12 +133,14 @@ def newest_of(subscriptions: Mapping[str, Subscription]) -> Source:
 
     One input: its newest value. Several (a fusion service): ``{input name: newest value or
     None}``. Either way None — nothing to process — until a sample arrives that the stream has
-    not taken yet, so a frame is never processed twice.
+    not taken yet, so a frame is never processed twice. A sample that arrived before the
+    stream last asked for its input (a lazy stream waking, D245) is not taken: it may be
+    from before the rest (D249).
     """
     taken: dict[str, tuple[int, int]] = {}
 
     def latest() -> Any:
-        samples = {name: sub.latest() for name, sub in subscriptions.items()}
+        samples = {name: sub.latest(since_ask=True) for name, sub in subscriptions.items()}
         fresh = {n: (s.source, s.seq) for n, s in samples.items() if s is not None}
         if not fresh or fresh == taken:
             return None

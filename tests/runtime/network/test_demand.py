@@ -109,3 +109,31 @@ def test_a_topiclinks_frame_without_demands_asks_for_every_topic(transports: Mak
     assert transport.subscribed("/a") and transport.subscribed("/b")
     transport._on_links(9, Frame(FrameType.TOPICLINKS, ["subs", ["/a", "/b"], ["/b", 3]]))
     assert not transport.subscribed("/a") and transport.subscribed("/b")
+
+
+def test_a_sample_heard_before_the_last_ask_is_not_news(transports: Make) -> None:
+    """D249: ``latest(since_ask=True)`` gives only what arrived since the topic was last asked for."""
+    network = private_network("multipeer")
+    producer, reader = transports(network, "producer"), transports(network, "reader")
+    topic = TopicQoS("/camera/raw")
+    watch, asking = reader.subscribe(topic, passive=True), reader.subscribe(TopicQoS("/camera/raw"))
+    publisher = producer.publisher(topic)
+    assert producer.wait_for_subscribers(topic.name, 1, TIMEOUT)
+    publisher.publish(1)
+    assert watch.wait(1, TIMEOUT) and asking.wait(1, TIMEOUT)
+    observed = watch.latest()
+    assert observed is not None and observed.value == 1  # observed …
+    assert watch.latest(since_ask=True) is None and not watch.heard_since_ask()  # … never asked for
+    assert asking.latest(since_ask=True) is not None  # asked for from its start
+    asks = watch.asks
+    watch.demand(True)
+    assert watch.asks == asks + 1 and watch.latest(since_ask=True) is None
+    publisher.publish(2)
+    assert watch.wait(2, TIMEOUT) and watch.heard_since_ask()
+    sample = watch.latest(since_ask=True)
+    assert sample is not None and sample.value == 2
+    watch.demand(False)
+    watch.demand(True)  # asked again: 2 is from before
+    assert watch.latest(since_ask=True) is None and watch.asks == asks + 2
+    watch.demand(True)  # already asked: no new ask
+    assert watch.asks == asks + 2

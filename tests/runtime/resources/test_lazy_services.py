@@ -71,3 +71,54 @@ def test_a_service_not_lazy_asks_for_its_inputs_from_the_start(
         remote.publisher(TopicQoS("/a", "ckm/raw"))
         assert until(lambda: remote.subscribed("/a") and remote.subscribed("/b"))
         assert runtime.streams["merge"].asked is None and runtime.streams["merge"].rested == 0
+
+
+def test_a_woken_service_fuses_no_input_from_before_its_rest(tmp_path: Path, pair: tuple[Transport, Transport]) -> None:
+    """D249: on waking, an input not heard since is None, not its value from before the rest."""
+    server, remote = pair
+    with SmartResourceRuntime(fusion(tmp_path, lazy=True), server, registry=registry()) as runtime:
+        stream = runtime.streams["merge"]
+        a, b = remote.publisher(TopicQoS("/a", "ckm/raw")), remote.publisher(TopicQoS("/b", "ckm/raw"))
+        received: list[Any] = []
+        fused = remote.subscribe(TopicQoS("/fused", "ckm/service-data", history=64), lambda s: received.append(s.value))
+        assert until(lambda: remote.subscribed("/a") and remote.subscribed("/b"))
+        a.publish(1)
+        b.publish(1)
+        assert until(lambda: {"a": 1, "b": 1} in received)
+
+        fused.demand(False)
+        assert until(lambda: not remote.subscribed("/a"))
+        rested = stream.rested
+        assert until(lambda: stream.rested > rested + 20)
+        instance = next(iter(stream.instances.values()))
+        before = instance.measures.count.get("deadline", 0)
+
+        fused.demand(True)  # woken: /b was last heard before the rest
+        assert until(lambda: remote.subscribed("/a"))
+        a.publish(2)
+        assert until(lambda: any(r.get("a") == 2 for r in received))
+        assert {"a": 2, "b": None} in received and {"a": 2, "b": 1} not in received
+        assert instance.measures.count.get("deadline", 0) > before
+        b.publish(2)
+        assert until(lambda: {"a": 2, "b": 2} in received)
+
+
+def test_a_woken_instance_counts_no_rest_as_a_period(tmp_path: Path, pair: tuple[Transport, Transport]) -> None:
+    """D249: the first result after a rest observes no ``rate`` (the rest is no publication period)."""
+    server, _ = pair
+    path = tmp_path / "rate.xml"
+    measure = '<QualityMeasure name="period" kind="qos" domain="temporal" source="rate" unit="s"/>'
+    path.write_text(FUSION.replace("<Scenario", measure + "<Scenario", 1))
+    record = load(path).resource("Global")
+    assert record is not None
+    with SmartResourceRuntime(record, server, registry=registry()) as runtime:
+        instance = next(iter(runtime.streams["merge"].instances.values()))
+        instance.deliver({"fused": 1}, 100.0, 100.0)
+        instance.deliver({"fused": 2}, 100.5, 100.5)
+        assert instance.measures.last["period"] == 0.5
+        periods = instance.measures.count["period"]
+        instance.resume()
+        instance.deliver({"fused": 3}, 160.0, 160.0)  # a minute of rest later
+        assert instance.measures.count["period"] == periods
+        instance.deliver({"fused": 4}, 160.25, 160.25)
+        assert instance.measures.last["period"] == 0.25 and instance.measures.count["period"] == periods + 1
