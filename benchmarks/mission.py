@@ -106,12 +106,16 @@ def collect(run_dir: Path, exit_code: int | None, finals: dict[str, str]) -> dic
 
 def mission_wall(recorded: Run) -> float | None:
     """Wall seconds from the first agent's start to the last agent's end, on the machine's own clock
-    (the events' ``real``, D248): the mission without the run's start-up and shutdown."""
-    def stamps(kind: str) -> list[float]:
-        return [t for e in recorded.events if e.kind == kind and isinstance(t := e.get("real"), int | float)]
+    (the events' ``real``, D248): the mission without the run's start-up and shutdown. None if an
+    agent that started has no end (killed, or cut off by the bench's timeout): its phase is unknown."""
+    def stamps(kind: str) -> dict[str, float]:
+        return {e.agent: t for e in recorded.events if e.kind == kind and isinstance(t := e.get("real"), int | float)}
 
     starts, ends = stamps("start"), stamps("end")
-    return round(max(ends) - min(starts), 3) if starts and ends and max(ends) > min(starts) else None
+    if not starts or set(starts) - set(ends):
+        return None
+    first, last = min(starts.values()), max(ends.values())
+    return round(last - first, 3) if last > first else None
 
 
 def run_once(

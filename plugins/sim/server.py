@@ -154,6 +154,7 @@ class WorldServer(RenderDispatch):
     def _drop(self, client: Client, why: str) -> None:
         LOG.info("client %d left (%s), %d channel(s) released", client.number, why, len(client.devices))
         self.clients.remove(client)
+        self._withdraw(client)
         client.close()
 
     def _receive(self, client: Client) -> bytes | None:
@@ -217,6 +218,7 @@ class WorldServer(RenderDispatch):
             name = device.spec.name
             if op == "close":
                 del client.devices[handle]
+                self._withdraw(client, device)
                 for ticket in [t for t, o in client.orders.items() if o.device is device]:
                     del client.orders[ticket]  # its renders are not collected: dropped (a made one lands unread)
                 return {}

@@ -77,6 +77,13 @@ class RenderDispatch:
         client.later(functools.partial(frame_reply, device, order.frame, order.time))
         return None
 
+    def _withdraw(self, client: Client, device: ChannelDevice | None = None) -> None:
+        """A client gone (or one of its channels closed): its renders not begun are not made; a read
+        waiting for a worker is dropped only with its client, which then waits for no answer."""
+        self._ordered = [i for i in self._ordered if not (i[0] is client and device in (None, i[1].device))]
+        if device is None:
+            self._cameras = [(c, d) for c, d in self._cameras if c is not client]
+
     def _flight(self, key: Key, step: int) -> Flight | None:
         return next((f for f in self._flights.values() if f.key == key and f.step == step), None)
 

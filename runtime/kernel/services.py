@@ -62,6 +62,8 @@ class SensorService:
         self.rested = 0  # periods a lazy sensor did not read
         self._orders: queue.Queue[tuple[Any, float, float, float] | None] | None = None  # reads in flight (D246)
         self.failure: Exception | None = None  # a collect's error, raised by the next tick
+        self._failure_lock = threading.Lock()  # the collector sets it while a tick takes it
+        self._stopped = threading.Event()
 
     def tick(self) -> None:
         """Read the channel, adapt and publish the value (sensory perception service, §3.1.2.1).
@@ -76,7 +78,8 @@ class SensorService:
         if self.backend.latency <= 0:
             self._publish(self.backend.read(), None)
             return
-        failure, self.failure = self.failure, None
+        with self._failure_lock:
+            failure, self.failure = self.failure, None
         if failure is not None:  # a collect that failed fails this task, where the scheduler sees it
             raise failure
         token, stamp = self.backend.request(), time.time()
@@ -90,15 +93,22 @@ class SensorService:
         while (order := self._orders.get()) is not None:
             token, stamp, then, due = order
             delay = due - time.monotonic()
-            if delay > 0:
+            if delay > 0 and not self._stopped.is_set():
                 time.sleep(delay)  # on the run's clock: in lock-step the world runs on meanwhile
+            if self._stopped.is_set():
+                continue  # stopping: the read is dropped, not collected from a backend being closed
             try:
                 self._publish(self.backend.collect(token), stamp, then)
             except Exception as exc:
-                self.failure = exc
+                with self._failure_lock:
+                    self.failure = exc
 
     def stop(self) -> None:
-        """End the collector thread (a backend with a latency); reads still in flight are dropped."""
+        """End the collector thread (a backend with a latency); reads still in flight are dropped.
+
+        Not joined: it may sleep on a lock-step clock that this thread's waiting would hold.
+        """
+        self._stopped.set()
         if self._orders is not None:
             self._orders.put(None)
 

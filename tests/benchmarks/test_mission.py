@@ -14,12 +14,12 @@ import pytest
 
 import ckmconf
 from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
-from benchmarks.mission import collect, layout_config, run_once, success_finals
+from benchmarks.mission import collect, layout_config, mission_wall, run_once, success_finals
 from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
 from benchmarks.mission_report import summarise, wilson
 from benchmarks.mission_scenarios import BUILT_IN, judge
 from plugins.sim.plan import WorldPlan
-from runtime.missions.recording import RunRecorder, read_run
+from runtime.missions.recording import Event, Run, RunRecorder, read_run
 from runtime.missions.report import build_report
 from runtime.verification.verify import verify_safely
 from tests.conftest import CONFIGS
@@ -452,3 +452,13 @@ def test_a_disturbed_run_whose_ckm_run_made_no_directory_is_judged_a_failure(tmp
     judge(BUILT_IN["blocked-path"], run_dir, record, CONFIGS / "usecase" / "lab.xml", {"turtlebot": "succeeded"})
     assert record["handled"] is False and record["disturbed"] is False
     assert json.loads((run_dir / "scenario.json").read_text())["scenario"]["name"] == "blocked-path"
+
+
+def test_the_mission_phase_is_unknown_while_an_agent_that_started_has_no_end(tmp_path: Path) -> None:
+    def event(agent: str, kind: str, real: float) -> Event:
+        return Event(t=real, agent=agent, kind=kind, fields={"real": real}, local_t=real, source="x:1")
+
+    both = [event("a", "start", 10.0), event("b", "start", 11.0), event("a", "end", 40.0), event("b", "end", 42.5)]
+    assert mission_wall(Run(tmp_path, both)) == 32.5  # first start to last end
+    assert mission_wall(Run(tmp_path, both[:3])) is None  # b started and was cut off: no phase
+    assert mission_wall(Run(tmp_path, both[:2])) is None

@@ -135,3 +135,26 @@ def test_only_a_camera_has_a_latency(config: Path) -> None:
     wrist = channel_of(config, "wrist")
     camera = SimBackend(dataclasses.replace(wrist, params=(*wrist.params, Param(name="latency", value="0.1"))))
     assert camera.latency == 0.1 and SimBackend(wrist).latency == 0.0
+
+def test_renders_of_a_closed_channel_or_a_client_gone_are_not_made(config: Path, served: Served) -> None:
+    server, client, _, clock = served
+    wrist = channel_of(config, "wrist")
+    handle = server._open(client, SimBackend(wrist).spec())
+    other = ServedClient(2, Pipe()[1])
+    server.clients.append(other)
+    theirs = server._open(other, SimBackend(wrist).spec())
+    assert ask(server, client, op="render", handle=handle) is not None
+    server._dispatch()  # the worker is busy with it
+    clock[0] = 0.1
+    assert ask(server, client, op="render", handle=handle) is not None
+    clock[0] = 0.2
+    assert ask(server, other, op="render", handle=theirs) is not None
+    assert ask(server, other, op="read", handle=theirs) is None
+    assert len(server._ordered) == 2 and len(server._cameras) == 1
+    assert ask(server, client, op="close", handle=handle) == {}
+    assert [o.device for _, o, _, _ in server._ordered] == [other.devices[theirs]]  # the closed channel's is gone
+    server._drop(other, "test")
+    assert not server._ordered and not server._cameras
+    server._landed(server.renderers[0])  # the render begun before still lands, unread
+    server._dispatch()
+    assert not server.renderers[0].busy and not client.orders

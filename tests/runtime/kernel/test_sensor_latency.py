@@ -88,3 +88,17 @@ def test_a_failed_collect_fails_the_next_period(sensor: tuple[SensorService, Slo
     assert waiting.until(lambda: len(published) == 1)
     assert published[0][0] == 2.0 and len(backend.asked) == 2
     service.stop()
+
+
+def test_reads_in_flight_when_the_sensor_stops_are_dropped(
+    sensor: tuple[SensorService, SlowCamera, list[Any]],
+) -> None:
+    service, backend, published = sensor
+    backend.latency = 0.3
+    service.tick()
+    service.tick()
+    service.stop()  # the channel closes next: nothing may be collected from it
+    assert service._orders is not None
+    assert waiting.until(lambda: service._orders is not None and service._orders.empty())
+    time.sleep(0.4)  # past the reads' latency
+    assert backend.collected == [] and published == [] and service.failure is None
