@@ -15,7 +15,9 @@ home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/useca
   round of ``views`` it backs ``shift`` metres and looks round again, up to ``rounds`` rounds. A
   texture print is recognisable from some sides only: a candidate of the target's shape that the
   depth recognition alone saw (no texture) within ``probeRange`` is looked at again from ``probe``
-  radians round it (the robot moves on the circle through it, facing it), ``probes`` times at most.
+  radians round it (the robot moves on the circle through it, facing it, from either side in turn),
+  ``probes`` times at most. A move the base could not finish (blocked by a table) does not end the
+  search: the robot looks from where it stopped, unless ``blockedMoves`` moves failed in a row.
   Writes the target's position (an ``ObjectPosition``) like SPOT, so APPR can approach it.
 
 Messages are those of :mod:`plugins.behaviors.usecase` (``/base/move_goal``, ``/base/move_status``,
@@ -83,6 +85,8 @@ class SearchObject(_Goals):
           "recognisable from some sides only) is looked at again from this far round it (0: never).", unit="rad"),
         P("probes", 3, "Such second looks at most, in the whole search.", min=0),
         P("probeRange", 1.2, "Farthest candidate looked at again.", unit="m", min=0.0),
+        P("blockedMoves", 2, "Failed moves in a row (the base blocked by furniture) that end the search; "
+          "after fewer, it looks from where the robot stopped.", min=1),
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
@@ -94,7 +98,7 @@ class SearchObject(_Goals):
     def start(self) -> None:
         """Look from where the robot stands first."""
         super().start()
-        self.view, self.round, self.probed = 0, 0, 0
+        self.view, self.round, self.probed, self.blocked = 0, 0, 0, 0
         self.candidate: tuple[float, float] | None = None
         self.looking_since: float | None = self.context.now()
         self.move_id: int | None = None
@@ -115,10 +119,16 @@ class SearchObject(_Goals):
             move = self.service("base").output("move_status")
             state = _state(move, self.move_id)
             if state == "failed":
-                return BehaviorStatus(progress=done_views / self._total(), failed=True,
-                                      detail="the base could not move to the next view")
-            if state != "done":
+                self.blocked += 1
+                if self.blocked >= p["blockedMoves"]:
+                    return BehaviorStatus(progress=done_views / self._total(), failed=True,
+                                          detail=f"the base could not move to the next view ({self.blocked} "
+                                                 "moves failed in a row)")
+                self.context.log("the base could not move there; looking from where it stopped", view=done_views)
+            elif state != "done":
                 return BehaviorStatus(progress=(done_views + 0.5 * _share_done(move)) / self._total())
+            else:
+                self.blocked = 0
             self.looking_since = now
         watched = now - self.looking_since
         if watched >= p["settle"]:
@@ -136,7 +146,8 @@ class SearchObject(_Goals):
         if self.candidate is not None and p["probe"] != 0.0 and self.probed < p["probes"]:
             self.probed += 1
             self.context.log("looking again round a candidate", at=list(self.candidate), probe=self.probed)
-            self.move_id = self._send("move", self._round(self.candidate, float(p["probe"])))
+            side = 1.0 if self.probed % 2 else -1.0  # from either side in turn: one may be blocked
+            self.move_id = self._send("move", self._round(self.candidate, side * float(p["probe"])))
             self.candidate, self.looking_since = None, None
             return BehaviorStatus(progress=done_views / self._total(), detail="looking at a candidate again")
         self.candidate = None

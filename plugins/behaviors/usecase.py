@@ -181,9 +181,13 @@ class ArmSequence(_Goals):
 
     def step(self) -> BehaviorStatus:
         """Send each goal of the sequence once the previous one is reached; failed if one fails."""
-        state = _state(self.service("arm").output("status"), self.goal_id)
+        status = self.service("arm").output("status")
+        state = _state(status, self.goal_id)
         if state == "failed":
-            return BehaviorStatus(progress=self.index / len(self.steps), failed=True)
+            error = status.get("error") if isinstance(status, Mapping) else None
+            step = self.steps[self.index]
+            return BehaviorStatus(progress=self.index / len(self.steps), failed=True,
+                                  detail=f"{step['group']}:{step['pose']}: {error or 'failed'}")
         if state == "reached":
             self.index += 1
             if self.index == len(self.steps):

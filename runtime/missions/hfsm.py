@@ -146,8 +146,9 @@ class MissionRun:
         if self.status.done or (self.child is not None and self.child.outcome is not None):
             self.engine.emit(path, "done")
         self.engine.emit(path, "exit")
+        detail = self.status.detail if self.behavior is not None and self.status.failed else None
         self.engine.record("exit", path=path, state=self.state.name, mission=self.mission.name, to=to,
-                           condition=condition, reason=reason)  # fmt: skip
+                           condition=condition, reason=reason, **({"detail": detail} if detail else {}))  # fmt: skip
         self.state, self.behavior, self.child = None, None, None
 
     # ------------------------------------------------------------------ stepping

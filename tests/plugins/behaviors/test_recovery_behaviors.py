@@ -114,14 +114,28 @@ def test_look_backs_off_turns_between_views_and_between_rounds_and_fails_after_t
     assert progress == sorted(progress)  # the share of views examined only grows
 
 
-def test_look_fails_when_the_base_cannot_turn(lab: System) -> None:
-    rig = _look(lab, settle="0", dwell="0", back="0")
+def test_look_looks_from_where_a_blocked_move_stopped_and_fails_after_two_in_a_row(lab: System) -> None:
+    rig = _look(lab, settle="0", dwell="0", back="0")  # LOOK_FLOOR's blockedMoves: 2
     rig.time = 0.1
-    rig.behavior.step()
-    move = rig.last("move")
+
+    def next_move(state: str) -> dict[str, Any]:
+        rig.behavior.step()
+        move = rig.last("move")
+        rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": state}
+        rig.time += 0.1
+        return move
+
+    move = next_move("failed")
     assert move["yaw"] == pytest.approx(0.7) and math.isclose(move["x"], 0.0)
-    rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": "failed"}
-    assert rig.behavior.step().failed
+    status = rig.behavior.step()  # blocked by a table: it looks from where the robot stopped
+    assert not status.failed and not status.done
+    assert rig.behavior.context.events[-1]["message"].startswith("the base could not move there")
+    next_move("done")  # the next turn goes: the count starts again
+    next_move("failed")
+    assert not rig.behavior.step().failed
+    next_move("failed")
+    status = rig.behavior.step()
+    assert status.failed and "2 moves failed in a row" in status.detail
 
 
 def test_look_refuses_views_that_do_not_turn(lab: System) -> None:
@@ -131,7 +145,8 @@ def test_look_refuses_views_that_do_not_turn(lab: System) -> None:
 
 def test_look_looks_again_from_round_a_candidate_seen_by_its_shape_alone(lab: System) -> None:
     """A cylinder the depth recognition alone saw (no texture: its print faces away) 0.6 m ahead-left
-    is looked at again from 0.5 rad round it, at the same distance and facing it; three times at most."""
+    is looked at again from 0.5 rad round it, at the same distance and facing it, from either side in
+    turn (one may be blocked); three times at most."""
     rig = _look(lab, back="0", settle="1", dwell="0", probe="0.5", probes="3")
     observer = {"x": 1.0, "y": 2.0, "yaw": 0.5}
     ahead, left = 0.5, 0.2  # the candidate in the robot's frame
@@ -149,9 +164,10 @@ def test_look_looks_again_from_round_a_candidate_seen_by_its_shape_alone(lab: Sy
         rig.time += 0.1
         rig.behavior.step()  # arrived: the next view starts
     probes, turn = moves[:3], moves[3]
-    for move in probes:
+    for move, side in zip(probes, (1, -1, 1), strict=True):
         x, y, yaw = move["x"], move["y"], move["yaw"]
         assert math.dist((x, y), (ahead, left)) == pytest.approx(math.hypot(ahead, left))  # same distance
         assert math.atan2(left - y, ahead - x) == pytest.approx(yaw)  # facing it
-        assert math.atan2(-left, -ahead) - math.atan2(y - left, x - ahead) == pytest.approx(-0.5)  # 0.5 rad round
+        turned = math.remainder(math.atan2(-left, -ahead) - math.atan2(y - left, x - ahead), 2 * math.pi)
+        assert turned == pytest.approx(-0.5 * side)  # 0.5 rad round, one side then the other
     assert (turn["x"], turn["y"], turn["yaw"]) == (0.0, 0.0, pytest.approx(0.7))  # then the search goes on

@@ -12,7 +12,7 @@ import pytest
 
 import ckmconf
 from ckmconf.model import System
-from runtime.missions.behaviors import Behavior, BehaviorContext
+from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
 from runtime.missions.hfsm import MissionEngine, MissionError, distances_to_success
 from runtime.missions.recording import RunRecorder, read_run
 from runtime.missions.signals import Signals
@@ -120,3 +120,39 @@ def test_signals_are_emitted_on_entry_done_and_exit(system: System) -> None:
 def test_unknown_missions_and_behaviors_are_clear_errors(system: System) -> None:
     with pytest.raises(MissionError, match="no mission 'Nope'"):
         MissionEngine(system, "Nope", factory=factory(system), clock=Clock())
+
+
+FAILING = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="failing">
+  <Behavior name="PLACE" kind="timer"/>
+  <Mission name="Place" initial="PLACE">
+    <State name="PLACE" behavior="PLACE"/>
+    <Final name="placed"/>
+    <Final name="failed"/>
+    <Transition from="PLACE" to="placed" when="done()"/>
+    <Transition from="PLACE" to="failed" when="failed()"/>
+  </Mission>
+</System>
+"""
+
+
+def test_a_failed_behaviors_detail_is_recorded_with_its_exit(tmp_path: Path) -> None:
+    (tmp_path / "failing.xml").write_text(FAILING)
+    system = ckmconf.load(tmp_path / "failing.xml")
+
+    class Blocked(Behavior):
+        def step(self) -> BehaviorStatus:
+            return BehaviorStatus(failed=True, detail="arm:place: goal 3: arm pose 'place' not reached")
+
+    def make(behavior: str, path: str, now: Callable[[], float]) -> Behavior:
+        record = system.behavior(behavior)
+        assert record is not None
+        return Blocked(record, BehaviorContext(services={}, inputs={}, outputs={}, now=now))
+
+    clock = Clock()
+    with RunRecorder(tmp_path / "run", "robot", clock=clock) as recorder:
+        engine = MissionEngine(system, "Place", factory=make, clock=clock, recorder=recorder)
+        run(engine, clock)
+    assert engine.outcome == "failed"
+    [exit_] = [e for e in read_run(tmp_path / "run").events if e.kind == "exit"]
+    assert exit_.fields["detail"] == "arm:place: goal 3: arm pose 'place' not reached"
