@@ -120,7 +120,7 @@ def test_look_looks_from_where_a_blocked_move_stopped_and_fails_after_two_in_a_r
 
     def next_move(state: str) -> dict[str, Any]:
         rig.behavior.step()
-        move = rig.last("move")
+        move: dict[str, Any] = rig.last("move")
         rig.services["base"].outputs["move_status"] = {"id": move["id"], "state": state}
         rig.time += 0.1
         return move
