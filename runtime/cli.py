@@ -294,6 +294,8 @@ def _verdict(codes: list[int], agents: list[_Agent]) -> int:
         LOG.log(logging.INFO if succeeded else logging.ERROR, "agent %s: outcome %s", agent.name, outcome)
         if not succeeded:
             detail = f": {type(agent.error).__name__}: {agent.error}" if agent.error is not None else ""
+            failures = agent.runner.engine.failures
+            detail += f" (last failed state: {failures[-1]})" if failures and agent.error is None else ""
             print(f"agent {agent.name}: mission ended {outcome}{detail}", file=sys.stderr)
             codes.append(EXIT_AGENTS)
     return min(codes) if codes else 0

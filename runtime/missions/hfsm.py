@@ -147,6 +147,8 @@ class MissionRun:
             self.engine.emit(path, "done")
         self.engine.emit(path, "exit")
         detail = self.status.detail if self.behavior is not None and self.status.failed else None
+        if detail:
+            self.engine.failures.append(f"{path}: {detail}")
         self.engine.record("exit", path=path, state=self.state.name, mission=self.mission.name, to=to,
                            condition=condition, reason=reason, **({"detail": detail} if detail else {}))  # fmt: skip
         self.state, self.behavior, self.child = None, None, None
@@ -284,6 +286,7 @@ class MissionEngine:
         self._stopping = False
         self._start = 0.0
         self._last_progress = -1e9
+        self.failures: list[str] = []  # "state path: detail" of each behavior that failed, in order
         self.top = MissionRun(self, record, record.name)
 
     # ------------------------------------------------------------------ services for MissionRun

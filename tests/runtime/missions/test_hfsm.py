@@ -156,3 +156,17 @@ def test_a_failed_behaviors_detail_is_recorded_with_its_exit(tmp_path: Path) -> 
     assert engine.outcome == "failed"
     [exit_] = [e for e in read_run(tmp_path / "run").events if e.kind == "exit"]
     assert exit_.fields["detail"] == "arm:place: goal 3: arm pose 'place' not reached"
+    assert engine.failures == ["Place/PLACE: arm:place: goal 3: arm pose 'place' not reached"]  # for the terminal
+
+
+def test_the_terminal_names_the_state_that_failed_a_mission(capsys: pytest.CaptureFixture[str]) -> None:
+    from types import SimpleNamespace
+
+    from runtime.cli import EXIT_AGENTS, _verdict
+
+    runner = SimpleNamespace(succeeded=False, engine=SimpleNamespace(failures=["Place/PLACE: arm:place: blocked"]))
+    agent = SimpleNamespace(name="turtlebot", outcome="failed", error=None, runner=runner)
+    assert _verdict([], [agent]) == EXIT_AGENTS  # type: ignore[list-item]
+    assert "agent turtlebot: mission ended failed (last failed state: Place/PLACE: arm:place: blocked)" in (
+        capsys.readouterr().err
+    )
