@@ -22,9 +22,9 @@ TRACE_EVERY = 1.0  # simulated seconds between the samples of the robots' trace
 
 
 class Trace:
-    """The robots' true planar poses at the first world step at or after every TRACE_EVERY seconds
-    (a world hook). In lock-step the world steps at the same simulated instants under any load, so
-    two runs of one configuration leave the same trace (D190)."""
+    """The robots' true planar poses, and the objects' positions and tilts, at the first world step
+    at or after every TRACE_EVERY seconds (a world hook). In lock-step the world steps at the same
+    simulated instants under any load, so two runs of one configuration leave the same trace (D190)."""
 
     def __init__(self, sim: SimWorld, every: float = TRACE_EVERY) -> None:
         self.sim, self.every = sim, every
@@ -39,7 +39,8 @@ class Trace:
         while self._next <= world.time + 1e-9:
             self._next += self.every
         robots = {name: [round(v, 6) for v in robot.planar_pose()] for name, robot in self.sim.robots.items()}
-        self.samples.append({"steps": world.steps, "time": round(world.time, 6), "robots": robots})
+        sample = {"steps": world.steps, "time": round(world.time, 6), "robots": robots}
+        self.samples.append({**sample, "objects": world.object_poses()})  # a carried or knocked object's way
 
 
 def write_ready(path: Path, ready: dict[str, Any]) -> None:

@@ -277,6 +277,17 @@ class World:
                      if p.getDynamicsInfo(b, -1, physicsClientId=self.client)[0] > 0.0}, **self.robots}  # fmt: skip
         return {name: [round(v, 4) for v in self.pose(body)[0]] for name, body in bodies.items()}
 
+    def object_poses(self) -> dict[str, list[float]]:
+        """Every object with mass: name → x, y, z and its tilt (rad between its up axis and the vertical)."""
+        poses = {}
+        for name, body in self.objects.items():
+            if p.getDynamicsInfo(body, -1, physicsClientId=self.client)[0] <= 0.0:
+                continue
+            position, orientation = self.pose(body)
+            up = p.getMatrixFromQuaternion(orientation)[8]  # the body's z axis, its vertical component
+            poses[name] = [round(v, 4) for v in (*position, math.acos(max(-1.0, min(1.0, up))))]
+        return poses
+
     def close(self) -> None:
         """Disconnect from the physics server (idempotent)."""
         if self.client >= 0:

@@ -208,3 +208,17 @@ def test_a_render_mirror_built_from_the_same_plan_sees_the_added_crate() -> None
     finally:
         server.world.close()
         mirror.world.close()
+
+
+def test_object_poses_give_each_objects_position_and_tilt(lab: World) -> None:
+    """The trace's ``objects`` (plugins.sim.evidence): a standing cylinder's tilt is 0, one laid down's π/2."""
+    lab.step(60)
+    standing = lab.object_poses()["cylinder_red_stripes"]
+    assert standing[3] == pytest.approx(0.0, abs=0.02) and standing[:3] == pytest.approx(
+        lab.movable_positions()["cylinder_red_stripes"], abs=1e-3)
+    cylinder = lab.objects["cylinder_red_stripes"]
+    p.resetBasePositionAndOrientation(cylinder, [5.0, 4.0, 0.04], p.getQuaternionFromEuler([math.pi / 2, 0, 0.3]),
+                                      physicsClientId=lab.client)  # fmt: skip
+    lab.step(120)
+    assert lab.object_poses()["cylinder_red_stripes"][3] == pytest.approx(math.pi / 2, abs=0.05)  # lying
+    assert "turtlebot" not in lab.object_poses()  # robots are in the trace's ``robots``
