@@ -5,10 +5,7 @@ topic. A one-shot value on any other topic still reaches a state entered after i
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterator
 from pathlib import Path
-
-import pytest
 
 from ckmconf.loader import load
 from ckmconf.model.system import System
@@ -16,11 +13,11 @@ from runtime.missions.agent import LiveFactory
 from runtime.missions.hfsm import MissionEngine
 from runtime.missions.services import NetworkServiceHandle
 from runtime.missions.signals import Signals
-from runtime.network import TopicQoS, Transport, open_transport
+from runtime.network import TopicQoS, Transport
 from runtime.resources import codec
 from runtime.resources.api import topics
 from tests import waiting
-from tests.runtime.network.conftest import private_network
+from tests.runtime.resources.conftest import pair as pair  # the fixture: two transports on loopback
 
 until = functools.partial(waiting.until, interval=0.01)
 
@@ -64,20 +61,6 @@ def system(tmp_path: Path, lazy: bool) -> System:
     path = tmp_path / "system.xml"
     path.write_text(SYSTEM.replace("LAZY", str(lazy).lower()))
     return load(path)
-
-
-@pytest.fixture
-def pair() -> Iterator[tuple[Transport, Transport]]:
-    network = private_network()
-    made = [open_transport(network, name="agent"), open_transport(network, name="service")]
-    try:
-        for transport in made:
-            transport.setup()
-            transport.start()
-        yield made[0], made[1]
-    finally:
-        for transport in made:
-            transport.stop()
 
 
 def handle_of(loaded: System, transport: Transport) -> NetworkServiceHandle:
