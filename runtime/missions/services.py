@@ -18,7 +18,7 @@ from typing import Any
 
 from ckmconf.model.resources import Service, SmartResource
 
-from ..network.api import Sample, TopicQoS, Transport
+from ..network.api import Sample, Subscription, TopicQoS, Transport
 from ..resources import codec
 from ..resources.api import Bounds, check_parameter, topics
 
@@ -50,10 +50,10 @@ class NetworkServiceHandle:
         qos = topics(resource, service)
         self._config = transport.publisher(qos["config"])
         # the outputs are observed only until a state using the service asks for them (D245)
-        self._by_output = {
-            o.name: transport.subscribe(TopicQoS(o.topic, "ckm/service-data"), self._output(o.name), passive=True)
-            for o in service.outputs
-        }
+        self._by_output: dict[str, Subscription] = {}  # filled one by one: a sample may arrive meanwhile
+        for o in service.outputs:
+            topic = TopicQoS(o.topic, "ckm/service-data")
+            self._by_output[o.name] = transport.subscribe(topic, self._output(o.name), passive=True)
         self.outputs = list(self._by_output.values())
         # a lazy service's results from before it rested are not news when it is asked again (D249)
         self.lazy = service.lazy and bool(self.outputs)
