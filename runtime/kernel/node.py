@@ -77,7 +77,8 @@ class NodeRuntime:
     ) -> None:
         """``partition``: None runs every component; a name runs only that partition's components,
         and "" only the components outside any partition (the node's main process)."""
-        # the whole node's lazy sensors, its partitions' too: the monitor only observes their topics (D245)
+        # every lazy producer's topic, a partition's too: the monitor only observes them (D245), once computed
+        self._lazy_topics = system.lazy_topics()
         if partition is not None:
             node = _only_partition(node, partition)
         self.partition = partition
@@ -206,7 +207,7 @@ class NodeRuntime:
     def _watch(self, topic: str) -> Subscription:
         if topic not in self._watched:
             # a lazy producer's topic is only observed: the watch must not keep it producing (D245)
-            passive = topic in self.system.lazy_topics()
+            passive = topic in self._lazy_topics
             self._watched[topic] = self.transport.subscribe(self.topic(topic), passive=passive)
         return self._watched[topic]
 
