@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 import ckmconf
+from ckmconf.model.environment import EnvObject, Geometry3D, Geometry25D
 from plugins.sim.disturbances import ENV_SCENARIO, Disturbances
 from plugins.sim.plan import WorldPlan
 from plugins.sim.scenario import ScenarioError, read
@@ -266,7 +267,9 @@ def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Pat
 
 
 def object_home(config: Path, run_dir: Path) -> bool | None:
-    """Whether the world's final state has the lab's target on the drop table (None: not known)."""
+    """Whether the world's final state has the lab's target on the drop table (None: not known): its
+    centre within ``radius`` of the table's and above the table's top (a cylinder fallen beside the
+    table is within the radius too)."""
     target, table, radius = HOME
     try:
         environment = ckmconf.load(config).environment
@@ -277,4 +280,13 @@ def object_home(config: Path, run_dir: Path) -> bool | None:
     position = final.get("positions", {}).get(target)
     if place is None or position is None:
         return None
-    return bool(((position[0] - place.pose.x) ** 2 + (position[1] - place.pose.y) ** 2) ** 0.5 <= radius)
+    near = ((position[0] - place.pose.x) ** 2 + (position[1] - place.pose.y) ** 2) ** 0.5 <= radius
+    return bool(near and len(position) > 2 and position[2] > _top(place))  # on the top, not the floor beside
+
+
+def _top(place: EnvObject) -> float:
+    """The height of an environment object's highest face (m): its pose's z plus its prisms' zmax."""
+    geometry = place.geometry
+    prisms = geometry.prisms if isinstance(geometry, Geometry3D) else (
+        (geometry.prism,) if isinstance(geometry, Geometry25D) else ())
+    return place.pose.z + max((prism.zmax for prism in prisms), default=0.0)

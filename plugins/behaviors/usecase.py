@@ -155,10 +155,16 @@ class SpotObjects(Behavior):
 
 
 class ArmSequence(_Goals):
-    """PICK, PLACE: the ``sequence`` of ``group:pose`` goals, each after the previous is reached."""
+    """PICK, PLACE: the ``sequence`` of ``group:pose`` goals, each after the previous is reached.
+
+    With ``minHold`` > 0, a gripper goal that stops on an object with the fingers nearer than that
+    share of their range has closed across the object's edge, not round its middle (an aim off by
+    more than the fingers' clearance, D251): the behavior fails there, before lifting it."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("sequence", REQUIRED, "Space-separated goals 'arm:POSE' or 'gripper:POSE', reached in order.", type=str)
+        P("sequence", REQUIRED, "Space-separated goals 'arm:POSE' or 'gripper:POSE', reached in order.", type=str),
+        P("minHold", 0.0, "Least gripper opening (share of its range) an object held must keep (0: any).",
+          min=0.0, max=1.0),
     )
     PORTS = Ports(outputs={"*": MAPPING})
 
@@ -189,11 +195,25 @@ class ArmSequence(_Goals):
             return BehaviorStatus(progress=self.index / len(self.steps), failed=True,
                                   detail=f"{step['group']}:{step['pose']}: {error or 'failed'}")
         if state == "reached":
+            if (narrow := self._narrow_hold(status)) is not None:
+                return BehaviorStatus(progress=self.index / len(self.steps), failed=True, detail=narrow)
             self.index += 1
             if self.index == len(self.steps):
                 return BehaviorStatus(progress=1.0, done=True)
             self.goal_id = self._send("arm_goal", self.steps[self.index])
         return BehaviorStatus(progress=self.index / len(self.steps))
+
+
+    def _narrow_hold(self, status: Any) -> str | None:
+        """Why a reached gripper goal holds the object by its edge (``minHold``), None if it does not."""
+        limit, step = self.params["minHold"], self.steps[self.index]
+        if limit <= 0 or step["group"] != "gripper" or not isinstance(status, Mapping) or not status.get("holding"):
+            return None
+        opening = status.get("opening")
+        if not isinstance(opening, int | float) or opening >= limit:
+            return None
+        return (f"gripper:{step['pose']}: holds the object at {opening:.2f} of the opening, under {limit:.2f}: "
+                "closed across its edge")
 
 
 class BackOff(_Goals):

@@ -19,7 +19,9 @@ Outputs (only the keys naming a service Output are published):
   joint's velocity limit (URDF, or Param ``maxVelocity``), speed the service Parameter ``speed``
   (Table 7.1's configuration) or the goal's own;
 - ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose",
-  "state": "moving" | "reached" | "failed", "active", "error", "holding"}`` (holding: a gripper goal's);
+  "state": "moving" | "reached" | "failed", "active", "error", "holding", "contact", "opening"}``
+  (holding: a gripper goal's; contact: an arm goal to a ``contactPoses`` pose ended by contact;
+  opening: the gripper's measured opening as a share of its range, 0 before joint states);
 - the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
   readable), else 0;
 - the measure ``holding`` (the gripper's measure, issue K): 1 from a closing gripper goal that
@@ -29,9 +31,13 @@ Outputs (only the keys naming a service Output are published):
 Reached: every joint of the group within ``tolerance`` (rad) of its target (the gripper within
 ``gripperTolerance`` of its range); a gripper *closing* whose fingers have stopped short — an
 object between them — for ``settle`` seconds after the planned time is reached too, with
-``holding`` true. Failed: an unknown pose, a pose the IK left out of reach or out of the joint
-limits (solved once, at set-up, in a private pybullet client: :mod:`.kinematics`), or not reached
-``timeout`` seconds after the planned time. Time is the frame's stamp (``Context.stamp``).
+``holding`` true. An arm goal to one of the ``contactPoses`` (the place) whose joints have stood
+still (each within ``stillness``) short of the target for ``settle`` seconds after the planned time is
+reached too, with ``contact`` true in its status: the held object stands on the table and holds
+the arm back (a carried object hangs lower after a grasp that tilted it, D251).
+Failed: an unknown pose, a pose the IK left out of reach or out of the joint limits (solved once,
+at set-up, in a private pybullet client: :mod:`.kinematics`), or not reached ``timeout`` seconds
+after the planned time. Time is the frame's stamp (``Context.stamp``).
 """
 
 from __future__ import annotations
@@ -65,6 +71,7 @@ class _Goal:
         self.state = "moving"
         self.error = ""
         self.holding = False
+        self.contact = False
         self.indices: list[int] = []
         self.target: list[float] = []
         self.started: float | None = None  # planned once joint states are known
@@ -87,6 +94,10 @@ class ArmPoses(ProcessingPlugin):
         P("gripperTolerance", 0.05, "Largest gripper error, as a share of its range.", above=0.0, max=1.0),
         P("settle", 0.5, "How long closing fingers must stand still on an object to count as holding it.",
           unit="s", above=0.0),
+        P("contactPoses", "", "Arm poses (space-separated) reached when the arm stops short of them on "
+          "contact for 'settle' s: setting the held object down."),
+        P("stillness", 0.005, "Largest joint motion over 'settle' s of an arm standing still on contact.",
+          unit="rad", above=0.0),
         P("timeout", 5.0, "Time allowed after the planned duration before a goal fails.", unit="s", above=0.0),
     )
 
@@ -109,13 +120,14 @@ class ArmPoses(ProcessingPlugin):
         if len(self.max_velocity) not in (0, 1, 5) or not all(x > 0 and math.isfinite(x) for x in self.max_velocity):
             raise ParamError(f"{self.owner}: parameter 'maxVelocity' needs one or five positive numbers")
         self.speed: float = v["speed"]
+        self.contact_poses = frozenset(str(v["contactPoses"]).split())
         self.model: ArmModel | None = None
         self.file: PoseFile | None = None
         self.solutions: dict[str, Solution] = {}
         self.velocity: list[float] = []
         self.goal: _Goal | None = None
         self._message: Any = None
-        self._gripper: deque[tuple[float, float]] = deque()
+        self._history: deque[tuple[float, tuple[float, ...]]] = deque()  # the goal's joints over 'settle' s
         self.held: float | None = None  # the closing target of the gripper goal now holding an object
 
     # ------------------------------------------------------------------ set-up
@@ -179,7 +191,7 @@ class ArmPoses(ProcessingPlugin):
         if message is not None and message != self._message:
             self._message = message
             self.goal = self._accept(message)
-            self._gripper.clear()
+            self._history.clear()
         goal = self.goal
         if goal is not None and goal.state == "moving" and positions is not None:
             if goal.started is None:
@@ -194,8 +206,16 @@ class ArmPoses(ProcessingPlugin):
             error = goal.error or reading
             result["status"] = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose,
                                 "state": goal.state, "active": active, "error": error,
-                                "holding": goal.holding}  # never true for an arm goal
+                                "holding": goal.holding,  # never true for an arm goal
+                                "contact": goal.contact,  # never true for a gripper goal
+                                "opening": 0.0 if positions is None else self._opening(positions[4])}
         return result
+
+    def _opening(self, position: float) -> float:
+        """The gripper joint's ``position`` as a share of its range (the pose file's gripper scale)."""
+        assert self.model is not None
+        low, high = self.model.lower[4], self.model.upper[4]
+        return round((position - low) / (high - low), 4)
 
     def _positions(self, state: Any) -> list[float] | None:
         """The five joint positions (Param ``joints`` order) of a JointState, None before the first."""
@@ -278,6 +298,9 @@ class ArmPoses(ProcessingPlugin):
             if max(errors) <= self.params["tolerance"]:
                 goal.state = "reached"
                 return
+            if goal.pose in self.contact_poses and self._still(goal, positions, now, self.params["stillness"]):
+                goal.state, goal.contact = "reached", True
+                return
         else:
             span = self.model.upper[4] - self.model.lower[4]
             if errors[0] <= self.params["gripperTolerance"] * span:
@@ -308,13 +331,17 @@ class ArmPoses(ProcessingPlugin):
 
     def _holding(self, goal: _Goal, position: float, now: float, span: float) -> bool:
         """Whether closing fingers have stood still short of their target for ``settle`` s (an object)."""
-        assert goal.started is not None
-        self._gripper.append((now, position))
-        settle = self.params["settle"]
-        while len(self._gripper) > 1 and self._gripper[1][0] <= now - settle:
-            self._gripper.popleft()  # keep one sample at or before the window's start
         closing = goal.target[0] < position
-        if not closing or now - goal.started < goal.duration or now - self._gripper[0][0] < settle:
+        return self._still(goal, [0.0] * 4 + [position], now, 0.01 * span) and closing
+
+    def _still(self, goal: _Goal, positions: Sequence[float], now: float, bound: float) -> bool:
+        """Whether the goal's joints have each moved less than ``bound`` over the last ``settle`` s,
+        after its planned time."""
+        assert goal.started is not None
+        self._history.append((now, tuple(positions[i] for i in goal.indices)))
+        settle = self.params["settle"]
+        while len(self._history) > 1 and self._history[1][0] <= now - settle:
+            self._history.popleft()  # keep one sample at or before the window's start
+        if now - goal.started < goal.duration or now - self._history[0][0] < settle:
             return False
-        values = [q for _, q in self._gripper]
-        return max(values) - min(values) < 0.01 * span
+        return all(max(values) - min(values) < bound for values in zip(*(q for _, q in self._history), strict=True))

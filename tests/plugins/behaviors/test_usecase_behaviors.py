@@ -145,6 +145,38 @@ def test_pick_runs_its_arm_sequence_step_by_step(lab: System) -> None:
     assert poses == ["gripper:open", "arm:grasp", "gripper:closed", "arm:carry"] and status.done
 
 
+@pytest.mark.parametrize(("opening", "held"), [(0.77, True), (0.72, True), (0.64, False), (0.56, False)])
+def test_pick_floor_fails_before_the_lift_when_the_fingers_closed_across_the_object_s_edge(
+    lab: System, opening: float, held: bool
+) -> None:
+    """PICK_FLOOR's minHold (0.72, D251): round the cylinder's middle the fingers stop at 0.77 of
+    their range; across its edge nearer. Such a grasp fails at gripper:closed, before arm:carry."""
+    rig = Rig(lab, "PICK_FLOOR")
+    for pose in ("gripper:open", "arm:grasp_floor"):
+        goal = rig.last("arm_goal")
+        assert f"{goal['group']}:{goal['pose']}" == pose
+        rig.services["arm"].outputs["status"] = {"id": goal["id"], "state": "reached", "holding": False,
+                                                 "opening": 1.0 if pose == "gripper:open" else 0.0}  # fmt: skip
+        rig.behavior.step()
+    closed = rig.last("arm_goal")
+    rig.services["arm"].outputs["status"] = {"id": closed["id"], "state": "reached", "holding": True,
+                                             "opening": opening}  # fmt: skip
+    status = rig.behavior.step()
+    if held:
+        assert not status.failed and rig.last("arm_goal")["pose"] == "carry"
+    else:
+        assert status.failed and rig.last("arm_goal") == closed  # no lift
+        assert status.detail == (f"gripper:closed: holds the object at {opening:.2f} of the opening, under 0.72: "
+                                 "closed across its edge")
+    plain = Rig(lab, "PICK")  # no minHold: any hold lifts
+    for _ in range(3):
+        goal = plain.last("arm_goal")
+        plain.services["arm"].outputs["status"] = {"id": goal["id"], "state": "reached", "holding": True,
+                                                   "opening": 0.3}  # fmt: skip
+        plain.behavior.step()
+    assert plain.last("arm_goal")["pose"] == "carry"
+
+
 def test_fix_holds_a_reliable_recognition_then_signals_the_position(lab: System) -> None:
     rig = Rig(lab, "OBJ_FIX")
     rig.services["recog"].outputs["objects"] = {

@@ -13,6 +13,7 @@ decides when an object is held.
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from typing import Any
 
@@ -37,8 +38,13 @@ SERVICE_STEPS = 12  # joint states and the service at 20 Hz
 
 
 def arm_plugin(**params: object) -> ArmPoses:
-    """An arm-poses plugin declared in the use case's resources.xml (its pose file: models/arm_poses.yml)."""
-    given = tuple(Param(name=k, value=str(v)) for k, v in params.items())
+    """The arm-poses plugin of the use case's resources.xml, with its Params there (its pose file:
+    models/arm_poses.yml) but for those ``params`` override."""
+    ns = {"c": ET.parse(RESOURCES).getroot().tag.partition("}")[0][1:]}
+    record = ET.parse(RESOURCES).getroot().find(".//c:Plugin[@kind='arm-poses']", ns)
+    assert record is not None, "resources.xml declares no arm-poses plugin"
+    declared = {q.get("name", ""): q.get("value", "") for q in record.findall("c:Param", ns)}
+    given = tuple(Param(name=k, value=str(v)) for k, v in {**declared, **params}.items())
     return ArmPoses(Plugin(name="moveit", kind="arm-poses", params=given, loc=Loc(str(RESOURCES), 1, 1, "/Plugin")))
 
 

@@ -25,7 +25,7 @@ REST = [0.0, 0.0, 0.0, 0.0, 0.0]
 
 @pytest.fixture
 def arm() -> Iterator[ArmPoses]:
-    plugin = arm_plugin(timeout=2.0)
+    plugin = arm_plugin(timeout=2.0, maxVelocity="")  # the URDF's limits; resources.xml's contactPoses
     plugin.setup()
     yield plugin
     plugin.stop()
@@ -49,7 +49,7 @@ def test_a_goal_gets_one_trajectory_from_the_measured_start_and_is_reached_only_
     peak = max(1.5 * abs(q) / end["time_from_start"] for q in target)
     assert peak == pytest.approx(1.5)
     assert first["status"] == {"stamp": 0.0, "id": 7, "group": "arm", "pose": "ready", "state": "moving",
-                               "active": True, "error": "", "holding": False}
+                               "active": True, "error": "", "holding": False, "contact": False, "opening": 0.0}
     assert first["active"] == 1
     halfway = [q / 2 for q in target] + [0.0]
     assert "trajectory" not in frame(arm, goal, halfway, 0.2)  # the same goal is not planned twice
@@ -110,6 +110,57 @@ def test_the_holding_measure_drops_when_the_object_slips_out_or_the_gripper_open
     goal, t, opening = hold_an_object(arm, 5, t + 2.0)
     released = frame(arm, {"id": 6, "group": "gripper", "pose": "open"}, [*REST[:4], opening], t + 0.1)
     assert released["holding"] == 0  # opening lets it go
+
+
+def test_the_status_gives_the_measured_opening_of_the_held_object(arm: ArmPoses) -> None:
+    """What PICK_FLOOR's minHold reads (D251): 0.02 m of the fingers' 0.045 m range."""
+    goal, t, opening = hold_an_object(arm, 4)
+    status = frame(arm, goal, [*REST[:4], opening], t + 0.05)["status"]
+    assert status["holding"] is True and status["opening"] == pytest.approx(0.02 / 0.045, abs=1e-4)
+
+
+def _stalled(arm: ArmPoses, goal: dict[str, Any], share: float) -> tuple[list[float], float]:
+    """Plan ``goal`` from REST; the joints stopped at ``share`` of the way; its planned duration."""
+    duration = frame(arm, goal, REST, 0.0)["trajectory"]["points"][1]["time_from_start"]
+    target = list(arm.solutions[goal["pose"]].joints)
+    return [q * share for q in target] + [0.0], duration
+
+
+def test_a_place_stopped_short_by_the_set_down_object_is_reached_with_contact(arm: ArmPoses) -> None:
+    """resources.xml's contactPoses: the place ends when the object stands on the table and the
+    arm stands still short of the pose for settle (0.5 s) after the planned time (D251)."""
+    assert arm.contact_poses == {"place"}
+    goal = {"id": 9, "group": "arm", "pose": "place"}
+    stopped, duration = _stalled(arm, goal, 0.9)
+    t = duration
+    while t < duration + 0.45:  # standing still, not yet for settle
+        t += 0.05
+        assert frame(arm, goal, stopped, t)["status"]["state"] == "moving"
+    status = frame(arm, goal, stopped, t + 0.1)["status"]
+    assert status["state"] == "reached" and status["contact"] is True and status["active"] is True
+
+
+def test_an_arm_still_creeping_or_stopped_short_of_another_pose_is_not_reached(arm: ArmPoses) -> None:
+    """Creeping by more than stillness (5 mrad in settle) is no contact; a pose outside contactPoses
+    stopped short fails at its timeout as before."""
+    goal = {"id": 10, "group": "arm", "pose": "place"}
+    stopped, duration = _stalled(arm, goal, 0.9)
+    t, states = duration, []
+    for k in range(40):  # 2 s creeping at 6 mrad/s on the elbow (3 mrad per settle window)…
+        t = duration + 0.05 * k
+        stopped[2] += 0.0003
+        states.append(frame(arm, goal, stopped, t)["status"]["state"])
+    assert "reached" in states  # …is still: 3 mrad < 5
+    goal = {"id": 11, "group": "arm", "pose": "place"}
+    stopped, duration = _stalled(arm, goal, 0.9)
+    for k in range(40):  # creeping at 20 mrad/s: moving, never contact
+        stopped[2] += 0.001
+        assert frame(arm, goal, stopped, duration + 0.05 * k)["status"]["state"] == "moving"
+    goal = {"id": 12, "group": "arm", "pose": "ready"}
+    stopped, duration = _stalled(arm, goal, 0.9)
+    assert frame(arm, goal, stopped, duration + 1.0)["status"]["state"] == "moving"
+    status = frame(arm, goal, stopped, duration + 2.1)["status"]
+    assert status["state"] == "failed" and status["contact"] is False
 
 
 def test_fingers_closing_on_nothing_never_count_as_holding(arm: ArmPoses) -> None:

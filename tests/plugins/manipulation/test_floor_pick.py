@@ -187,6 +187,37 @@ def test_the_cylinder_picked_off_the_floor_is_placed_upright_on_the_drop_table(l
     assert _tilt(lab.world, lab.cylinder) < 0.05  # upright
 
 
+def test_an_edge_grasp_shows_in_the_opening_and_the_low_hanging_cylinder_is_still_set_down(
+    lab: Lab, system: System
+) -> None:
+    """2 cm aside, beyond the fingers' 1 cm clearance, they close across the cylinder's edge: the
+    opening the status gives is under PICK_FLOOR's minHold (which fails the pick there, D251).
+    Lifted all the same, it hangs about 5 cm lower; PLACE still sets it upright on the table: the
+    arm stops short on it, and contact ends the place pose (resources.xml contactPoses)."""
+    _drop_on_the_way_home(lab, system)
+    lab.run(_steps(system, "STOW"))
+    where = lab.world.pose(lab.cylinder)[0]
+    x, y, _ = lab.robot.link_pose(-1)[0]
+    heading = math.atan2(where[1] - y, where[0] - x)
+    back, aside = float(_param(system, "APPR_FLOOR", "standoff")) - 0.012, 0.02  # APPR's usual 1.2 cm overshoot
+    lab.move_base(where[0] - back * math.cos(heading) + aside * math.sin(heading),
+                  where[1] - back * math.sin(heading) - aside * math.cos(heading), heading)
+    lab.world.step(24)
+    closed = lab.run([("arm", "pre_grasp_floor"), *_steps(system, "PICK_FLOOR")[:3]])
+    assert closed["holding"] is True and closed["opening"] < float(_param(system, "PICK_FLOOR", "minHold"))
+    lab.run([("arm", "carry")])
+    lab.loop.run(1.0)
+    assert lab.loop.gripper.held == lab.cylinder and lab.world.pose(lab.cylinder)[0][2] < 0.37  # hangs low
+    lab.move_base(*(float(v) for v in _param(system, "DOCK", "pose").split()))
+    lab.loop.run(1.0)
+    place, *rest = _steps(system, "PLACE")
+    assert lab.run([place])["contact"] is True  # stopped short on the table top
+    lab.run(rest)
+    lab.loop.run(2.0)
+    centre = lab.world.pose(lab.cylinder)[0]
+    assert centre[2] == pytest.approx(0.30 + 0.06, abs=0.01) and _tilt(lab.world, lab.cylinder) < 0.05
+
+
 def test_the_xtion_sees_an_object_on_the_floor_from_half_a_metre_not_from_the_grasp_distance(
     lab: Lab, system: System
 ) -> None:
