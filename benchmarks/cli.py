@@ -23,6 +23,7 @@ Describer = Callable[[dict[str, Any]], list[tuple[str, str]]]
 BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "adaptation": ("benchmarks.adaptation", "run", "describe"),
     "config": ("benchmarks.config", "run", "describe"),
+    "delegation": ("benchmarks.delegation", "run", "describe"),
     "pubsub": ("benchmarks.netbench", "run_pubsub", "describe_pubsub"),
     "discovery": ("benchmarks.netbench", "run_discovery", "describe_discovery"),
     "fusion": ("benchmarks.fusion", "run", "describe"),
@@ -35,7 +36,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "zoom": ("benchmarks.zoom", "run", "describe"),
 }
 # These take their own options: ckm-bench NAME --help lists them.
-TAKES_OPTIONS = {"adaptation", "fusion", "localization", "mission", "rates", "soak", "zoom"}
+TAKES_OPTIONS = {"adaptation", "delegation", "fusion", "localization", "mission", "rates", "soak", "zoom"}
 
 
 def resolve(name: str) -> tuple[Runner, Describer]:
