@@ -27,7 +27,10 @@ class Approach(_Goals):
     observer pose: the heading the wheel odometry lost on the long drive (D207) is measured again
     where the arm still lets the camera see the object. No fresh sighting within ``reaimWait``
     seconds: the last leg goes straight on, as one move would have. A target without a ``label``
-    or no sighting of it on ``objects`` when the drive starts: one move, as before."""
+    or no sighting of it on ``objects`` when the drive starts: one move, as before.
+
+    ``yawTolerance`` > 0 asks the base to end each move within that heading of facing the target
+    (Move2D ``yaw_tolerance``): the floor grasp's fingers clear the object by 1 cm a side (D252)."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("standoff", 0.2, "Distance kept from the target.", unit="m"),
@@ -37,6 +40,8 @@ class Approach(_Goals):
         P("settle", 2.5, "Standing still this long before a sighting counts (camera, recognition, fusion).",
           unit="s", min=0.0),
         P("reaimWait", 5.0, "Longest wait for a fresh sighting after settling.", unit="s", min=0.0),
+        P("yawTolerance", 0.0, "Final heading tolerance asked of the base (0: the Displacement's own).",
+          unit="rad", min=0.0, max=0.5),
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 
@@ -74,7 +79,10 @@ class Approach(_Goals):
         x, y = relative
         distance = math.hypot(x, y)
         keep = max(0.0, distance - keep_off) / distance if distance > 0 else 0.0
-        self.move_id = self._send("move", {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)})
+        goal = {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)}
+        if self.params["yawTolerance"] > 0:  # aimed finer than the base's default (D252)
+            goal["yaw_tolerance"] = self.params["yawTolerance"]
+        self.move_id = self._send("move", goal)
         return distance * keep
 
     def _first_move(self) -> BehaviorStatus | None:

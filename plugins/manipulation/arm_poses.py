@@ -12,9 +12,10 @@ groups, ``arm`` and ``gripper``. This SPT service plugin plays that role on its 
 
 Outputs (only the keys naming a service Output are published):
 
-- ``trajectory`` (JointTrajectory, once per goal): ``{"joint_names": the group's joints,
-  "points": [{"positions": the measured start, "time_from_start": 0}, {"positions": the target,
-  "time_from_start": T}]}`` for the joint-trajectory controller; T = max over the joints of
+- ``trajectory`` (JointTrajectory, once per goal, and once more to hold a place ended by contact):
+  ``{"joint_names": the group's joints, "points": [{"positions": the measured start,
+  "time_from_start": 0}, {"positions": the target, "time_from_start": T}]}`` for the
+  joint-trajectory controller; T = max over the joints of
   1.5·|Δq|/(v·speed) — the cubic rest-to-rest profile's peak speed stays within v·speed, v the
   joint's velocity limit (URDF, or Param ``maxVelocity``), speed the service Parameter ``speed``
   (Table 7.1's configuration) or the goal's own;
@@ -34,7 +35,8 @@ object between them — for ``settle`` seconds after the planned time is reached
 ``holding`` true. An arm goal to one of the ``contactPoses`` (the place) whose joints have stood
 still (each within ``stillness``) short of the target for ``settle`` seconds after the planned time is
 reached too, with ``contact`` true in its status: the held object stands on the table and holds
-the arm back (a carried object hangs lower after a grasp that tilted it, D251).
+the arm back (a carried object hangs lower after a grasp that tilted it, D251); a last trajectory
+then holds the arm where it stopped, so that it stops pressing the object and the fingers open.
 Failed: an unknown pose, a pose the IK left out of reach or out of the joint limits (solved once,
 at set-up, in a private pybullet client: :mod:`.kinematics`), or not reached ``timeout`` seconds
 after the planned time. Time is the frame's stamp (``Context.stamp``).
@@ -197,6 +199,8 @@ class ArmPoses(ProcessingPlugin):
             if goal.started is None:
                 result["trajectory"] = self._plan(goal, positions, now)
             self._judge(goal, positions, now)
+            if goal.contact:  # stop pressing the object onto the table: the fingers must open freely
+                result["trajectory"] = self._stay(goal, positions)
         if positions is not None:
             self._hold(goal, positions[4])
         active = not reading and (goal is None or goal.state != "failed")
@@ -289,6 +293,14 @@ class ArmPoses(ProcessingPlugin):
             "points": [{"positions": start, "time_from_start": 0.0},
                        {"positions": list(goal.target), "time_from_start": goal.duration}],
         }
+
+    def _stay(self, goal: _Goal, positions: Sequence[float]) -> dict[str, Any]:
+        """A JointTrajectory holding the goal's joints where they stand (the controller's target
+        becomes the measured position: the arm no longer pushes on what stopped it)."""
+        here = [positions[i] for i in goal.indices]
+        return {"joint_names": [self.joints[i] for i in goal.indices],
+                "points": [{"positions": here, "time_from_start": 0.0},
+                           {"positions": list(here), "time_from_start": MIN_DURATION}]}  # fmt: skip
 
     def _judge(self, goal: _Goal, positions: Sequence[float], now: float) -> None:
         """Reached, still moving, or failed by timeout (see the module docstring)."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from .frames import Point, Pose, along, project, relative, remaining_length, wrap
@@ -168,12 +168,14 @@ class RelativeMove:
     def state(self) -> dict[str, Any]:
         """Where the move is (msgpack-able), for :meth:`from_state`."""
         return {"goal": list(self.goal), "speed": self.speed, "total": self.total, "backwards": self.backwards,
-                "phase": self.phase, "remaining": self.remaining}
+                "phase": self.phase, "remaining": self.remaining, "yaw_tolerance": self.gains.yaw_tolerance}
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], gains: Gains) -> RelativeMove:
         """A move where :meth:`state` left one (a partition restarted, §3.1.2.3)."""
         x, y, yaw = (float(v) for v in state["goal"])
+        if "yaw_tolerance" in state:  # the goal's own (Move2D ``yaw_tolerance``)
+            gains = replace(gains, yaw_tolerance=float(state["yaw_tolerance"]))
         made = cls((x, y, yaw), (x, y, yaw), float(state["speed"]), gains)
         made.total, made.backwards = float(state["total"]), bool(state["backwards"])
         made.phase, made.remaining = str(state["phase"]), float(state["remaining"])

@@ -2,7 +2,8 @@
 
 Inputs (a mapping, the service's ``<Input>`` names): ``path`` (Path2D from Navigation.AMCL, in the
 odom frame, re-anchored every 0.8 s), ``move_goal`` (Move2D, a relative move of APPR or BACK, in the
-robot frame) and ``wheel_odom`` (the Odometry of the kobuki's diff-drive-odometry controller).
+robot frame, with an optional ``yaw_tolerance`` of its own for the final heading) and
+``wheel_odom`` (the Odometry of the kobuki's diff-drive-odometry controller).
 
 Outputs: ``odom`` (Odometry: the wheel odometry's pose and twist with this service's dispersion),
 ``move_status`` (MoveStatus of the current or last relative move, by id: moving / done / failed
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any, ClassVar
 
 from ckmconf.model.resources import Plugin
@@ -212,6 +214,13 @@ class BaseDisplacement(ProcessingPlugin):
         where = "input 'move_goal'"
         local = (number(goal, "x", self.owner, where), number(goal, "y", self.owner, where),
                  wrap(number(goal, "yaw", self.owner, where)))
+        gains = self.gains
+        if goal.get("yaw_tolerance") is not None:  # a move that must end aimed finer (APPR_FLOOR, D252)
+            tolerance = number(goal, "yaw_tolerance", self.owner, where)
+            if not 0.005 <= tolerance <= 0.5:
+                raise ValueError(f"{self.owner}: {where} field 'yaw_tolerance' = {tolerance!r} must be in "
+                                 "[0.005, 0.5] rad")
+            gains = replace(gains, yaw_tolerance=tolerance)
         if goal_id == self.move_id:
             return
         self._end_move("failed")
@@ -223,7 +232,7 @@ class BaseDisplacement(ProcessingPlugin):
         if self.pose is None:
             self.move, self.move_state = None, "failed"  # no odometry: nothing to move on
             return
-        self.move = RelativeMove(self.pose, compose(self.pose, local), self.speed, self.gains)
+        self.move = RelativeMove(self.pose, compose(self.pose, local), self.speed, gains)
         turning = 2 * math.pi / self.gains.max_angular
         self.move_deadline = now + self.move.total / (0.5 * self.speed) + turning + 5.0
 

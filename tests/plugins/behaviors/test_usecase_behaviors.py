@@ -127,6 +127,21 @@ def test_approach_sends_base_and_arm_goals_and_follows_them_by_id(lab: System) -
     assert rig.behavior.step().done
 
 
+@pytest.mark.parametrize(("name", "tolerance"), [("APPR_FLOOR", 0.01), ("APPR", None)])
+def test_the_floor_approach_asks_the_base_for_a_finer_final_heading(
+    lab: System, name: str, tolerance: float | None
+) -> None:
+    """D252: the floor grasp's fingers clear the cylinder by 1 cm a side; APPR_FLOOR's move carries
+    Move2D yaw_tolerance 0.01 rad, the table's APPR keeps the base's own."""
+    rig = Rig(lab, name, {"target": {"x": 0.8, "y": 0.1}})
+    rig.behavior.step()
+    rig.services["arm"].outputs["status"] = {"id": rig.last("arm_goal")["id"], "state": "reached"}
+    rig.behavior.step()
+    move = rig.last("move")
+    assert move.get("yaw_tolerance") == tolerance
+    assert move["yaw"] == pytest.approx(math.atan2(0.1, 0.8))
+
+
 def test_approach_fails_when_the_arm_cannot_rise(lab: System) -> None:
     rig = Rig(lab, "APPR", {"target": {"x": 1.0, "y": 0.0}})
     rig.behavior.step()

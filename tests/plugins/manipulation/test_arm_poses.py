@@ -136,8 +136,12 @@ def test_a_place_stopped_short_by_the_set_down_object_is_reached_with_contact(ar
     while t < duration + 0.45:  # standing still, not yet for settle
         t += 0.05
         assert frame(arm, goal, stopped, t)["status"]["state"] == "moving"
-    status = frame(arm, goal, stopped, t + 0.1)["status"]
+    result = frame(arm, goal, stopped, t + 0.1)
+    status = result["status"]
     assert status["state"] == "reached" and status["contact"] is True and status["active"] is True
+    # the arm is held where it stopped: it no longer presses the object, the fingers can open
+    assert [point["positions"] for point in result["trajectory"]["points"]] == [stopped[:4], stopped[:4]]
+    assert "trajectory" not in frame(arm, goal, stopped, t + 0.15)  # once
 
 
 def test_an_arm_still_creeping_or_stopped_short_of_another_pose_is_not_reached(arm: ArmPoses) -> None:

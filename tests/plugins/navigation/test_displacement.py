@@ -113,6 +113,32 @@ def test_relative_moves_end_at_the_goal_pose(goal: dict[str, Any], backwards: bo
     assert (min(v for v, _ in robot.commands) < 0) == backwards  # BACK reverses, it does not turn round
 
 
+@pytest.mark.parametrize("tolerance", [None, 0.01, 0.005])
+def test_a_move_with_its_own_yaw_tolerance_ends_aimed_within_it_and_keeps_it_in_its_state(
+    tolerance: float | None,
+) -> None:
+    """APPR_FLOOR's moves (D252): Move2D ``yaw_tolerance`` replaces the service's 0.03 rad for the
+    move's final heading (and its first facing, at twice it); a copy restored mid-move keeps it."""
+    robot, service = Unicycle((1.0, 1.0, 0.3)), base()
+    goal = move(5, 0.25, 0.02, 0.4) | ({} if tolerance is None else {"yaw_tolerance": tolerance})
+    status: dict[str, Any] = {}
+    for _ in range(300):
+        status = robot.frame(service, move_goal=goal)["move_status"]
+        if status["state"] != "moving":
+            break
+        if robot.frames == 20:
+            assert service.state()["move"]["yaw_tolerance"] == (tolerance or 0.03)
+            copy = base()
+            copy.restore(codec.decode(codec.encode(service.state())))
+            service = copy
+    assert status["state"] == "done"
+    error = abs(math.remainder(robot.yaw - 0.3 - 0.4, 2 * math.pi))
+    if tolerance is None:
+        assert 0.01 < error <= 0.03  # the service's own tolerance: the last turn stops early
+    else:
+        assert error <= tolerance
+
+
 def test_a_new_goal_preempts_the_running_one_and_a_move_preempts_the_path_for_good() -> None:
     robot, service = Unicycle(), base()
     robot.frame(service, move_goal=move(1, 1.0))
@@ -172,6 +198,8 @@ def test_odometry_dispersion_grows_with_distance_and_rotation_and_resets_with_a_
         ({"path": path([]) | {"points": 3}}, "field 'points' must be a list"),
         ({"move_goal": move(1, 0.5) | {"frame": "map"}}, "input 'move_goal' must be in the robot frame"),
         ({"move_goal": move(1, math.inf)}, "input 'move_goal' field 'x' must be a finite number"),
+        ({"move_goal": move(1, 0.5) | {"yaw_tolerance": 0.0}}, "field 'yaw_tolerance' = 0.0 must be in"),
+        ({"move_goal": move(1, 0.5) | {"yaw_tolerance": "fine"}}, "field 'yaw_tolerance' must be a finite number"),
         ({"wheel_odom": {"pose": {"x": 0.0}}}, "input 'wheel_odom' pose field 'y'"),
     ],
 )
