@@ -68,8 +68,9 @@ def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["show", "--json", "behavior.pick"], builtin()) == 0
     [info] = json.loads(capsys.readouterr().out)
     assert info["name"] == "behavior.pick" and info["package"] == "ckm"
-    [sequence] = info["params"]
+    sequence, min_hold = info["params"]
     assert (sequence["name"], sequence["default"], sequence["type"]) == ("sequence", "required", "string")
+    assert (min_hold["name"], min_hold["default"]) == ("minHold", "0")  # D251
     assert info["outputs"] == {"*": "mapping"}
 
 
