@@ -288,19 +288,21 @@ class ArmPoses(ProcessingPlugin):
         duration = max(CUBIC_PEAK * abs(t - s) / (self.velocity[i] * goal.speed)
                        for i, s, t in zip(goal.indices, start, goal.target, strict=True))
         goal.started, goal.duration = now, max(MIN_DURATION, duration)
+        return self._trajectory(goal, start, goal.target, goal.duration)
+
+    def _trajectory(self, goal: _Goal, start: list[float], end: Sequence[float], duration: float) -> dict[str, Any]:
+        """A JointTrajectory of the goal's joints from ``start`` to ``end`` in ``duration`` s."""
         return {
             "joint_names": [self.joints[i] for i in goal.indices],
             "points": [{"positions": start, "time_from_start": 0.0},
-                       {"positions": list(goal.target), "time_from_start": goal.duration}],
+                       {"positions": list(end), "time_from_start": duration}],
         }
 
     def _stay(self, goal: _Goal, positions: Sequence[float]) -> dict[str, Any]:
         """A JointTrajectory holding the goal's joints where they stand (the controller's target
         becomes the measured position: the arm no longer pushes on what stopped it)."""
         here = [positions[i] for i in goal.indices]
-        return {"joint_names": [self.joints[i] for i in goal.indices],
-                "points": [{"positions": here, "time_from_start": 0.0},
-                           {"positions": list(here), "time_from_start": MIN_DURATION}]}  # fmt: skip
+        return self._trajectory(goal, here, here, MIN_DURATION)
 
     def _judge(self, goal: _Goal, positions: Sequence[float], now: float) -> None:
         """Reached, still moving, or failed by timeout (see the module docstring)."""
@@ -318,7 +320,7 @@ class ArmPoses(ProcessingPlugin):
             if errors[0] <= self.params["gripperTolerance"] * span:
                 goal.state = "reached"
                 return
-            if self._holding(goal, positions[4], now, span):
+            if self._holding(goal, positions, now, span):
                 goal.state, goal.holding = "reached", True
                 return
         if now - goal.started > goal.duration + self.params["timeout"]:
@@ -341,10 +343,10 @@ class ArmPoses(ProcessingPlugin):
             if abs(position - self.held) <= self.params["gripperTolerance"] * span:
                 self.held = None
 
-    def _holding(self, goal: _Goal, position: float, now: float, span: float) -> bool:
+    def _holding(self, goal: _Goal, positions: Sequence[float], now: float, span: float) -> bool:
         """Whether closing fingers have stood still short of their target for ``settle`` s (an object)."""
-        closing = goal.target[0] < position
-        return self._still(goal, [0.0] * 4 + [position], now, 0.01 * span) and closing
+        closing = goal.target[0] < positions[4]
+        return self._still(goal, positions, now, 0.01 * span) and closing
 
     def _still(self, goal: _Goal, positions: Sequence[float], now: float, bound: float) -> bool:
         """Whether the goal's joints have each moved less than ``bound`` over the last ``settle`` s,
