@@ -29,6 +29,11 @@ class Approach(_Goals):
     seconds: the last leg goes straight on, as one move would have. A target without a ``label``
     or no sighting of it on ``objects`` when the drive starts: one move, as before.
 
+    ``faceFirst`` turns the robot on the spot to face the target before any drive and looks again
+    the same way, so the turn's odometry error is measured away and the drive goes straight
+    (APPR_FLOOR, D253). ``aimAtCentre`` takes a fresh sighting's ``centre`` (its 3D source's point,
+    the solid's centre) rather than the fused estimate, which a print seen aside pulls off the axis.
+
     ``yawTolerance`` > 0 asks the base to end each move within that heading of facing the target
     (Move2D ``yaw_tolerance``): the floor grasp's fingers clear the object by 1 cm a side (D252)."""
 
@@ -42,17 +47,26 @@ class Approach(_Goals):
         P("reaimWait", 5.0, "Longest wait for a fresh sighting after settling.", unit="s", min=0.0),
         P("yawTolerance", 0.0, "Final heading tolerance asked of the base (0: the Displacement's own).",
           unit="rad", min=0.0, max=0.5),
+        P("faceFirst", False, "Turn on the spot to face the target and look again before driving."),
+        P("aimAtCentre", False, "Aim a fresh sighting at its 3D source's point, not the fused estimate."),
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+
+    FACED = 0.01
+    """rad: a target this near straight ahead needs no turn first."""
 
     def start(self) -> None:
         """Send the arm goal; the base goal follows once the arm has reached it."""
         super().start()
-        self.phase = "arm"  # arm → drive (one move, or the short one) → look → last (the last leg)
+        self.phase = "arm"  # arm → drive (a move) → look (standing, after a move that is not the last) → drive…
         self.move_id: int | None = None
-        self.legs: list[float] = []  # the drive's lengths: one move, or the short move and the last leg
+        self.legs: list[float] = []  # the lengths of the moves sent
+        self.planned = 0.0  # the whole drive as planned at the start
+        self.final = False  # the move sent is the last leg
+        self.ahead = 0.0  # where the target should stand straight ahead after the move sent (m)
+        self.faced = self.reaimed = False
         self.label = ""
-        self.stopped = 0.0  # when the short move ended
+        self.stopped = 0.0  # when the last move that is not the last leg ended
         self.settled: Any = None  # the fused message when the settling ended: a sighting must be newer
         self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]})
 
@@ -66,41 +80,57 @@ class Approach(_Goals):
         return in_robot_frame(target, pose)
 
     def _sighting(self) -> Mapping[str, Any] | None:
-        """The most reliable positioned sighting of the target on the ``objects`` input, None if none."""
+        """The most reliable positioned sighting of the target on the ``objects`` input, None if none
+        (at its ``centre`` with ``aimAtCentre``, when it has one)."""
         result = self.read("objects") if self.label and "objects" in self.context.inputs else None
         if not isinstance(result, Mapping) or not isinstance(result.get("objects"), list):
             return None
         placed = [o for o in result["objects"] if isinstance(o, Mapping) and isinstance(o.get("x"), int | float)
                   and isinstance(o.get("y"), int | float)]  # fmt: skip
-        return find_target({"objects": placed}, self.label, "")
+        found = find_target({"objects": placed}, self.label, "")
+        centre = found.get("centre") if found is not None else None
+        if found is not None and self.params["aimAtCentre"] and isinstance(centre, list | tuple) and len(centre) == 3 \
+                and all(isinstance(v, int | float) for v in centre):
+            found = {**found, "x": centre[0], "y": centre[1], "z": centre[2]}
+        return found
 
-    def _move(self, relative: tuple[float, float], keep_off: float) -> float:
-        """Send the drive to ``keep_off`` metres from the target at ``relative``, facing it; its length."""
-        x, y = relative
-        distance = math.hypot(x, y)
-        keep = max(0.0, distance - keep_off) / distance if distance > 0 else 0.0
-        goal = {"frame": "robot", "x": x * keep, "y": y * keep, "yaw": math.atan2(y, x)}
+    def _send_move(self, x: float, y: float, yaw: float) -> None:
+        goal = {"frame": "robot", "x": x, "y": y, "yaw": yaw}
         if self.params["yawTolerance"] > 0:  # aimed finer than the base's default (D252)
             goal["yaw_tolerance"] = self.params["yawTolerance"]
         self.move_id = self._send("move", goal)
-        return distance * keep
+
+    def _next_move(self, relative: tuple[float, float]) -> None:
+        """Send the next move towards the target at ``relative``: a turn to face it (``faceFirst``), a
+        long drive's move short of it (``reaim``), or the last leg to the standoff."""
+        x, y = relative
+        p, distance, bearing = self.params, math.hypot(x, y), math.atan2(y, x)
+        drive = distance - p["standoff"]
+        can_look = self.label and self._sighting() is not None  # the fusion holds the target now
+        if p["faceFirst"] and not self.faced and can_look and abs(bearing) > self.FACED:
+            self.faced, keep_off, self.final = True, distance, False  # a turn on the spot
+        elif p["reaim"] > 0 and not self.reaimed and can_look and drive > max(p["reaimAbove"], p["reaim"]):
+            self.reaimed, keep_off, self.final = True, p["standoff"] + p["reaim"], False
+        else:
+            keep_off, self.final = p["standoff"], True
+        self.faced = self.faced or self.final or abs(bearing) <= self.FACED
+        keep = max(0.0, distance - keep_off) / distance if distance > 0 else 0.0
+        self._send_move(x * keep, y * keep, bearing)
+        self.legs.append(distance * keep)
+        self.ahead = min(distance, keep_off)
+        self.phase = "drive"
 
     def _first_move(self) -> BehaviorStatus | None:
-        """Send the first move (status while it cannot be sent): to the standoff, or short of it to look again."""
+        """Send the first move (status while it cannot be sent)."""
         target = self.read("target")
         if not isinstance(target, Mapping) or not isinstance(target.get("x"), int | float):
             return BehaviorStatus(progress=0.0, detail="no target")
         relative = self._relative(target)
         if relative is None:
             return BehaviorStatus(progress=0.0, detail="waiting for the pose estimate")
-        p = self.params
         self.label = str(target.get("label") or "")
-        drive = math.hypot(*relative) - p["standoff"]
-        if p["reaim"] > 0 and drive > max(p["reaimAbove"], p["reaim"]) and self._sighting() is not None:
-            self.legs = [self._move(relative, p["standoff"] + p["reaim"]), p["reaim"]]
-        else:
-            self.legs = [self._move(relative, p["standoff"])]
-        self.phase = "drive"
+        self.planned = max(0.0, math.hypot(*relative) - self.params["standoff"])
+        self._next_move(relative)
         return None
 
     def _fresh(self) -> tuple[float, float] | None:
@@ -120,20 +150,21 @@ class Approach(_Goals):
         return self._relative(sighting)
 
     def _look(self) -> bool:
-        """Standing short of the standoff: send the last leg once a fresh sighting or the wait's end allows."""
+        """Standing after a move that is not the last: send the next once a fresh sighting or the wait's end allows."""
         waited, p = self.context.now() - self.stopped, self.params
         if waited < p["settle"]:
             return False
         relative = self._fresh()
         if relative is not None:
-            self.legs[1] = self._move(relative, p["standoff"])
             self.context.log("re-aimed", x=round(relative[0], 4), y=round(relative[1], 4))
-            return True
-        if waited >= p["settle"] + p["reaimWait"]:  # the move short faced the target: straight on
-            self.legs[1] = self._move((self.legs[1] + p["standoff"], 0.0), p["standoff"])
-            self.context.log("no fresh sighting: straight on", distance=round(self.legs[1], 4))
-            return True
-        return False
+        elif waited >= p["settle"] + p["reaimWait"]:  # the move faced the target: straight on
+            relative = (self.ahead, 0.0)
+            self.context.log("no fresh sighting: straight on", distance=round(self.ahead - p["standoff"], 4))
+        else:
+            return False
+        self.settled = None
+        self._next_move(relative)
+        return True
 
     def step(self) -> BehaviorStatus:
         """Raise the arm, then drive to ``standoff`` from the target; done when both are reached."""
@@ -147,22 +178,20 @@ class Approach(_Goals):
                 return waiting
         move = self.service("base").output("move_status")
         move_state = _state(move, self.move_id)
-        if self.phase == "drive" and move_state == "done" and len(self.legs) == 2:
+        if self.phase == "drive" and move_state == "done" and not self.final:
             self.phase, self.stopped = "look", self.context.now()
         if self.phase == "look":
             if not self._look():
                 return BehaviorStatus(progress=self._progress(arm_state, 1.0), detail="looking again")
-            self.phase, move_state = "last", None
+            move_state = None
         share = _share_done(move) if move_state else 0.0
         if "failed" in (move_state, arm_state):
             return BehaviorStatus(progress=self._progress(arm_state, share), failed=True)
-        done = move_state == "done" and arm_state == "reached" and (self.phase == "last" or len(self.legs) == 1)
+        done = move_state == "done" and arm_state == "reached" and self.final
         return BehaviorStatus(progress=1.0 if done else self._progress(arm_state, share), done=done)
 
     def _progress(self, arm_state: str | None, share: float) -> float:
-        """0.2 for the arm, 0.8 for the share of the whole drive done (``share`` of the current move)."""
-        total = sum(self.legs)
-        before = self.legs[0] if self.phase == "last" else 0.0
-        current = self.legs[-1] if self.phase == "last" else self.legs[0] if self.legs else 0.0
-        driven = (before + share * current) / total if total > 0 else share
-        return 0.8 * driven + 0.2 * (arm_state == "reached")
+        """0.2 for the arm, 0.8 for the share of the planned drive done (``share`` of the current move)."""
+        driven = sum(self.legs[:-1]) + share * (self.legs[-1] if self.legs else 0.0)
+        part = min(1.0, driven / self.planned) if self.planned > 0 else share
+        return 0.8 * part + 0.2 * (arm_state == "reached")

@@ -3,7 +3,8 @@
 - :class:`Observation`: S(θ)ᵢ of eq. 6.35, one recognised object of one input in the common frame;
 - :func:`reinforce`: eq. 6.41's reinforcement of the reliability by one matched observation;
 - :func:`share_at_bound`: how many fused reliabilities sit at the upper bound;
-- :func:`fused_object`: f̂ and r̂ of eq. 6.39 as the service's output record;
+- :func:`fused_object`: f̂ and r̂ of eq. 6.39 as the service's output record, with the centre its
+  most reliable 3D observation gave (D253);
 - :func:`number`: one finite number of an input message.
 
 The per-input Params (``"name: v1 v2; name: v…"``) are declared with
@@ -70,13 +71,20 @@ def fused_object(
     members: list[Observation],
     frame: str,
 ) -> dict[str, Any]:
-    """f̂ and r̂ of eq. 6.39 as a msgpack-able dict, placed in ``frame``."""
-    place: dict[str, Any] = dict.fromkeys(("x", "y", "z", "sigma", "origin", "direction"))
+    """f̂ and r̂ of eq. 6.39 as a msgpack-able dict, placed in ``frame``.
+
+    ``centre`` is the point of the most reliable 3D member as its service gave it (the solid's centre
+    a shape fit finds), None without one: a fused θ̂ leans towards a joined ray, which passes through
+    the print's keypoints on the surface, not through the axis a grasp needs (D253)."""
+    place: dict[str, Any] = dict.fromkeys(("x", "y", "z", "sigma", "origin", "direction", "centre"))
     if isinstance(theta, Point):
         x, y, z = (float(v) for v in theta.mean)
         place |= {"x": x, "y": y, "z": z, "sigma": math.sqrt(float(np.trace(theta.cov)) / 3.0)}
     else:
         place |= {"origin": [float(v) for v in theta.origin], "direction": [float(v) for v in theta.direction]}
+    point = next((m.geometry for m in members if isinstance(m.geometry, Point)), None)
+    if point is not None:
+        place["centre"] = [float(v) for v in point.mean]
     return {
         "name": knowledge.get("object", model),
         "shape": knowledge.get("shape"),

@@ -87,6 +87,20 @@ def test_a_line_and_a_point_of_one_object_fuse_with_higher_reliability() -> None
     assert out["reliability"] == obj["reliability"]
 
 
+def test_a_fused_object_keeps_the_centre_its_point_source_gave() -> None:
+    """D253: a ray through the print aside of the axis pulls θ̂ off; ``centre`` is the depth point as given."""
+    aside = (RED[0] + 0.03, RED[1], RED[2])  # the print's keypoints, 3 cm aside of the solid's centre
+    out = fusion().process(
+        {"rgb": rgb(seen("cylinder_red_stripes", aside, 0.65)), "depth": depth(("cylinder", RED, 0.8))}, CTX
+    )
+    (obj,) = out["objects"]
+    assert obj["sources"] == ["depth", "rgb"]
+    assert obj["centre"] == pytest.approx(list(RED))
+    assert math.dist(position(obj), obj["centre"]) > 0.01  # the fused point leans towards the ray
+    (alone,) = fusion().process({"rgb": rgb(seen("cylinder_red_stripes", RED, 0.65))}, CTX)["objects"]
+    assert alone["centre"] is None  # a lone ray has no centre
+
+
 def test_reinforcement_of_a_new_magnitude_is_eq_6_41() -> None:
     """x₁ is the depth point; the RGB line adds a magnitude: r̂ = r₁ + 1/(1 + d(line, θ̂')), θ̂' = x₁."""
     off = np.array([0.1, 0.05 + 0.024, 1.2])  # 2.4 cm below the ray through RED

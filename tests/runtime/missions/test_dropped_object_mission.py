@@ -157,7 +157,8 @@ def test_a_drop_on_the_way_home_is_detected_and_the_object_picked_off_the_floor_
     assert goals == ["1.0 1.3 1.5708", "", "1.0 1.3 1.5708", ""]  # home, HALT's cancel, home, DOCK's cancel (D211)
     moves = lab.sent_on("/base/move_goal")
     assert moves[0] == {**moves[0], "x": 0.0, "y": 0.0, "yaw": 0.0}  # HALT: the zero move that stops the path
-    assert sum(1 for m in moves if m["x"] == 0.0 and m["yaw"] != 0.0) == 3  # LOOK turned until it saw it
+    # LOOK turned until it saw it (3), then APPR turned to face it first (D253)
+    assert sum(1 for m in moves if m["x"] == 0.0 and m["yaw"] != 0.0) == 4
     arm = [(g["group"], g["pose"]) for g in lab.sent_on("/arm/goal")]
     assert arm == [("arm", "resting"), ("arm", "pre_grasp_floor"), ("gripper", "open"), ("arm", "grasp_floor"),
                    ("gripper", "closed"), ("arm", "carry"),  # the recovery

@@ -115,7 +115,7 @@ def usecase() -> System:
     return ckmconf.load(USECASE)
 
 
-QUALITY = 0.9  # the weakest step: Fusion's, Pan-Tilt Recog.'s and Track's policies; APPR reads the fusion (D207)
+QUALITY = 0.9  # the weakest step: Fusion's, Pan-Tilt Recog.'s and Track's policies; APPR reads the fusion (D207, D253)
 MOBILE = 0.95  # AMCL's, Scan's and Displacement's policies
 ARM = 0.99  # MoveIt's "active" policy
 PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("ObjectPlace", "DOCK"): MOBILE,
@@ -124,7 +124,7 @@ PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("Obje
          # the dropped-object recovery (issue K.3d): the drive home again, and ObjectRecovery
          ("ObjectPlace", "RENAV"): MOBILE, ("ObjectPlace", "REWAIT"): MOBILE,
          ("ObjectRecovery", "HALT"): MOBILE, ("ObjectRecovery", "STOW"): ARM, ("ObjectRecovery", "LOOK"): QUALITY,
-         ("ObjectRecovery", "APPR"): MOBILE, ("ObjectRecovery", "PICK"): ARM, ("ObjectRecovery", "RELEASE"): ARM,
+         ("ObjectRecovery", "APPR"): QUALITY, ("ObjectRecovery", "PICK"): ARM, ("ObjectRecovery", "RELEASE"): ARM,
          ("ObjectRecovery", "BACK"): MOBILE, ("ObjectRecovery", "RESTOW"): ARM}  # fmt: skip
 
 
@@ -136,14 +136,15 @@ PLACE = {("ObjectPlace", "NAV"): MOBILE, ("ObjectPlace", "WAIT"): MOBILE, ("Obje
           ("ObjectInteraction", "APPR"): QUALITY, ("ObjectInteraction", "PICK"): ARM,
           ("ObjectInteraction", "RELEASE"): ARM, ("ObjectInteraction", "BACK"): MOBILE,
           ("ObjectInteraction", "STOW"): ARM, **PLACE},
-         {("ObjectInteraction", "SPOT"), ("ObjectInteraction", "APPR"), ("ObjectRecovery", "LOOK")}),
+         {("ObjectInteraction", "SPOT"), ("ObjectInteraction", "APPR"), ("ObjectRecovery", "LOOK"),
+          ("ObjectRecovery", "APPR")}),
         ("Agent1FetchCoop",
          {("NavigationCoop", "NAV"): QUALITY, ("NavigationCoop", "WAIT"): MOBILE,
           ("ObjectInteractionCoop", "SPOT"): QUALITY, ("ObjectInteractionCoop", "APPR"): QUALITY,
           ("ObjectInteractionCoop", "PICK"): ARM, ("ObjectInteractionCoop", "RELEASE"): ARM,
           ("ObjectInteractionCoop", "BACK"): MOBILE, ("ObjectInteractionCoop", "STOW"): ARM, **PLACE},
          {("NavigationCoop", "NAV"), ("ObjectInteractionCoop", "SPOT"), ("ObjectInteractionCoop", "APPR"),
-          ("ObjectRecovery", "LOOK")}),
+          ("ObjectRecovery", "LOOK"), ("ObjectRecovery", "APPR")}),
         ("Agent2Spot", {("Agent2Spot", "OBJ_TRACK"): QUALITY, ("Agent2Spot", "OBJ_FIX"): QUALITY},
          {("Agent2Spot", "OBJ_TRACK"), ("Agent2Spot", "OBJ_FIX")}),
     ],
