@@ -15,8 +15,9 @@ home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/useca
   round of ``views`` it backs ``shift`` metres and looks round again, up to ``rounds`` rounds. A
   texture print is recognisable from some sides only: a candidate of the target's shape that the
   depth recognition alone saw (no texture) within ``probeRange`` is looked at again from ``probe``
-  radians round it (the robot moves on the circle through it, facing it, from either side in turn),
-  ``probes`` times at most. A move the base could not finish (blocked by a table) does not end the
+  radians round it (the robot moves round it, facing it, to either side of where the first probe
+  started in turn: +probe, −probe, +probe…), at ``probeDistance`` metres from it (0: the distance it
+  was seen at), ``probes`` times at most (D254). A move the base could not finish (blocked by a table) does not end the
   search: the robot looks from where it stopped, unless ``blockedMoves`` moves failed in a row.
   Writes the target's position (an ``ObjectPosition``) like SPOT, so APPR can approach it.
 
@@ -85,6 +86,8 @@ class SearchObject(_Goals):
           "recognisable from some sides only) is looked at again from this far round it (0: never).", unit="rad"),
         P("probes", 3, "Such second looks at most, in the whole search.", min=0),
         P("probeRange", 1.2, "Farthest candidate looked at again.", unit="m", min=0.0),
+        P("probeDistance", 0.0, "Distance from the candidate the second looks are taken at (0: the distance it "
+          "was seen at).", unit="m", min=0.0),
         P("blockedMoves", 2, "Failed moves in a row (the base blocked by furniture) that end the search; "
           "after fewer, it looks from where the robot stopped.", min=1),
     )
@@ -99,6 +102,7 @@ class SearchObject(_Goals):
         """Look from where the robot stands first."""
         super().start()
         self.view, self.round, self.probed, self.blocked = 0, 0, 0, 0
+        self.orbit = 0.0  # how far round the first probed candidate the probes have taken the robot (rad)
         self.candidate: tuple[float, float] | None = None
         self.looking_since: float | None = self.context.now()
         self.move_id: int | None = None
@@ -146,8 +150,11 @@ class SearchObject(_Goals):
         if self.candidate is not None and p["probe"] != 0.0 and self.probed < p["probes"]:
             self.probed += 1
             self.context.log("looking again round a candidate", at=list(self.candidate), probe=self.probed)
-            side = 1.0 if self.probed % 2 else -1.0  # from either side in turn: one may be blocked
-            self.move_id = self._send("move", self._round(self.candidate, side * float(p["probe"])))
+            # either side of where the probes started, in turn (one may be blocked); a blocked move
+            # is taken as done: the next probe then goes a little further than asked
+            side = 1.0 if self.probed % 2 else -1.0
+            angle, self.orbit = side * float(p["probe"]) - self.orbit, side * float(p["probe"])
+            self.move_id = self._send("move", self._round(self.candidate, angle, float(p["probeDistance"])))
             self.candidate, self.looking_since = None, None
             return BehaviorStatus(progress=done_views / self._total(), detail="looking at a candidate again")
         self.candidate = None
@@ -178,10 +185,14 @@ class SearchObject(_Goals):
         return best
 
     @staticmethod
-    def _round(candidate: tuple[float, float], angle: float) -> dict[str, Any]:
-        """The move (robot frame) to the point ``angle`` rad round ``candidate`` at the same distance,
-        facing it: the straight way there keeps at least cos(angle / 2) of that distance from it."""
+    def _round(candidate: tuple[float, float], angle: float, distance: float = 0.0) -> dict[str, Any]:
+        """The move (robot frame) to the point ``angle`` rad round ``candidate`` at ``distance`` from it
+        (0: the same distance), facing it. At the same distance the straight way there keeps at least
+        cos(angle / 2) of it from the candidate."""
         cx, cy = candidate
-        # the candidate seen from the new point: the current view turned by `angle` about it
-        vx, vy = cx * math.cos(angle) - cy * math.sin(angle), cx * math.sin(angle) + cy * math.cos(angle)
+        seen = math.hypot(cx, cy)
+        scale = distance / seen if distance > 0.0 and seen > 0.0 else 1.0
+        # the candidate seen from the new point: the current view turned by `angle` about it, scaled
+        vx = scale * (cx * math.cos(angle) - cy * math.sin(angle))
+        vy = scale * (cx * math.sin(angle) + cy * math.cos(angle))
         return {"frame": "robot", "x": cx - vx, "y": cy - vy, "yaw": math.atan2(vy, vx)}

@@ -145,9 +145,11 @@ def test_look_refuses_views_that_do_not_turn(lab: System) -> None:
 
 def test_look_looks_again_from_round_a_candidate_seen_by_its_shape_alone(lab: System) -> None:
     """A cylinder the depth recognition alone saw (no texture: its print faces away) 0.6 m ahead-left
-    is looked at again from 0.5 rad round it, at the same distance and facing it, from either side in
-    turn (one may be blocked); three times at most."""
-    rig = _look(lab, back="0", settle="1", dwell="0", probe="0.5", probes="3")
+    is looked at again from 0.5 rad round it, at the same distance and facing it, to either side of
+    where the probes started in turn (one may be blocked: +0.5, then 1 rad back to -0.5, then 1 rad on
+    to +0.5 again, D254); three times at most. The candidate is where the robot sees it from each probe:
+    here the fused result does not change, so each move starts from the same view of it."""
+    rig = _look(lab, back="0", settle="1", dwell="0", probe="0.5", probes="3", probeDistance="0")
     observer = {"x": 1.0, "y": 2.0, "yaw": 0.5}
     ahead, left = 0.5, 0.2  # the candidate in the robot's frame
     shape_only = {"name": "cylinder", "shape": "cylinder", "frame": "map", "reliability": 0.95, "sources": ["depth"],
@@ -164,10 +166,27 @@ def test_look_looks_again_from_round_a_candidate_seen_by_its_shape_alone(lab: Sy
         rig.time += 0.1
         rig.behavior.step()  # arrived: the next view starts
     probes, turn = moves[:3], moves[3]
-    for move, side in zip(probes, (1, -1, 1), strict=True):
+    for move, angle in zip(probes, (0.5, -1.0, 1.0), strict=True):
         x, y, yaw = move["x"], move["y"], move["yaw"]
         assert math.dist((x, y), (ahead, left)) == pytest.approx(math.hypot(ahead, left))  # same distance
         assert math.atan2(left - y, ahead - x) == pytest.approx(yaw)  # facing it
         turned = math.remainder(math.atan2(-left, -ahead) - math.atan2(y - left, x - ahead), 2 * math.pi)
-        assert turned == pytest.approx(-0.5 * side)  # 0.5 rad round, one side then the other
+        assert turned == pytest.approx(-angle)  # round it, one side then the other
     assert (turn["x"], turn["y"], turn["yaw"]) == (0.0, 0.0, pytest.approx(0.7))  # then the search goes on
+
+
+def test_look_probes_a_near_candidate_from_farther_off(lab: System) -> None:
+    """D254: at 0.45 m the resting arm hides the print's band; probeDistance 0.7 takes the second look
+    from 0.7 m, 0.5 rad round the candidate, facing it."""
+    rig = _look(lab, back="0", settle="1", dwell="0", probe="0.5", probes="1", probeDistance="0.7")
+    observer = {"x": 1.0, "y": 2.0, "yaw": 0.0}
+    shape_only = {"name": "cylinder", "shape": "cylinder", "frame": "map", "reliability": 0.95, "sources": ["depth"],
+                  "x": 1.45, "y": 2.0, "observer": [observer]}  # fmt: skip
+    rig.inputs["objects"] = {"objects": [shape_only]}
+    rig.time += 1.1
+    rig.behavior.step()
+    move = rig.last("move")
+    x, y, yaw = move["x"], move["y"], move["yaw"]
+    assert math.dist((x, y), (0.45, 0.0)) == pytest.approx(0.7)  # backed off to 0.7 m
+    assert math.atan2(-y, 0.45 - x) == pytest.approx(yaw)  # facing it
+    assert math.atan2(y, x - 0.45) == pytest.approx(-math.pi + 0.5)  # 0.5 rad round it (to the right)
