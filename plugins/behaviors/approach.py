@@ -64,7 +64,7 @@ class Approach(_Goals):
         self.planned = 0.0  # the whole drive as planned at the start
         self.final = False  # the move sent is the last leg
         self.ahead = 0.0  # where the target should stand straight ahead after the move sent (m)
-        self.faced = self.reaimed = False
+        self.reaimed = False
         self.label = ""
         self.stopped = 0.0  # when the last move that is not the last leg ended
         self.settled: Any = None  # the fused message when the settling ended: a sighting must be newer
@@ -88,10 +88,11 @@ class Approach(_Goals):
         placed = [o for o in result["objects"] if isinstance(o, Mapping) and isinstance(o.get("x"), int | float)
                   and isinstance(o.get("y"), int | float)]  # fmt: skip
         found = find_target({"objects": placed}, self.label, "")
-        centre = found.get("centre") if found is not None else None
-        if found is not None and self.params["aimAtCentre"] and isinstance(centre, list | tuple) and len(centre) == 3 \
-                and all(isinstance(v, int | float) for v in centre):
-            found = {**found, "x": centre[0], "y": centre[1], "z": centre[2]}
+        if found is None or not self.params["aimAtCentre"]:
+            return found
+        centre = found.get("centre")
+        if isinstance(centre, list | tuple) and len(centre) == 3 and all(isinstance(v, int | float) for v in centre):
+            return {**found, "x": centre[0], "y": centre[1], "z": centre[2]}
         return found
 
     def _send_move(self, x: float, y: float, yaw: float) -> None:
@@ -107,13 +108,12 @@ class Approach(_Goals):
         p, distance, bearing = self.params, math.hypot(x, y), math.atan2(y, x)
         drive = distance - p["standoff"]
         can_look = self.label and self._sighting() is not None  # the fusion holds the target now
-        if p["faceFirst"] and not self.faced and can_look and abs(bearing) > self.FACED:
-            self.faced, keep_off, self.final = True, distance, False  # a turn on the spot
+        if p["faceFirst"] and not self.legs and can_look and abs(bearing) > self.FACED:
+            keep_off, self.final = distance, False  # the first move: a turn on the spot
         elif p["reaim"] > 0 and not self.reaimed and can_look and drive > max(p["reaimAbove"], p["reaim"]):
             self.reaimed, keep_off, self.final = True, p["standoff"] + p["reaim"], False
         else:
             keep_off, self.final = p["standoff"], True
-        self.faced = self.faced or self.final or abs(bearing) <= self.FACED
         keep = max(0.0, distance - keep_off) / distance if distance > 0 else 0.0
         self._send_move(x * keep, y * keep, bearing)
         self.legs.append(distance * keep)
