@@ -149,6 +149,8 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         self.unlocalized_since: float | None = None
         self.stopped = True
         self.settling = False  # at the goal, the path emptied: waiting for the base to stop
+        self.at_goal = False  # the goal was reached once (settling): after that, a heading off only turns (D255)
+        self.turning = False
 
     # ------------------------------------------------------------------ set-up and goals
 
@@ -205,7 +207,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         self._pending_goal = None
         self.phase, self.reason, self.plan, self.target = "planning", "", None, None
         self.routes.reset()
-        self.unlocalized_since, self.settling = None, False
+        self.unlocalized_since, self.settling, self.at_goal, self.turning = None, False, False, False
 
     # ------------------------------------------------------------------ delegation
 
@@ -223,6 +225,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             "path_id": self.path_id, "plan_length": self.plan_length,
             "obstacles": self.routes.areas(),
             "unlocalized_since": self.unlocalized_since, "stopped": self.stopped, "settling": self.settling,
+            "at_goal": self.at_goal, "turning": self.turning,
             "localizer": self.localizer.state(), "zoom": None if self.zoom is None else self.zoom.state(),
         }
 
@@ -248,6 +251,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             self.plan_length = float(state["plan_length"])
             self.unlocalized_since, self.stopped = state["unlocalized_since"], bool(state["stopped"])
             self.settling = bool(state.get("settling", False))
+            self.at_goal, self.turning = bool(state.get("at_goal", False)), bool(state.get("turning", False))
             self.routes.restore(state["obstacles"])
             self.localizer.restore(state["localizer"])
             if self.zoom is not None:

@@ -4,7 +4,8 @@ Given the estimate of each frame (plugins/navigation/amcl.py): plan on the Envir
 the A* planner when the goal is set, when the robot strays more than ``strayDistance`` from the
 path, or when scan points fall on the path ahead (they become obstacles of a new plan; D152); take
 a new plan when obstacles cleared make the way ``replanGain`` metres shorter; stop at the goal and
-report ``arrived`` once the base has stopped (D109, D128); wait stopped for a localization and
+report ``arrived`` once the base has stopped (D109, D128); once reached, a heading the estimate moved
+off the goal's only makes the base turn on the spot (D255); wait stopped for a localization and
 fail after ``localizeTimeout`` (D108). The ``status`` and ``path`` outputs are made here.
 """
 
@@ -42,6 +43,8 @@ class NavigationCourse:
     unlocalized_since: float | None
     stopped: bool
     settling: bool
+    at_goal: bool
+    turning: bool
 
     def _replan(self, start: Pose) -> None:
         """A new plan from ``start`` to the goal; an unreachable goal fails with the planner's reason."""
@@ -91,9 +94,13 @@ class NavigationCourse:
         assert self.goal is not None
         gyaw = self.goal[2]
         target = self.target or (self.goal[0], self.goal[1])
-        self.settling = math.dist(pose[:2], target) <= self.params["tolerance"] and (
-            gyaw is None or abs(wrap(gyaw - pose[2])) <= self.params["yawTolerance"]
-        )
+        near = math.dist(pose[:2], target) <= self.params["tolerance"]
+        self.settling = near and (gyaw is None or abs(wrap(gyaw - pose[2])) <= self.params["yawTolerance"])
+        self.at_goal = self.at_goal or self.settling
+        self.turning = near and self.at_goal and not self.settling
+        if self.turning:  # reached, and the estimate's heading has moved off since: only turn (D255)
+            self.phase = "active"
+            return
         if self.settling:  # at the goal as the localization sees it: stop the base (an empty path) ...
             if self.stopped:  # ... and once its odometry says it has stopped, arrived
                 self.phase, self.plan = "arrived", None
@@ -140,12 +147,15 @@ class NavigationCourse:
         correction = self.localizer.correction
         points: list[list[float]] = []
         yaw = None
-        if self.phase == "active" and not self.settling and self.plan is not None and correction is not None:
+        planned = self.plan is not None or self.turning
+        if self.phase == "active" and not self.settling and planned and correction is not None:
             to_odom = inverse(correction)
             odom_pose = self.localizer.odom
-            rest = self.plan[self.segment + 1 :]
+            rest = [] if self.plan is None else self.plan[self.segment + 1 :]
             start = [] if odom_pose is None else [[odom_pose[0], odom_pose[1]]]  # from the robot, in odom
-            points = start + [list(transform_point(to_odom, p)) for p in rest]
+            # turning: the robot's own spot, so the base only turns to the yaw; the few cm left to the
+            # path's end would have it face them first, half a turn away (D255)
+            points = start + ([] if self.turning else [list(transform_point(to_odom, p)) for p in rest])
             if self.goal[2] is not None:
                 yaw = wrap(self.goal[2] - correction[2])
         return {

@@ -245,3 +245,27 @@ def test_at_the_goal_the_base_is_stopped_then_arrival_waits_for_it_to_be_still(f
     assert result["status"]["state"] == "active" and result["path"]["points"] == []
     result = nav.process({"scan": scan(grid(file), truth), "odom": odometry((0.0, 0.0, 0.0))}, Context(3, 2.4))
     assert result["status"]["state"] == "arrived" and result["path"]["points"] == []
+
+
+def test_once_reached_a_heading_moved_off_only_turns_the_base_on_the_spot(file: Path) -> None:
+    """D255: after the goal was reached (the path emptied), an estimate whose heading moved more than
+    yawTolerance off sends the robot's own spot with the goal's yaw, never the few cm left to the
+    plan's end, which the base would first turn to face (half a turn away); back within it, arrived."""
+    nav = navigation(file, initialPose="3.95 1.85 1.55", initialSpread="0.05 0.02", goal="4 1.8 1.57")
+    moving = {**odometry((0.0, 0.0, 0.0)), "twist": {"linear": 0.1, "angular": 0.3}}
+    for k in range(3):
+        result = nav.process({"scan": scan(grid(file), (3.95, 1.85, 1.55)), "odom": moving}, Context(k, 0.8 * k))
+    assert result["path"]["points"] == []  # reached
+    off = (3.95, 1.85, 1.95)  # the heading 0.38 rad off the goal's
+    for k in range(3, 8):
+        odom = {**odometry((0.0, 0.0, 0.4)), "twist": {"linear": 0.0, "angular": 0.3}}
+        result = nav.process({"scan": scan(grid(file), off), "odom": odom}, Context(k, 0.8 * k))
+    path, status = result["path"], result["status"]
+    assert status["state"] == "active"
+    assert path["points"] == [pytest.approx([0.0, 0.0], abs=1e-9)]  # the robot's spot in odom: turn, do not drive
+    assert path["yaw"] == pytest.approx(1.57 - nav.localizer.correction[2], abs=1e-9)  # the goal's yaw in odom
+    assert math.dist(nav.localizer.correction[:2], (3.95, 1.85)) < 0.1  # (the odom origin is the robot's start)
+    for k in range(8, 12):  # turned back: within tolerance, empty path, arrived once still
+        result = nav.process({"scan": scan(grid(file), (3.95, 1.85, 1.56)), "odom": odometry((0.0, 0.0, 0.01))},
+                             Context(k, 0.8 * k))
+    assert result["path"]["points"] == [] and result["status"]["state"] == "arrived"

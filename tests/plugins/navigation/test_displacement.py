@@ -273,3 +273,22 @@ def test_a_new_path_is_faced_turning_in_place_before_the_base_drives() -> None:
         if robot.twist == (0.0, 0.0):
             break
     assert math.hypot(robot.x - 2.0, robot.y - 0.65) < 0.05
+
+
+def test_a_path_of_the_robots_own_spot_only_turns_it_to_the_yaw_and_a_short_rest_behind_is_faced() -> None:
+    """D255: the Navigation's path once the goal is reached and only the heading is off is the robot's
+    own spot with the yaw: the base turns in place to it and never drives. (The rest of the plan, 4 cm
+    behind the robot, would have been faced first: a half turn to drive 4 cm, then a half turn back.)"""
+    robot, service = Unicycle((0.5, 0.5, 0.0)), base()
+    spot = path([[0.5, 0.5]], path_id=2, yaw=0.4)
+    for _ in range(200):
+        robot.frame(service, path=spot)
+        if robot.twist == (0.0, 0.0) and robot.frames > 5:
+            break
+    assert all(v == 0.0 for v, _ in robot.commands) and any(w > 0 for _, w in robot.commands)
+    assert robot.yaw == pytest.approx(0.4, abs=0.03) and (robot.x, robot.y) == (0.5, 0.5)
+    behind, other = Unicycle((0.5, 0.5, 0.0)), base()
+    rest = path([[0.5, 0.5], [0.46, 0.5]], path_id=2, yaw=0.4)  # what the Navigation sent before D255
+    for _ in range(40):
+        behind.frame(other, path=rest)
+    assert abs(behind.yaw) > 1.5  # it turned round to face the 4 cm behind it
