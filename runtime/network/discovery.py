@@ -15,12 +15,13 @@ import logging
 import os
 import socket
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import msgpack
+
+from .. import lockstep
 
 LOG = logging.getLogger("ckm.discovery")
 MAGIC = "CKD"
@@ -40,7 +41,7 @@ class Known:
     name: str
     boot: bytes
     counter: int
-    last_heard: float = field(default_factory=time.monotonic)
+    last_heard: float = field(default_factory=lockstep.wall_monotonic)
 
 
 class Discovery:
@@ -212,7 +213,7 @@ class Discovery:
     def _answer(self) -> None:
         # A newcomer must learn us: re-announce. In a burst of joins, answers within 5 ms are
         # merged into one sent when the burst's first window ends (never dropped).
-        now = time.monotonic()
+        now = lockstep.wall_monotonic()
         if now - self._last_answer > 0.005:
             self._last_answer = now
             self.announce(HELLO)
@@ -220,21 +221,24 @@ class Discovery:
             self._answer_due = True
 
     def _flush_answer(self) -> None:
-        if self._answer_due and time.monotonic() - self._last_answer > 0.005:
+        if self._answer_due and lockstep.wall_monotonic() - self._last_answer > 0.005:
             self._answer_due = False
-            self._last_answer = time.monotonic()
+            self._last_answer = lockstep.wall_monotonic()
             self.announce(HELLO)
 
     def _beat_loop(self) -> None:
+        # heartbeats and their deadlines on the wall clock, in lock-step too (D256): a receiver stamping a
+        # beat with the simulated time saw a peer "stop" whenever the run's clock outran its threads
+        lockstep.unclocked()
         while not self._stop.wait(self.heartbeat):
             self.announce(HEARTBEAT)
-            deadline = time.monotonic() - self.heartbeat * self.lost_after
+            deadline = lockstep.wall_monotonic() - self.heartbeat * self.lost_after
             with self._table:
                 for guid, known in list(self.known.items()):
                     if known.last_heard >= deadline:
                         continue
                     if self.alive(guid):
-                        known.last_heard = time.monotonic()  # busy but talking on its link: not lost
+                        known.last_heard = lockstep.wall_monotonic()  # busy but talking on its link: not lost
                         continue
                     self._retire(guid, known.boot, known.counter)
                     self.on_lost(guid, known.name, "heartbeat stopped")

@@ -8,10 +8,10 @@ import os
 import select
 import socket
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
+from .. import lockstep
 from .frames import Authenticator, Decoder, Frame, FrameError, FrameType, encode
 from .guid import guid_address, guid_text
 
@@ -57,7 +57,7 @@ class Link:
         self.closed_reason = ""
         self.frames_in = 0
         self.frames_out = 0
-        self.last_received = time.monotonic()
+        self.last_received = lockstep.wall_monotonic()
         self._key = key
         self._nonce = os.urandom(16)
         self._auth = Authenticator(key, _HELLO_SESSION) if key is not None else None
@@ -145,11 +145,11 @@ class Link:
     # ------------------------------------------------------------------ receiving
 
     def _read_loop(self) -> None:
-        deadline = time.monotonic() + HANDSHAKE_TIMEOUT
+        deadline = lockstep.wall_monotonic() + HANDSHAKE_TIMEOUT
         reason = "closed by peer"
         try:
             while self.state != "closed":
-                if self.state != "open" and time.monotonic() > deadline:
+                if self.state != "open" and lockstep.wall_monotonic() > deadline:
                     reason = "handshake timed out"
                     break
                 # select, not a socket timeout: the socket's timeout bounds sends (SEND_TIMEOUT).
@@ -162,7 +162,7 @@ class Link:
                         reason = f"truncated frame from {self._who()}: the stream ended inside a frame"
                         LOG.warning("link closed: %s", reason)
                     break
-                self.last_received = time.monotonic()
+                self.last_received = lockstep.wall_monotonic()
                 for frame in self._decoder.feed(data):
                     self.frames_in += 1
                     if self.state == "handshake":

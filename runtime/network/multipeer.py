@@ -284,7 +284,8 @@ class MultiPeer:
                 self.rejected_links += 1
                 return False  # a higher GUID must wait for us to connect
             old = self.links.get(guid)
-            if old is not None and old is not link and time.monotonic() - old.last_received < self._healthy_window():
+            healthy = old is not None and lockstep.wall_monotonic() - old.last_received < self._healthy_window()
+            if old is not None and old is not link and healthy:
                 self.rejected_links += 1
                 return False  # the current link is alive: a second HELLO for it is an intruder or a ghost
             self.links[guid] = link
@@ -327,7 +328,7 @@ class MultiPeer:
         link = self.links.get(guid)
         return (
             link is not None
-            and time.monotonic() - link.last_received < self.network.heartbeat * self.network.lost_after
+            and lockstep.wall_monotonic() - link.last_received < self.network.heartbeat * self.network.lost_after
         )
 
     def _schedule_retry(self, guid: int) -> None:

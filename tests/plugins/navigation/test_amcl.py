@@ -261,10 +261,12 @@ def test_once_reached_a_heading_moved_off_only_turns_the_base_on_the_spot(file: 
         odom = {**odometry((0.0, 0.0, 0.4)), "twist": {"linear": 0.0, "angular": 0.3}}
         result = nav.process({"scan": scan(grid(file), off), "odom": odom}, Context(k, 0.8 * k))
     path, status = result["path"], result["status"]
+    assert nav.localizer is not None and nav.localizer.correction is not None
+    correction = nav.localizer.correction
     assert status["state"] == "active"
     assert path["points"] == [pytest.approx([0.0, 0.0], abs=1e-9)]  # the robot's spot in odom: turn, do not drive
-    assert path["yaw"] == pytest.approx(1.57 - nav.localizer.correction[2], abs=1e-9)  # the goal's yaw in odom
-    assert math.dist(nav.localizer.correction[:2], (3.95, 1.85)) < 0.1  # (the odom origin is the robot's start)
+    assert path["yaw"] == pytest.approx(1.57 - correction[2], abs=1e-9)  # the goal's yaw in odom
+    assert math.dist(correction[:2], (3.95, 1.85)) < 0.1  # (the odom origin is the robot's start)
     for k in range(8, 12):  # turned back: within tolerance, empty path, arrived once still
         result = nav.process({"scan": scan(grid(file), (3.95, 1.85, 1.56)), "odom": odometry((0.0, 0.0, 0.01))},
                              Context(k, 0.8 * k))
