@@ -42,16 +42,16 @@ from pathlib import Path
 from typing import Any
 
 from ckmconf import ConfigError, load
-from ckmconf.model import Node, Partition, System
+from ckmconf.model import Network, Node, Partition, System
 
 from . import lockstep, simtime
 from .distribution import NAME, run_agent
 from .host import Host, stop_on_signals
-from .host_network import JoinError
+from .host_network import JoinError, Namesakes
 from .kernel.partitions import MEMORY_EXIT, MemoryWatch, enter_partition
 from .kernel.runlog import RunLog
 from .missions.agent import AgentRunner
-from .network import Transport
+from .network import NetworkEvent, Transport
 from .ros.recording import RECORD_FORMATS, RecordingError, RunRecorder
 from .runrecord import EXIT_AGENTS as EXIT_AGENTS  # the exit codes, re-exported for callers
 from .runrecord import EXIT_CONFIG as EXIT_CONFIG
@@ -214,8 +214,14 @@ def _run(
     recorder: RunRecorder | None = None,
 ) -> int:
     host = Host(system, config, run_log.run_dir)
+    namesakes = Namesakes(name, system.network or Network())
+
+    def network_event(event: NetworkEvent) -> None:
+        _network_event(run_log, event)
+        namesakes.heard(event)
+
     try:
-        transport = host.join(name, lambda event: _network_event(run_log, event))
+        transport = host.join(name, network_event)
     except JoinError as exc:
         print(f"{config}: {exc}", file=sys.stderr)
         return EXIT_NETWORK
@@ -234,10 +240,16 @@ def _run(
         try:
             host.start_sessions(nodes)  # before any node is built or partition started (runtime.sessions)
             transport.start()
+            namesakes.listening()
             if recorder is not None:  # subscribed before any node publishes
                 recorder.start(transport)
             for node in nodes:
                 host.build(node, transport, partition=partition, several=len(nodes) > 1, sinks=[run_log.event])
+            # a namesake heard within ms of joining: refused before any node runs (D257); a partition's own
+            # process is started by a run that checked already, and its restart must not wait
+            if partition is None and (clash := namesakes.clash()) is not None:
+                print(f"{config}: {clash}", file=sys.stderr)
+                return EXIT_NETWORK
             host.start()
             if partition is not None:  # its memory budget counts from the runtime it started with
 

@@ -11,13 +11,22 @@ layer, so a benchmark's worker process joins without loading the kernel.
 from __future__ import annotations
 
 import contextlib
+import logging
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ckmconf.model import Network
 
+from . import lockstep
 from .network import NetworkEvent, Transport, open_transport, read_group_key
 from .network.api import GroupKeyError, NetworkError
+from .network.guid import guid_text
+
+LOG = logging.getLogger("ckm.run")
+ANSWER_WAIT = 0.25
+"""Wall seconds after joining by which the peers already on the network have answered (they answer a
+newcomer's announcement within 5 ms; a loaded machine adds some)."""
 
 
 class JoinError(Exception):
@@ -79,3 +88,56 @@ def joined(network: Network, name: str, *, key_dir: Path | None = None, start: b
         yield transport
     finally:
         transport.stop()
+
+
+class Namesakes:
+    """Other peers announcing this process's own name: another run of the same system on the same
+    network (D257). Each run's frames would reach the other's topics, and neither would say so (two
+    lab missions started side by side both ended in SPOT loops). Feed it the network events; before
+    the nodes start, :meth:`clash` is the error to stop on; a namesake heard later is warned about."""
+
+    def __init__(self, name: str, network: Network) -> None:
+        self.name, self.network = name, network
+        self.peers: list[int] = []
+        self.started = False  # this run's nodes are running: a later namesake is a newcomer's to refuse
+        self.joined = lockstep.wall_monotonic()
+        self._lock = threading.Lock()
+
+    def listening(self) -> None:
+        """The transport has started: the peers on the network answer from now."""
+        self.joined = lockstep.wall_monotonic()
+
+    def heard(self, event: NetworkEvent) -> None:
+        """Note a peer found under this process's name."""
+        if event.kind != "found" or event.detail != self.name or event.peer is None:
+            return
+        with self._lock:
+            if event.peer in self.peers:
+                return
+            self.peers.append(event.peer)
+            started = self.started
+        if started:
+            LOG.warning("another peer named %r joined the network at %s: %s", self.name, self._where(event.peer),
+                        self._advice())
+
+    def clash(self) -> str | None:
+        """The error to stop on if a namesake was heard (None: none), once the peers had ANSWER_WAIT
+        to answer; afterwards only warnings."""
+        left = ANSWER_WAIT - (lockstep.wall_monotonic() - self.joined)
+        if left > 0:  # on the wall clock: in lock-step the run's clock is held meanwhile (nothing runs yet)
+            lockstep.real("sleep")(left)
+        with self._lock:
+            self.started = True
+            peers = list(self.peers)
+        if not peers:
+            return None
+        where = ", ".join(self._where(peer) for peer in peers)
+        return f"cannot join the network: another peer named {self.name!r} is on it, at {where}: {self._advice()}"
+
+    def _where(self, peer: int) -> str:
+        return guid_text(peer) if 0 < peer < 1 << 48 else str(peer)
+
+    def _advice(self) -> str:
+        net = self.network
+        return (f"another run of this system on group {net.group}:{net.discovery_port}? Stop it, or give this run "
+                "a <Network> of its own (group, discoveryPort, basePort)")
