@@ -212,6 +212,7 @@ def plot(plans: Sequence[dict[str, Any]], path: Path) -> Path:
     fig = Figure(figsize=(10, 1.5 + 0.45 * max(1, len(names)) * max(1, len(plans))), layout="constrained")
     ax = fig.subplots()
     width = 0.8 / max(1, len(plans))
+    drawn = False
     for k, p in enumerate(plans):
         by_name = {s["name"]: s["times_s"] for s in p["states"]}
         data = [(i, by_name[n]) for i, n in enumerate(names) if by_name.get(n)]
@@ -231,10 +232,15 @@ def plot(plans: Sequence[dict[str, Any]], path: Path) -> Path:
             patch.set_facecolor(f"C{k}")
             patch.set_alpha(0.6)
         ax.plot([], [], color=f"C{k}", linewidth=8, alpha=0.6, label=f"{p['plan']} ({p['states_from']} runs)")
-    ax.set_yticks(range(len(names)), names, fontsize=7)
-    ax.set(ylim=(len(names) - 0.5, -0.5), xlabel="time in the state per run (s)")
+        drawn = True
     ax.set_title("ckm-bench mission: time per state over the runs (Table 7.9's execution time)")
-    if plans:
+    if names:
+        ax.set_yticks(range(len(names)), names, fontsize=7)
+        ax.set(ylim=(len(names) - 0.5, -0.5), xlabel="time in the state per run (s)")
+    else:  # every run failed before a state was recorded: say so, not an empty frame
+        ax.text(0.5, 0.5, "no run recorded a state", ha="center", va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+    if drawn:
         ax.legend(loc="lower right", fontsize=8)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)

@@ -16,7 +16,7 @@ import ckmconf
 from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
 from benchmarks.mission import collect, layout_config, mission_wall, run_once, success_finals
 from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
-from benchmarks.mission_report import summarise, wilson
+from benchmarks.mission_report import plot, summarise, wilson
 from benchmarks.mission_scenarios import BUILT_IN, judge, object_home
 from plugins.sim.plan import WorldPlan
 from runtime.missions.recording import Event, Run, RunRecorder, read_run
@@ -480,3 +480,15 @@ def test_the_object_is_home_only_on_the_drop_table_s_top(
     assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path) is home
     (tmp_path / "sim-final.json").write_text(json.dumps({"positions": {}}))
     assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path) is None
+
+
+def test_the_state_plot_of_runs_that_recorded_no_state_says_so_without_warnings(tmp_path: Path) -> None:
+    """Every run failed before its first state (a broken configuration, say): the plot is still made,
+    with a line saying why it is empty, and matplotlib warns of nothing (no singular axis, no empty legend)."""
+    import warnings
+
+    plans = [{"plan": "cooperative", "states_from": "all", "states": []}]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        made = plot(plans, tmp_path / "states.png")
+    assert made.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
