@@ -47,7 +47,7 @@ from ckmconf.model import Network, Node, Partition, System
 from . import lockstep, simtime
 from .distribution import NAME, run_agent
 from .host import Host, stop_on_signals
-from .host_network import JoinError, Namesakes
+from .host_network import PORTS_VARIABLE, JoinError, Namesakes, parse_ports, with_ports
 from .kernel.partitions import MEMORY_EXIT, MemoryWatch, enter_partition
 from .kernel.runlog import RunLog
 from .missions.agent import AgentRunner
@@ -71,6 +71,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=float, help="stop after this many seconds (default: until a signal)")
     parser.add_argument("--log-dir", type=Path, help="run directory (default: runs/SYSTEM-TIMESTAMP)")
     parser.add_argument("--plan", help="also run this plan's agents whose node runs here")
+    parser.add_argument("--ports", nargs=2, metavar=("DISCOVERY", "BASE"),
+                        help="run on these network ports instead of the <Network>'s discoveryPort and basePort: a "
+                        "second run of one system beside the first (D258)")
     parser.add_argument(
         "--await-config", action="store_true", help="run no configuration: announce an agent and wait for pushes"
     )
@@ -107,6 +110,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("the following arguments are required: config")
     if args.name is not None:
         parser.error("--name goes with --await-config")
+    if args.ports is not None:  # in the environment: the run's partitions and a lock-step re-start inherit it
+        try:
+            os.environ[PORTS_VARIABLE] = "{} {}".format(*parse_ports(" ".join(args.ports), "--ports"))
+        except ValueError as error:
+            parser.error(str(error))
     if args.lockstep is not None and args.time_scale is not None:
         parser.error("--lockstep and --time-scale exclude each other")
     if args.lockstep is not None and args.node is not None and lockstep.active() is None:
@@ -214,7 +222,7 @@ def _run(
     recorder: RunRecorder | None = None,
 ) -> int:
     host = Host(system, config, run_log.run_dir)
-    namesakes = Namesakes(name, system.network or Network())
+    namesakes = Namesakes(name, with_ports(system.network or Network()))
 
     def network_event(event: NetworkEvent) -> None:
         _network_event(run_log, event)

@@ -11,9 +11,11 @@ layer, so a benchmark's worker process joins without loading the kernel.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
+import os
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from ckmconf.model import Network
@@ -24,9 +26,32 @@ from .network.api import GroupKeyError, NetworkError
 from .network.guid import guid_text
 
 LOG = logging.getLogger("ckm.run")
+PORTS_VARIABLE = "CKM_NETWORK_PORTS"
+"""``DISCOVERY BASE``: the network ports of every process of a run, instead of its ``<Network>``'s
+(``ckm-run --ports``, D258); the run's partitions inherit it."""
 ANSWER_WAIT = 0.25
 """Wall seconds after joining by which the peers already on the network have answered (they answer a
 newcomer's announcement within 5 ms; a loaded machine adds some)."""
+
+
+def parse_ports(text: str, where: str = PORTS_VARIABLE) -> tuple[int, int]:
+    """(discovery, base) from ``DISCOVERY BASE``: two different ports in 1024-65535; ValueError naming ``where``."""
+    try:
+        discovery, base = (int(word) for word in text.split())
+    except ValueError:
+        raise ValueError(f"{where} = {text!r}: expected two port numbers, DISCOVERY BASE") from None
+    if not (1024 <= discovery <= 65535 and 1024 <= base <= 65535) or discovery == base:
+        raise ValueError(f"{where} = {text!r}: expected two different ports in 1024-65535")
+    return discovery, base
+
+
+def with_ports(network: Network, environ: Mapping[str, str] | None = None) -> Network:
+    """``network`` on the ports ``CKM_NETWORK_PORTS`` names, if it is set (D258)."""
+    text = (os.environ if environ is None else environ).get(PORTS_VARIABLE, "").strip()
+    if not text:
+        return network
+    discovery, base = parse_ports(text)
+    return dataclasses.replace(network, discovery_port=discovery, base_port=base)
 
 
 class JoinError(Exception):
@@ -60,6 +85,7 @@ def join(
         JoinError: the key cannot be read or the transport cannot be set up.
     """
     try:
+        network = with_ports(network)
         key = read_group_key(network, key_dir) if key_dir is not None else None
         transport = open_transport(network, name=name, key=key)
         if on_event is not None:
@@ -139,5 +165,5 @@ class Namesakes:
 
     def _advice(self) -> str:
         net = self.network
-        return (f"another run of this system on group {net.group}:{net.discovery_port}? Stop it, or give this run "
-                "a <Network> of its own (group, discoveryPort, basePort)")
+        return (f"another run of this system on group {net.group}:{net.discovery_port}? Stop it, or run this one "
+                "on other ports (ckm-run --ports DISCOVERY BASE), or give it a <Network> of its own")
