@@ -225,7 +225,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             "path_id": self.path_id, "plan_length": self.plan_length,
             "obstacles": self.routes.areas(),
             "unlocalized_since": self.unlocalized_since, "stopped": self.stopped, "settling": self.settling,
-            "at_goal": self.at_goal, "turning": self.turning,
+            "at_goal": self.at_goal,  # (turning is made again by each frame's _navigate before it is used)
             "localizer": self.localizer.state(), "zoom": None if self.zoom is None else self.zoom.state(),
         }
 
@@ -251,7 +251,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             self.plan_length = float(state["plan_length"])
             self.unlocalized_since, self.stopped = state["unlocalized_since"], bool(state["stopped"])
             self.settling = bool(state.get("settling", False))
-            self.at_goal, self.turning = bool(state.get("at_goal", False)), bool(state.get("turning", False))
+            self.at_goal = bool(state.get("at_goal", False))
             self.routes.restore(state["obstacles"])
             self.localizer.restore(state["localizer"])
             if self.zoom is not None:

@@ -284,8 +284,8 @@ class MultiPeer:
                 self.rejected_links += 1
                 return False  # a higher GUID must wait for us to connect
             old = self.links.get(guid)
-            healthy = old is not None and lockstep.wall_monotonic() - old.last_received < self._healthy_window()
-            if old is not None and old is not link and healthy:
+            if old is not None and old is not link \
+                    and lockstep.wall_monotonic() - old.last_received < self._healthy_window():
                 self.rejected_links += 1
                 return False  # the current link is alive: a second HELLO for it is an intruder or a ghost
             self.links[guid] = link
