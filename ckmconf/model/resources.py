@@ -167,6 +167,7 @@ class Service(Record):
     TAG = "Service"
     name: str = attr()
     function: str | None = attr(default=None)
+    interface: str | None = attr(default=None)
     rate: float | None = attr(default=None)
     performance: str | None = attr(default=None)
     config_topic: str | None = attr(default=None)

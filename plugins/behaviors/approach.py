@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from runtime.missions.behaviors import BehaviorStatus
+from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 from .messages import _Goals, _share_done, _state, find_target, in_robot_frame, observer_pose, robot_pose
@@ -36,6 +37,9 @@ class Approach(_Goals):
 
     ``yawTolerance`` > 0 asks the base to end each move within that heading of facing the target
     (Move2D ``yaw_tolerance``): the floor grasp's fingers clear the object by 1 cm a side (D252)."""
+
+    USES = Uses(Use("base", "base-drive", "drives the moves towards the target"),
+                Use("arm", "arm-motion", "raises the arm to armPose before the last leg"))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("standoff", 0.2, "Distance kept from the target.", unit="m"),

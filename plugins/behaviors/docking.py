@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
+from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 from .usecase import _Goals, _share_done, _state, robot_pose
@@ -31,6 +32,8 @@ def _map_pose(text: str, owner: str) -> tuple[float, float, float]:
 
 class Dock(_Goals):
     """DOCK: the base to the map pose ``pose``, placed relative to the robot by its pose estimate."""
+
+    USES = Uses(Use("base", "base-drive", "drives to the docking pose"))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("pose", REQUIRED, "Map pose to end at: 'x y yaw' (m, m, rad).", type=str),

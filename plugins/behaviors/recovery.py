@@ -34,6 +34,7 @@ from typing import Any, ClassVar
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
+from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 from .usecase import (
@@ -50,6 +51,8 @@ from .usecase import (
 
 class StopNavigation(_Goals):
     """HALT: the Navigation goal cancelled (its ``<Configure>``) and the base stopped by a zero move."""
+
+    USES = Uses(Use("base", "base-drive", "takes the zero move that stops the base"))
 
     PORTS = Ports(outputs={"*": MAPPING})
 
@@ -68,6 +71,10 @@ class StopNavigation(_Goals):
 
 class SearchObject(_Goals):
     """LOOK: views round the robot until the fused recognition holds the target (module docstring)."""
+
+    USES = Uses(Use("base", "base-drive", "turns and moves the robot to look"),
+                Use("fusion", "fusion", "the recognition looked in, unless an input named objects gives it",
+                    optional=True))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         *_TARGET,

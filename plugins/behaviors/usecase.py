@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
+from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 # re-exported (``as``): docking and recovery import these from here; Approach moved to .approach
@@ -61,6 +62,8 @@ class SetNavGoal(Behavior):
     also writes it on a ``goal`` output when it has one. Without a ``nav`` service it is done once
     the goal is set (the goal is handed over on its output only).
     """
+
+    USES = Uses(Use("nav", "navigation", "given the goal; without it the goal only goes on the output", optional=True))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("approachDistance", 0.0, "Stop this far short of a position received on the input.", unit="m"),
@@ -123,6 +126,8 @@ class SetNavGoal(Behavior):
 class WaitGoal(Behavior):
     """WAIT: drives along AMCL's path; progress is the share of the path covered."""
 
+    USES = Uses(Use("nav", "navigation", "the goal driven to and its status"))
+
     def step(self) -> BehaviorStatus:
         """Done when Navigation reports the goal reached (its progress is the share of the path done)."""
         status = self.service("nav").output("status")
@@ -137,6 +142,9 @@ class WaitGoal(Behavior):
 class SpotObjects(Behavior):
     """SPOT, SPOT_COOP: waits until the fused recognition holds the target (untraceable), then
     writes its position (an ``ObjectPosition``) on the ``target`` output."""
+
+    USES = Uses(Use("fusion", "fusion", "the recognition looked in, unless an input named objects gives it",
+                    optional=True))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         *_TARGET, P("minSources", 1, "Fewest recognition sources that must have seen the object.")
@@ -160,6 +168,8 @@ class ArmSequence(_Goals):
     With ``minHold`` > 0, a gripper goal that stops on an object with the fingers nearer than that
     share of their range has closed across the object's edge, not round its middle (an aim off by
     more than the fingers' clearance, D251): the behavior fails there, before lifting it."""
+
+    USES = Uses(Use("arm", "arm-motion", "reaches each pose of the sequence"))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("sequence", REQUIRED, "Space-separated goals 'arm:POSE' or 'gripper:POSE', reached in order.", type=str),
@@ -219,6 +229,8 @@ class ArmSequence(_Goals):
 class BackOff(_Goals):
     """BACK: moves ``distance`` metres backwards."""
 
+    USES = Uses(Use("base", "base-drive", "drives the backwards move"))
+
     PARAMS: ClassVar[Mapping[str, Any]] = Params(P("distance", 0.3, "How far to move backwards.", unit="m"))
     PORTS = Ports(outputs={"*": MAPPING})
 
@@ -238,6 +250,9 @@ class BackOff(_Goals):
 class TrackObject(Behavior):
     """OBJ_TRACK: waits until the pan-tilt recognition sees the target and the head follows it."""
 
+    USES = Uses(Use("recog", "object-detection", "sees the target"),
+                Use("track", "pan-tilt-tracking", "keeps the head on it (measure moving)"))
+
     PARAMS: ClassVar[Mapping[str, Any]] = Params(*_TARGET)
 
     def step(self) -> BehaviorStatus:
@@ -256,6 +271,9 @@ class FixObject(Behavior):
     ``holdTime`` seconds, then writes the target's position (an ``ObjectPosition``) on its
     outputs: the payload of the plan signal (``<Output signal=…>``) or a topic. With a ``track``
     service the position is the tracked target it places on the map; else the recognition's."""
+
+    USES = Uses(Use("recog", "object-detection", "sees the target and rates it"),
+                Use("track", "pan-tilt-tracking", "places the target on the map", optional=True))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("holdTime", 2.0, "How long the recognition must stay reliable.", unit="s"),

@@ -71,6 +71,7 @@ class EnvironmentMap(ProcessingPlugin):
     """``plugin.environment-map``: one robot's map, fed by its recognition and completed by its peers' maps."""
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"objects": MAPPING})
+    PROVIDES = "map-sharing"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("environment", "", "Environment XML file of the map, relative to the configuration file (empty: the "
           "use-case lab)."),

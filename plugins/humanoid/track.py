@@ -55,6 +55,7 @@ class PanTiltTrack(ProcessingPlugin):
     """Head goals that keep the recognised target centred, and its map position (see the module docstring)."""
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # Recog result + PanTilt in; goals, state out
+    PROVIDES = "pan-tilt-tracking"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "nao", "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
           "configuration file."),

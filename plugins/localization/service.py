@@ -50,6 +50,7 @@ class Localization(ProcessingPlugin):
     """
 
     PORTS = Ports(inputs={"odometry": NUMBERS, "ranges": NUMBERS, "*": MAPPING}, outputs={"*": MAPPING})
+    PROVIDES = "localization"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P(
             "filter",

@@ -84,6 +84,7 @@ class ArmPoses(ProcessingPlugin):
     """Goals by predefined pose name to joint trajectories, and their status (see the module docstring)."""
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # ArmGoal + JointState in; trajectory, status out
+    PROVIDES = "arm-motion"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "turtlebot", "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
           "configuration file."),

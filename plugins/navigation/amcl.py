@@ -84,6 +84,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
     """``plugin.amcl-navigation``: localization, planning and the path of the Navigation.AMCL service."""
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PROVIDES = "navigation"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("environment", "", "Environment XML file, relative to the configuration file (empty: the use-case lab)."),
         P("filter", "reliability", "Algorithm 3 ('reliability') or the AMCL-like baseline ('mcl').", choices=FILTERS),

@@ -68,6 +68,7 @@ class BaseDisplacement(ProcessingPlugin):
     """``plugin.base-displacement``: path following, relative moves and odometry of the Kobuki base."""
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PROVIDES = "base-drive"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("speed", 0.3, "Top linear speed (Table 7.1 Speed); the service Parameter 'speed' overrides it.",
           unit="m/s", above=0.0, max=0.7),

@@ -47,6 +47,7 @@ class LaserScanService(ProcessingPlugin):
     """
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PROVIDES = "laser-scan"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("fov", 4.1888, "Field of view of the raw sweep, steps spread evenly from -fov/2 to +fov/2.",
           unit="rad", above=0.0, max=2 * math.pi),

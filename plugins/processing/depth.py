@@ -233,6 +233,7 @@ class KdTreeShapeClassifier(ProcessingPlugin):
     """
 
     PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability
+    PROVIDES = "object-detection"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "", "ASCII PCD file of labelled descriptors, relative to the configuration file (required)."),
         P("k", 5, "Nearest training descriptors that vote.", min=1),

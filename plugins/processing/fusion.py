@@ -102,6 +102,7 @@ class FeatureFusion(ProcessingPlugin):
     """
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # one recognition result per input
+    PROVIDES = "fusion"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind.", entries=KIND),
         P("poses", "", "Sensor frames in the common frame (default identity).", entries=POSE),

@@ -203,6 +203,7 @@ class KeypointMatching(ProcessingPlugin):
     """
 
     PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability, keypoints, size
+    PROVIDES = "object-detection"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "", "Texture model file, relative to the configuration file (required)."),
         P("ratio", 0.75, "Lowe's ratio test threshold, in (0, 1]."),

@@ -27,6 +27,7 @@ class OrbRecognition(ProcessingPlugin):
     :class:`KeypointMatching` for its fields)."""
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": MAPPING})  # an image in, objects + reliability out
+    PROVIDES = "object-detection"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = as_params(OrbKeypoints.PARAMS) | KeypointMatching.PARAMS
 
     def __init__(self, record: Plugin) -> None:

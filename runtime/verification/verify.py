@@ -19,6 +19,8 @@ single node; ``verify`` does the same for a loaded System:
   result; several: the field of the Output's name), every ``<Input>`` of a stream against what its
   acquisition (root) plugin accepts (one Input: the value itself; several: the dict's entry of the
   Input's name). A ``bytes`` topic carries the codec's encoding of any value (D98);
+- each service's interface (``interface=`` or its output plugin kind's ``PROVIDES``) and its ports,
+  and each behavior's ``<Uses>`` against the services its kind ``USES`` (:mod:`.interface_checks`);
 - channel sizes are ones the backend serves (a loopback plant has one output);
 - what the runtime would silently not run is refused: Smart Resources on a ROS kernel (no ROS
   kernel runs here), services without scenarios (only SPT scenarios are executed), services whose
@@ -54,7 +56,7 @@ from ckmconf.rostypes import is_ros_type
 
 from ..kernel.vectors import chain_refusal, is_vector, problem, refusal, scalar_refusals
 from ..registry import Registry, default_registry
-from .checker import Checker
+from .interface_checks import InterfaceChecks
 from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ports_of
 from .types import describe, fits
 
@@ -74,10 +76,11 @@ def verify(system: System, registry: Registry | None = None) -> list[ConfigError
     return sorted(set(checker.report.errors), key=ConfigError.sort_key)
 
 
-class _Verifier(Checker):
+class _Verifier(InterfaceChecks):
     """One pass over a system, element by element (the shared checks are :class:`Checker`'s)."""
 
     def run(self) -> None:
+        self.interfaces, self.lacking = {}, {}
         self._ros_topics()
         for node in self.system.nodes:
             self._node(node)
@@ -199,6 +202,8 @@ class _Verifier(Checker):
 
     def _resource(self, resource: SmartResource) -> None:
         if resource.kernel == "ros":
+            for service in resource.services:
+                self._service_interface(resource, service, [], {})
             self.report.error(
                 resource,
                 f"Smart Resource {resource.name!r} runs on a ROS kernel, which this runtime does not provide: "
@@ -220,6 +225,7 @@ class _Verifier(Checker):
                     f"service {ref} has no Scenario: the runtime executes services "
                     "through their scenarios' SPT profiles, so nothing would produce its outputs (not runnable)",
                 )
+                self._service_interface(resource, service, [], kinds)
                 continue
             roots = sorted({profiles[s.profile].root.plugin for s in service.scenarios if s.profile in profiles})
             if len(roots) > 1:
@@ -232,6 +238,7 @@ class _Verifier(Checker):
                 streams.setdefault(roots[0], []).append(service)
             used = [profiles[s.profile] for s in service.scenarios if s.profile in profiles]
             self._service_outputs(resource, service, used, kinds, node)
+            self._service_interface(resource, service, used, kinds)
         for root, services in streams.items():
             self._stream_inputs(resource, root, services, kinds, node)
             if not any(service.inputs for service in services):
@@ -323,6 +330,7 @@ class _Verifier(Checker):
         cls = self._checked(behavior, "behavior", behavior.kind, behavior.params)
         if cls is None:
             return
+        self._behavior_uses(behavior, cls)
         ports = ports_of(cls)
         owner = f"behavior {behavior.name!r} ({behavior.kind})"
         for port in behavior.outputs:

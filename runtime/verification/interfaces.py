@@ -1,0 +1,195 @@
+"""Service interfaces: what a behavior may rely on a service to offer (issue M, Nav2's plugin interfaces).
+
+A behavior reads a service's outputs and configures its parameters by name; an interface names
+them once, for every kind that implements it. Two declarations meet here, both checked by
+``verify`` before anything is built:
+
+- a processing plugin kind that is the output (leaf) plugin of a service's profiles declares the
+  interface it implements, ``PROVIDES = "navigation"``; a ``<Service interface="…">`` says it too
+  (and must agree with its kinds; a service on a ROS kernel has no kind to say it);
+- a behavior kind declares the services it needs under the aliases it uses, as BehaviorTree.CPP's
+  ``providedPorts``: ``USES = Uses(Use("nav", "navigation", "…"))``. Each ``<Uses as=…>`` of a
+  ``<Behavior>`` is checked against it: a required alias missing, an alias bound to a service of
+  another interface, or to a service whose interface is not known, is refused at its ``FILE:LINE:COL``.
+  Further ``<Uses>`` (services the behavior only configures or requires a quality of, for eq. 5.1)
+  are accepted.
+
+A service of an interface must have the interface's Inputs, Outputs and Parameters (by name). The
+catalogue :data:`STANDARD` is what ``ckm-plugins interfaces`` and ``docs/interfaces.md`` show.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Port:
+    """One Input, Output, Parameter or quality measure an interface requires, and what it carries."""
+
+    name: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Interface:
+    """A named service interface: the ports a service of it has, and how its goals behave.
+
+    ``goals`` describes the goal protocol of a long-running service (empty for a streaming one).
+    """
+
+    name: str
+    summary: str
+    inputs: tuple[Port, ...] = ()
+    outputs: tuple[Port, ...] = ()
+    parameters: tuple[Port, ...] = ()
+    measures: tuple[Port, ...] = ()
+    goals: str = ""
+
+    def missing(self, inputs: set[str], outputs: set[str], parameters: set[str], measures: set[str]) -> list[str]:
+        """What a service with these port and measure names lacks to be of this interface, in words."""
+        lacking = []
+        for label, required, present in (("Input", self.inputs, inputs), ("Output", self.outputs, outputs),
+                                         ("Parameter", self.parameters, parameters),
+                                         ("QualityMeasure", self.measures, measures)):
+            lacking += [f"{label} {port.name!r}" for port in required if port.name not in present]
+        return lacking
+
+
+_ID_GOALS = (
+    "Each goal carries a fresh `id` and the status names the `id` of the goal it reports, so a status "
+    "left over from an earlier goal is never read as this one's; a newer goal preempts the older one."
+)
+
+STANDARD: dict[str, Interface] = {
+    i.name: i
+    for i in (
+        Interface(
+            "laser-scan",
+            "A planar range scanner's scans, in the frame of its mount.",
+            outputs=(Port("scan", "sensor_msgs/LaserScan's fields: `stamp`, `angle_min`, `angle_max`, "
+                                  "`angle_increment` (rad), `time_increment`, `scan_time` (s), `range_min`, "
+                                  "`range_max` (m), `ranges` (m, one per beam; REP 117's inf, -inf, nan), "
+                                  "`intensities`"),),
+        ),
+        Interface(
+            "base-drive",
+            "A mobile base driven by relative moves, with wheel odometry.",
+            inputs=(Port("move_goal", "a move `{id, frame: robot, x, y (m), yaw (rad)}` from where the base "
+                                      "stands; the behaviors' `move` Output is this topic"),),
+            outputs=(
+                Port("move_status", "`{id, state: moving | done | failed, remaining, total (m)}` of the newest "
+                                    "move"),
+                Port("odom", "`{stamp, pose: {x, y, yaw}, twist: {linear, angular}, dispersion}` (m, rad, m/s, "
+                             "rad/s; dispersion in m)"),
+            ),
+            parameters=(Port("speed", "the top linear speed of a move (m/s)"),),
+            goals=_ID_GOALS,
+        ),
+        Interface(
+            "navigation",
+            "Localization on the system's map and path planning to a goal pose.",
+            outputs=(
+                Port("pose", "the estimate `{stamp, pose: {x, y, yaw}, covariance (3x3, row-major), dispersion}` "
+                             "on the map (m, rad)"),
+                Port("status", "`{goal, state: planning | active | arrived | failed, path_length, remaining "
+                               "(m), reason}` of the newest goal; `reason` says why it failed"),
+            ),
+            parameters=(Port("goal", "the goal on the map: `\"x y yaw\"` (m, m, rad) or an Area's name; empty: "
+                                     "none (the base stands)"),),
+            goals="The status echoes the goal it reports (`goal`), so a status of an earlier goal is never read as "
+                  "this one's; setting a goal preempts the older one, an empty goal cancels it.",
+        ),
+        Interface(
+            "arm-motion",
+            "An arm and its gripper moved to named poses.",
+            inputs=(Port("goal", "a goal `{id, group: arm | gripper, pose}`; the behaviors' `arm_goal` Output "
+                                 "is this topic"),),
+            outputs=(Port("status", "`{stamp, id, group, pose, state: moving | reached | failed, active, error, "
+                                    "holding, contact, opening}` of the newest goal: `holding` a gripper goal "
+                                    "that closed on an object, `contact` an arm goal stopped by one, `opening` "
+                                    "the gripper's share of its range"),),
+            goals=_ID_GOALS,
+        ),
+        Interface(
+            "object-detection",
+            "Objects recognised in a sensor's frames (texture, depth shape or colour).",
+            outputs=(Port("objects", "`{objects: [{name, shape, texture, x, y, z (m), reliability, sources}], "
+                                     "reliability}` in the sensor's frame"),),
+        ),
+        Interface(
+            "fusion",
+            "Recognitions of several sensors fused into one set of objects on the map.",
+            outputs=(Port("objects", "`{objects: [{name, shape, texture, frame, x, y, z, centre, reliability, "
+                                     "sources}], reliability}`"),),
+        ),
+        Interface(
+            "pan-tilt-tracking",
+            "A camera head kept on a recognised object, placing it on the map.",
+            outputs=(Port("target", "the tracked object `{stamp, label, frame, x, y, z, reliability}`"),),
+            measures=(Port("moving", "1 while the head follows the target"),),
+        ),
+        Interface(
+            "localization",
+            "A pose estimate on the system's map from odometry and range readings.",
+            outputs=(Port("pose", "the pose estimate `{stamp, x, y, yaw, dispersion}` (m, rad)"),),
+        ),
+        Interface(
+            "map-sharing",
+            "The environment map's objects, updated from perception and shared between robots.",
+            outputs=(Port("objects", "`{type: objects, map, stamp, objects: [...]}` updates of the map"),),
+        ),
+    )
+}
+"""The standard interfaces, by name."""
+
+
+@dataclass(frozen=True)
+class Use:
+    """One service a behavior kind needs: the ``<Uses as>`` alias it reads it by, and its interface."""
+
+    alias: str
+    interface: str
+    doc: str = ""
+    optional: bool = False
+
+    def __post_init__(self) -> None:
+        if self.interface not in STANDARD:
+            raise TypeError(f"use {self.alias!r}: no interface {self.interface!r} (known: {', '.join(STANDARD)})")
+
+
+@dataclass(frozen=True)
+class Uses:
+    """The services a behavior kind declares (``USES``), in declaration order."""
+
+    uses: tuple[Use, ...] = field(default=())
+
+    def __init__(self, *uses: Use) -> None:
+        aliases = [u.alias for u in uses]
+        if len(set(aliases)) != len(aliases):
+            raise TypeError(f"an alias is declared twice in {aliases}")
+        object.__setattr__(self, "uses", uses)
+
+    def __iter__(self) -> Iterator[Use]:
+        return iter(self.uses)
+
+    def by_alias(self) -> Mapping[str, Use]:
+        """The declared uses by alias."""
+        return {u.alias: u for u in self.uses}
+
+
+def uses_of(cls: type[Any] | None) -> Uses | None:
+    """The services a behavior kind declares (None: it declares none, so its ``<Uses>`` are not checked)."""
+    declared = getattr(cls, "USES", None)
+    return declared if isinstance(declared, Uses) else None
+
+
+def provided_by(cls: type[Any] | None) -> str | None:
+    """The interface a processing plugin kind implements as a service's output plugin (None: none declared)."""
+    provided = getattr(cls, "PROVIDES", None) if cls is not None else None
+    return provided if isinstance(provided, str) and provided in STANDARD else None
+
+
+__all__ = ["STANDARD", "Interface", "Port", "Use", "Uses", "provided_by", "uses_of"]
