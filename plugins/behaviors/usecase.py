@@ -77,8 +77,7 @@ class SetNavGoal(Behavior):
         super().start()
         self.goal: str | None = None
         if not self.record.inputs:
-            uses = next((u for u in self.record.uses if u.alias == "nav"), None)
-            self.goal = next((c.value for c in uses.configure if c.parameter == "goal"), None) if uses else None
+            self.goal = _goal_configured(self.record, "nav")
 
     def _goal_from_input(self) -> str | None:
         spotted = self.read(self.record.inputs[0].name)
@@ -119,23 +118,50 @@ class SetNavGoal(Behavior):
         if state in ("active", "arrived"):
             return BehaviorStatus(progress=1.0, done=True)
         if state == "failed":
-            return BehaviorStatus(progress=0.5, failed=True, detail="no path to the goal")
+            return BehaviorStatus(progress=0.5, failed=True, detail=_failure(status, "no path to the goal"))
         return BehaviorStatus(progress=0.5)
 
 
+def _goal_configured(record: BehaviorRecord, alias: str) -> str | None:
+    """The ``goal`` a behavior's ``<Uses as=alias>`` configures (None: it configures none)."""
+    uses = next((u for u in record.uses if u.alias == alias), None)
+    return next((c.value for c in uses.configure if c.parameter == "goal"), None) if uses else None
+
+
+def _failure(status: Any, what: str) -> str:
+    """``what`` failed, with the reason the status gives (navigation's ``reason``)."""
+    reason = status.get("reason") if isinstance(status, Mapping) else None
+    return f"{what}: {reason}" if isinstance(reason, str) and reason else what
+
+
 class WaitGoal(Behavior):
-    """WAIT: drives along AMCL's path; progress is the share of the path covered."""
+    """WAIT: drives along AMCL's path; progress is the share of the path covered.
+
+    With its own ``<Configure parameter="goal">`` only a status of that goal heard after the state was
+    entered counts: the status of the goal before it (failed, or arrived elsewhere, even at the same
+    goal) is not this one's. Without, the status of whatever goal the previous state set. A failure's
+    detail carries the navigation's reason."""
 
     USES = Uses(Use("nav", "navigation", "the goal driven to and its status"))
+
+    def start(self) -> None:
+        """Configure the navigation (its own goal, if any) and remember which goal this is."""
+        self.before = self.service("nav").output("status")  # the last goal's, as the state is entered
+        super().start()
+        self.goal = _goal_configured(self.record, "nav")
 
     def step(self) -> BehaviorStatus:
         """Done when Navigation reports the goal reached (its progress is the share of the path done)."""
         status = self.service("nav").output("status")
+        if self.goal is not None and (status is self.before or not isinstance(status, Mapping)
+                                      or status.get("goal") != self.goal):
+            return BehaviorStatus(progress=0.0, detail="waiting for the navigation to take the goal")
         state = _state(status)
         if state == "arrived":
             return BehaviorStatus(progress=1.0, done=True)
         if state == "failed":
-            return BehaviorStatus(progress=_share_done(status), failed=True, detail="navigation failed")
+            return BehaviorStatus(progress=_share_done(status), failed=True,
+                                  detail=_failure(status, "navigation failed"))
         return BehaviorStatus(progress=_share_done(status))
 
 

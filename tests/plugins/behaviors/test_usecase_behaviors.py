@@ -282,3 +282,68 @@ def test_bad_params_are_refused_naming_the_behavior(lab: System) -> None:
     context = BehaviorContext(services={}, inputs={}, outputs={}, now=lambda: 0.0)
     with pytest.raises(ParamError, match=r"behavior 'PICK' .*'elbow:up' is not arm:POSE"):
         default_registry().resolve("behavior", "pick", broken)(broken, context)
+
+
+def _with_goal(system: System, name: str, goal: str) -> System:
+    """``system`` with behavior ``name``'s ``nav`` Uses configuring ``goal`` (a WAIT of its own goal)."""
+    record = system.behavior(name)
+    assert record is not None
+    configure = ckmconf.model.missions.Configure(parameter="goal", value=goal)
+    uses = tuple(dataclasses.replace(u, configure=(configure,)) if u.alias == "nav" else u for u in record.uses)
+    behaviors = tuple(dataclasses.replace(b, uses=uses) if b.name == name else b for b in system.behaviors)
+    return dataclasses.replace(system, behaviors=behaviors)
+
+
+class StaleService(MemoryService):
+    """The navigation as a newer goal finds it: the status of the previous goal is still the newest."""
+
+    def __init__(self, ref: str) -> None:
+        super().__init__(ref)
+        self.outputs["status"] = {"goal": "1.0 1.3 1.5708", "state": "failed", "reason": "no path"}
+
+
+def test_wait_with_its_own_goal_never_reads_the_previous_goals_status(lab: System) -> None:
+    """Issue M: WAIT configuring its own goal ended at once on the previous goal's 'failed'."""
+    system = _with_goal(lab, "WAIT", "7.6 5.5 1.5708")
+    record = system.behavior("WAIT")
+    assert record is not None
+    nav = StaleService("Navigation.AMCL")
+    stale = nav.outputs["status"]
+    context = BehaviorContext(services={"nav": nav, "scan": MemoryService("s"), "base": MemoryService("b")},
+                              inputs={}, outputs={}, now=lambda: 0.0)
+    wait = default_registry().resolve("behavior", "wait-goal", record)(record, context)
+    wait.start()
+    assert nav.configured[-1][0] == {"goal": "7.6 5.5 1.5708"}
+    status = wait.step()
+    assert not status.failed and not status.done and "take the goal" in status.detail
+    nav.outputs["status"] = stale  # the same stale message again: still not this goal's
+    assert not wait.step().failed
+    nav.outputs["status"] = {"goal": "7.6 5.5 1.5708", "state": "active", "path_length": 4.0, "remaining": 1.0}
+    assert wait.step().progress == pytest.approx(0.75)
+    nav.outputs["status"] = {"goal": "7.6 5.5 1.5708", "state": "failed", "path_length": 4.0, "remaining": 1.0,
+                             "reason": "the goal collides with 'parcel_target'"}
+    failed = wait.step()
+    assert failed.failed and failed.detail == "navigation failed: the goal collides with 'parcel_target'"
+
+
+def test_wait_at_the_same_goal_again_ignores_the_status_it_entered_with(lab: System) -> None:
+    """The same goal set again starts a new navigation: the old 'failed' of that very goal is not its result."""
+    system = _with_goal(lab, "WAIT", "1.0 1.3 1.5708")
+    record = system.behavior("WAIT")
+    assert record is not None
+    nav = StaleService("Navigation.AMCL")
+    context = BehaviorContext(services={"nav": nav}, inputs={}, outputs={}, now=lambda: 0.0)
+    wait = default_registry().resolve("behavior", "wait-goal", record)(record, context)
+    wait.start()
+    assert not wait.step().failed
+    nav.outputs["status"] = {"goal": "1.0 1.3 1.5708", "state": "arrived", "path_length": 2.0, "remaining": 0.0}
+    assert wait.step().done
+
+
+def test_a_navigation_failure_carries_its_reason(lab: System) -> None:
+    rig = Rig(lab, "WAIT")
+    rig.services["nav"].outputs["status"] = {"goal": "x", "state": "failed", "reason": "no localization for 10 s"}
+    assert rig.behavior.step().detail == "navigation failed: no localization for 10 s"
+    nav = Rig(lab, "NAV")
+    nav.services["nav"].outputs["status"] = {"goal": "7.6 5.5 1.5708", "state": "failed", "reason": "no free cell"}
+    assert nav.behavior.step().detail == "no path to the goal: no free cell"
