@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from benchmarks.localization_worlds import WORLDS, Run, standard_runs
 from plugins.localization.mcl import AmclFilter, MclSettings
 from plugins.localization.odometry import wrap
 from plugins.localization.reliability_filter import ReliabilityFilter, ReliabilitySettings
-from plugins.localization.trajectories import WORLDS, Run, standard_runs
 
 Array = npt.NDArray[np.float64]
 PARTICLES = (500, 2500, 10000)

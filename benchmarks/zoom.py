@@ -33,11 +33,11 @@ import numpy as np
 from sklearn.neighbors import KDTree
 
 import ckmconf
+from benchmarks.zoom_tour import LAB_GOALS, draw_tour, drive
 from ckmconf.model.environment import Semantic
 from plugins.environment.map_model import MapModel, small_object
 from plugins.environment.perception import manage
 from plugins.environment.semantics import SemanticDictionary
-from plugins.environment.tour import LAB_GOALS, draw_tour, drive
 from plugins.environment.zoom import ZoomMap, ZoomSettings
 
 SIDE = 60.0

@@ -33,7 +33,6 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any, ClassVar
 
 import msgpack
@@ -44,13 +43,12 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.resources import codec
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 from .map_model import MapModel, MapObject
 from .perception import ingest_fused
 from .sharing import CHUNK, decode_object, encode_object
 
-LAB = Path(__file__).resolve().parents[2] / "configs" / "usecase" / "environment.xml"
 MAX_RECOGNIZED = 1000
 """Objects one recognition result may carry."""
 
@@ -73,8 +71,8 @@ class EnvironmentMap(ProcessingPlugin):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"objects": MAPPING})
     PROVIDES = "map-sharing"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("environment", "", "Environment XML file of the map, relative to the configuration file (empty: the "
-          "use-case lab)."),
+        P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
+          "configuration file.", type=str),
         P("areas", "", "Areas of the Environment this map holds, separated by spaces or commas (empty: all of it)."),
         P("robot", "", "Source name of this map's own updates (empty: the Smart Resource's name)."),
         P("gate", 0.3, "A recognised shape updates the nearest map object of that tag within this distance.",
@@ -87,7 +85,7 @@ class EnvironmentMap(ProcessingPlugin):
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
         base = config_dir(record)
-        self.environment_file = base / self.params["environment"] if self.params["environment"] else LAB
+        self.environment_file = base / self.params["environment"]
         self.area_names = _area_names(self.params["areas"])
         self.model: MapModel | None = None
         self.region: Any = None  # the prepared union of the areas (None: the whole map)

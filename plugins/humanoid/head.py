@@ -1,5 +1,5 @@
-"""The Nao's head as a pan-tilt camera (thesis §7.1, Fig. 7.6): where its camera looks, and where a
-pixel's viewing ray meets a horizontal plane of the map.
+"""A robot's pan-tilt head carrying a camera (the lab's Nao: thesis §7.1, Fig. 7.6): where its camera
+looks, and where a pixel's viewing ray meets a horizontal plane of the map.
 
 :class:`HeadModel` loads the robot's URDF in a PRIVATE pybullet client (DIRECT, no world, fixed
 base) and reads the camera's optical frame (z forward, x right, y down) for given head angles by
@@ -33,6 +33,13 @@ class HeadModel:
             self.close()
             raise ValueError(f"the robot model {urdf} has no joint or link {', '.join(missing)}")
         self.pan, self.tilt, self.camera = joints[pan], joints[tilt], links[camera]
+        self.limits = tuple(self._limits(joint) for joint in (self.pan, self.tilt))
+        """(lower, upper) of the pan and the tilt joint, from the URDF (None where it gives none)."""
+
+    def _limits(self, joint: int) -> tuple[float, float] | None:
+        info = p.getJointInfo(self.body, joint, physicsClientId=self.client)
+        lower, upper = float(info[8]), float(info[9])
+        return (lower, upper) if lower < upper else None  # a continuous joint: no limit
 
     def camera_pose(self, pan: float, tilt: float) -> tuple[Vector, Vector]:
         """Position and rotation (columns: the optical x, y, z axes) of the camera in the base frame."""

@@ -43,7 +43,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, Entries, P, Params, Ports, fixed_numbers
+from runtime.verification.manifest import MAPPING, REQUIRED, Entries, P, Params, Ports, fixed_numbers
 
 from .head import HeadModel, map_frame, on_plane
 
@@ -57,20 +57,23 @@ class PanTiltTrack(ProcessingPlugin):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # Recog result + PanTilt in; goals, state out
     PROVIDES = "pan-tilt-tracking"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("model", "nao", "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
-          "configuration file."),
-        P("panJoint", "HeadYaw", "The pan joint of the model."),
-        P("tiltJoint", "HeadPitch", "The tilt joint of the model."),
-        P("camera", "CameraTop_optical_frame", "The camera's optical frame link (z forward, x right, y down)."),
+        P("model", REQUIRED, "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
+          "configuration file.", type=str),
+        P("panJoint", REQUIRED, "The pan joint of the model.", type=str),
+        P("tiltJoint", REQUIRED, "The tilt joint of the model.", type=str),
+        P("camera", REQUIRED, "The camera's optical frame link (z forward, x right, y down).", type=str),
         P("pose", "0 0 0", "The robot's pose in the map: 'x y yaw'.", unit="m m rad"),
         P("baseHeight", 0.0, "Height of the robot's base frame above the map floor.", unit="m"),
-        P("fov", 0.8331, "Horizontal field of view of the camera.", unit="rad", above=0.0, below=math.pi),
+        P("fov", REQUIRED, "Horizontal field of view of the camera.", unit="rad", type=float, above=0.0,
+          below=math.pi),
         P("imageWidth", 640, "Image width, for results that do not give theirs.", unit="px", min=1),
         P("imageHeight", 480, "Image height, for results that do not give theirs.", unit="px", min=1),
-        P("panMin", -2.0857, "Lowest pan goal (the Nao's HeadYaw limit).", unit="rad"),
-        P("panMax", 2.0857, "Highest pan goal.", unit="rad"),
-        P("tiltMin", -0.6720, "Lowest tilt goal (the Nao's HeadPitch limit).", unit="rad"),
-        P("tiltMax", 0.5149, "Highest tilt goal.", unit="rad"),
+        P("panMin", None, "Lowest pan goal (default: the pan joint's lower limit in the URDF).", unit="rad",
+          type=float),
+        P("panMax", None, "Highest pan goal (default: the URDF's upper limit).", unit="rad", type=float),
+        P("tiltMin", None, "Lowest tilt goal (default: the tilt joint's lower limit in the URDF).", unit="rad",
+          type=float),
+        P("tiltMax", None, "Highest tilt goal (default: the URDF's upper limit).", unit="rad", type=float),
         P("speed", 0.5, "Top head speed until the service Parameter 'speed' sets it.", unit="rad/s", above=0.0),
         P("gain", 0.6, "Share of the target's offset corrected per frame (D90).", above=0.0, max=1.0),
         P("tolerance", 0.02, "Offset under which the target counts as centred (D90).", unit="rad", above=0.0),
@@ -91,10 +94,8 @@ class PanTiltTrack(ProcessingPlugin):
         super().__init__(record)
         v, owner = self.params, self.owner
         self.pose = fixed_numbers(v["pose"], 3, "pose", owner)
-        self.limits = ((v["panMin"], v["panMax"]), (v["tiltMin"], v["tiltMax"]))
-        for axis, (low, high) in zip(("pan", "tilt"), self.limits, strict=True):
-            if not low < high:
-                raise ParamError(f"{owner}: parameter '{axis}Min' = {low} must be less than '{axis}Max' = {high}")
+        self.given = ((v["panMin"], v["panMax"]), (v["tiltMin"], v["tiltMax"]))
+        self.limits = self._limits(((-math.inf, math.inf), (-math.inf, math.inf)))  # the URDF's fill in at setup
         self.heights: dict[str, float] = {name: z for name, (z,) in v["heights"].items()}
         base = config_dir(record)
         model = str(v["model"])
@@ -133,6 +134,19 @@ class PanTiltTrack(ProcessingPlugin):
                                   self.params["camera"])
         except ValueError as exc:
             raise ValueError(f"{self.owner}: {exc}") from None
+        urdf = tuple(limit or (-math.pi, math.pi) for limit in self.head.limits)
+        self.limits = self._limits((urdf[0], urdf[1]))
+
+    def _limits(self, urdf: tuple[tuple[float, float], tuple[float, float]]) -> tuple[tuple[float, float], ...]:
+        """The pan and tilt goal limits: the Params given, else the URDF joints' ``urdf``."""
+        limits = []
+        for axis, (low, high), (low_urdf, high_urdf) in zip(("pan", "tilt"), self.given, urdf, strict=True):
+            low, high = low_urdf if low is None else low, high_urdf if high is None else high
+            if not low < high:
+                raise ParamError(f"{self.owner}: the {axis} limits must be ordered: '{axis}Min' = {low:g} is not "
+                                 f"less than '{axis}Max' = {high:g}")
+            limits.append((low, high))
+        return tuple(limits)
 
     def stop(self) -> None:
         """Close the private head model."""

@@ -9,7 +9,6 @@ quality measure of the use case's AMCL service (``localization_dispersion``).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -18,14 +17,13 @@ import numpy.typing as npt
 import ckmconf
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
-from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, NUMBERS, P, Params, Ports
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
+from runtime.verification.manifest import MAPPING, NUMBERS, REQUIRED, P, Params, Ports
 
 from .mcl import AmclFilter, MclSettings
 from .raster import GridMap
 from .raycast import LaserSpec
 from .reliability_filter import ReliabilityFilter, ReliabilitySettings
-from .trajectories import LAB
 
 Array = npt.NDArray[np.float64]
 
@@ -59,7 +57,8 @@ class Localization(ProcessingPlugin):
             choices=("reliability", "mcl"),
         ),
         P("particles", 2500, "Number of particles (MCL: the maximum with KLD sampling).", min=10),
-        P("environment", "", "XML file holding the <Environment> (empty: the use-case lab)."),
+        P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
+          "configuration file.", type=str),
         P("resolution", 0.05, "Grid cell size of the map.", unit="m", above=0.0),
         P("fov", 2 * np.pi, "Laser field of view, beams spread evenly over it.", unit="rad", above=0.0),
         P("max_range", 8.0, "Laser maximum range: beams at it hit nothing.", unit="m", above=0.0),
@@ -77,7 +76,7 @@ class Localization(ProcessingPlugin):
 
     def setup(self) -> None:
         """Load the environment and rasterise it."""
-        path = Path(self.params["environment"]) if self.params["environment"] else LAB
+        path = config_dir(self.record) / self.params["environment"]
         env = ckmconf.load(path).environment
         if env is None:
             raise ParamError(f"{self.owner}: {path} holds no <Environment>")

@@ -53,11 +53,10 @@ from typing import Any, ClassVar
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 from .kinematics import MODELS, ArmModel, PoseFile, Solution, read_poses
 
-JOINTS = "arm_shoulder_pan_joint arm_shoulder_lift_joint arm_elbow_flex_joint arm_wrist_flex_joint gripper_joint"
 CUBIC_PEAK = 1.5
 """Peak over mean speed of the controller's cubic rest-to-rest segment (plugins/controllers/trajectory.py)."""
 MIN_DURATION = 0.1
@@ -86,11 +85,12 @@ class ArmPoses(ProcessingPlugin):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # ArmGoal + JointState in; trajectory, status out
     PROVIDES = "arm-motion"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("model", "turtlebot", "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
-          "configuration file."),
-        P("poses", "models/arm_poses.yml", "Pose file (Fig. 7.20 targets), relative to the configuration file."),
-        P("joints", JOINTS, "The pan, shoulder, elbow and wrist joints, then the gripper joint (also the "
-          "order of a JointState without names)."),
+        P("model", REQUIRED, "Robot URDF: a model name of plugins/sim/models, or a path relative to the "
+          "configuration file.", type=str),
+        P("poses", REQUIRED, "Pose file (the named poses' targets, docs/manipulation.md), relative to the "
+          "configuration file.", type=str),
+        P("joints", REQUIRED, "The pan, shoulder, elbow and wrist joints, then the gripper joint (also the "
+          "order of a JointState without names).", type=str),
         P("maxVelocity", "", "Velocity limit per joint, one value or five (empty: the URDF's).", unit="rad/s"),
         P("speed", 0.5, "Velocity scaling until the service Parameter 'speed' sets it.", above=0.0, max=1.0),
         P("tolerance", 0.02, "Largest arm joint error at which a pose counts as reached.", unit="rad", above=0.0),

@@ -45,10 +45,9 @@ from plugins.environment.geometry import Footprint
 from plugins.environment_file import environment_of
 from plugins.localization.estimate import Estimate
 from plugins.localization.raster import GridMap
-from plugins.localization.trajectories import LAB
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, P, Params, Ports, fixed_numbers
+from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports, fixed_numbers
 
 from .course import NavigationCourse
 from .frames import (
@@ -86,18 +85,23 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "navigation"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("environment", "", "Environment XML file, relative to the configuration file (empty: the use-case lab)."),
+        P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
+          "configuration file.", type=str),
         P("filter", "reliability", "Algorithm 3 ('reliability') or the AMCL-like baseline ('mcl').", choices=FILTERS),
         P("particles", 2000, "Number of particles.", min=10),
         P("beams", 60, "Beams of each scan used by the filter, evenly spread.", min=3),
         P("resolution", 0.05, "Cell size of the localization grid.", unit="m", above=0.0),
-        P("laserPose", "0.10 0 0", "The laser's 'x y yaw' in the robot frame."),
-        P("laserHeight", 0.14, "Height of the scan plane: the map obstacles it cuts.", unit="m", min=0.0),
+        P("laserPose", REQUIRED, "The laser's mount 'x y yaw' in the robot frame (m, m, rad): the URDF's laser "
+          "joint.", type=str),
+        P("laserHeight", REQUIRED, "Height of the scan plane above the floor: the map obstacles it cuts.", unit="m",
+          type=float, min=0.0),
         P("initialPose", "", "Start: 'x y yaw' or an Area name (its centroid); empty: global localization."),
         P("initialSpread", "0.3 0.2", "Standard deviations 'metres radians' of the initial particles."),
         P("goal", "", "Goal until the service Parameter 'goal' sets one: an Area name or 'x y yaw'."),
-        P("robotRadius", 0.18, "Radius of the robot's footprint.", unit="m", above=0.0),
-        P("robotHeight", 0.45, "Height of the robot: objects above it do not obstruct it.", unit="m", above=0.0),
+        P("robotRadius", REQUIRED, "Radius of the robot's round footprint (the URDF base's half width).", unit="m",
+          type=float, above=0.0),
+        P("robotHeight", REQUIRED, "Height of the robot: objects above it do not obstruct it.", unit="m",
+          type=float, above=0.0),
         P("inflation", 0.02, "Clearance added to the footprint when planning.", unit="m", min=0.0),
         P("planResolution", 0.1, "Cell size of the A* grid.", unit="m", above=0.0),
         P("speed", 0.3, "Speed asked of the Mobile Base along the path.", unit="m/s", above=0.0),
@@ -134,7 +138,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             raise ParamError(f"{owner}: parameter 'initialSpread' = {p['initialSpread']!r} must not be negative")
         self.spread = (sigma_xy, sigma_yaw)
         base = config_dir(record)
-        self.environment_file = base / p["environment"] if p["environment"] else LAB
+        self.environment_file = base / p["environment"]
         self.env: Environment | None = None
         self.localizer: Localizer | None = None
         self.zoom: NavigationZoom | None = None

@@ -33,6 +33,8 @@ SYSTEM = f"""<?xml version="1.0" encoding="UTF-8"?>
       <Param name="particles" value="500"/>
       <Param name="initialPose" value="1.5 1.5 0.785"/>
       <Param name="initialSpread" value="0.2 0.1"/>
+      <Param name="robotRadius" value="0.18"/><Param name="robotHeight" value="0.45"/>
+      <Param name="laserPose" value="0.10 0 0"/><Param name="laserHeight" value="0.14"/>
     </Plugin>
     <Profile name="RUN" output="amcl"><Use plugin="amcl"/></Profile>
     <Service name="AMCL" rate="0.2" performance="localization_dispersion">

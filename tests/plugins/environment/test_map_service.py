@@ -36,7 +36,7 @@ def service(**params: object) -> EnvironmentMap:
     """The plugin as a ``<Plugin>`` of a file next to the use case's environment.xml declares it."""
     loc = ckmconf.Loc(str(LAB), 1, 1, "/Plugin")
     record = Plugin(name="map", kind="environment-map", loc=loc,
-                    params=tuple(Param(name=k, value=str(v)) for k, v in params.items()))
+                    params=tuple(Param(name=k, value=str(v)) for k, v in {"environment": LAB.name, **params}.items()))
     made = EnvironmentMap(record)
     made.setup()
     return made

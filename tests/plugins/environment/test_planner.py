@@ -10,11 +10,11 @@ import pytest
 import shapely
 from shapely.geometry import LineString, box
 
+from benchmarks.zoom_tour import LAB_GOALS
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import MapModel, small_object
 from plugins.environment.planner import Planner, Unreachable
 from plugins.environment.semantics import SemanticDictionary
-from plugins.environment.tour import LAB_GOALS
 
 ROUND = Footprint.round(0.18, height=0.45)
 RECTANGLE = Footprint.rectangle(0.5, 0.36, height=0.45)

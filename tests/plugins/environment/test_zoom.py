@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from benchmarks.zoom import scattered_map
+from benchmarks.zoom_tour import LAB_GOALS, drive
 from ckmconf.model.environment import Environment
 from plugins.environment.map_model import MapModel
-from plugins.environment.tour import LAB_GOALS, drive
 from plugins.environment.zoom import ZoomMap, ZoomSettings
 from tests.plugins.environment.conftest import environment
 

@@ -36,9 +36,15 @@ CONTROL_STEPS = 4  # the head loop at 60 Hz on the 240 Hz physics
 WIDTH, HEIGHT = 320, 240  # the camera rendered at QVGA (the Recog's initial scenario) to keep the test fast
 
 
+NAO_HEAD = {"model": "nao", "panJoint": "HeadYaw", "tiltJoint": "HeadPitch", "camera": "CameraTop_optical_frame",
+            "fov": 0.8331}
+"""The Nao's head and camera, as configs/usecase/resources.xml gives them to its pan-tilt-track service."""
+
+
 def plugin(cls: type[Any], kind: str, **params: object) -> Any:
-    """A plugin declared in the use case's resources.xml."""
-    given = tuple(Param(name=k, value=str(v)) for k, v in params.items())
+    """A plugin declared in the use case's resources.xml (a pan-tilt-track with the Nao's head)."""
+    given = tuple(Param(name=k, value=str(v))
+                  for k, v in ({**NAO_HEAD, **params} if kind == "pan-tilt-track" else params).items())
     return cls(Plugin(name=kind, kind=kind, params=given, loc=Loc(str(RESOURCES), 1, 1, "/Plugin")))
 
 

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from benchmarks.localization import play, settled_from
+from benchmarks.localization_worlds import Run, corridor_grid, drive, simulate, standard_runs
 from plugins.localization.estimate import best_cluster
 from plugins.localization.mcl import AmclFilter, MclSettings, kld_count, low_variance_indices
 from plugins.localization.odometry import OdometryNoise
 from plugins.localization.raycast import LaserSpec
 from plugins.localization.reliability_filter import ReliabilityFilter, ReliabilitySettings
-from plugins.localization.trajectories import Run, corridor_grid, drive, simulate, standard_runs
 
 Filter = AmclFilter | ReliabilityFilter
 

@@ -10,11 +10,11 @@ import msgpack
 import numpy as np
 import pytest
 
+from benchmarks.localization_worlds import Run, standard_runs
 from ckmconf.errors import ConfigError
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin, Profile, SmartResource, Use
 from plugins.localization.service import Localization
-from plugins.localization.trajectories import Run, standard_runs
 from runtime.registry import default_registry
 from runtime.resources.spt import Context, Topology
 
@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 def _resource(filter_name: str, **params: str) -> SmartResource:
-    given = {"filter": filter_name, "particles": "2500", "seed": "7", **params}
+    given = {"filter": filter_name, "particles": "2500", "seed": "7",
+             "environment": str(ROOT / "configs" / "usecase" / "environment.xml"), **params}
     plugin = Plugin(name="amcl", kind="localization", params=tuple(Param(name=k, value=v) for k, v in given.items()))
     profile = Profile(name="localize", output="amcl", root=Use(plugin="amcl"))
     return SmartResource(name="Navigation", node="remote_pc", plugins=(plugin,), profiles=(profile,))

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import shapely
 
+from benchmarks.localization_worlds import floor_plan_grid, floor_plan_routes, lab_grid, standard_runs
 from plugins.localization.odometry import OdometryNoise, OdometrySimulator, sample_motion
 from plugins.localization.raster import GridMap
 from plugins.localization.raycast import LaserSpec, cast, simulate_scan
-from plugins.localization.trajectories import floor_plan_grid, floor_plan_routes, lab_grid, standard_runs
 
 
 def test_ray_caster_measures_known_wall_distances() -> None:

@@ -24,7 +24,7 @@ from ckmconf.errors import Loc
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.controllers.trajectory import JointTrajectory
-from plugins.manipulation.arm_poses import JOINTS, ArmPoses
+from plugins.manipulation.arm_poses import ArmPoses
 from plugins.sim.grasp import ChannelGrasp
 from plugins.sim.robots import DiffDriveBase, Robot
 from plugins.sim.world import World
@@ -35,6 +35,9 @@ from tests.plugins.controllers.vector_records import record
 RESOURCES = CONFIGS / "usecase" / "resources.xml"
 CONTROL_STEPS = 4  # the controller at 60 Hz on the 240 Hz physics
 SERVICE_STEPS = 12  # joint states and the service at 20 Hz
+
+JOINTS = "arm_shoulder_pan_joint arm_shoulder_lift_joint arm_elbow_flex_joint arm_wrist_flex_joint gripper_joint"
+"""The Turtlebot arm's joints, as configs/usecase/resources.xml gives them to its arm-poses service."""
 
 
 def arm_plugin(**params: object) -> ArmPoses:

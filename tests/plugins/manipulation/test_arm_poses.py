@@ -18,7 +18,7 @@ from plugins.manipulation.kinematics import parse_poses
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context
 
-from .arm_loop import arm_plugin
+from .arm_loop import JOINTS, arm_plugin
 
 REST = [0.0, 0.0, 0.0, 0.0, 0.0]
 
@@ -240,8 +240,9 @@ def test_the_speed_parameter_scales_the_trajectory_and_bad_values_are_refused(ar
 def _pose_file(tmp_path: Path, text: str) -> ArmPoses:
     (tmp_path / "poses.yml").write_text(text)
     loc = Loc(str(tmp_path / "resources.xml"), 1, 1, "/Plugin")
-    return ArmPoses(Plugin(name="moveit", kind="arm-poses", params=(Param(name="poses", value="poses.yml"),),
-                           loc=loc))
+    params = (Param(name="poses", value="poses.yml"), Param(name="model", value="turtlebot"),
+              Param(name="joints", value=JOINTS))
+    return ArmPoses(Plugin(name="moveit", kind="arm-poses", params=params, loc=loc))
 
 
 def test_poses_out_of_reach_or_out_of_the_joint_limits_fail_when_asked(tmp_path: Path, arm: ArmPoses) -> None:

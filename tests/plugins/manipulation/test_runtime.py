@@ -19,6 +19,7 @@ from runtime.resources import codec
 from runtime.resources.client import ServiceClient, ServiceDirectory
 from runtime.resources.resource import SmartResourceRuntime
 from tests.conftest import CONFIGS
+from tests.plugins.manipulation.arm_loop import JOINTS
 from tests.runtime.resources.conftest import pair  # noqa: F401  (the transport-pair fixture)
 from tests.runtime.resources.test_service_api import until
 
@@ -37,7 +38,8 @@ SYSTEM = f"""<?xml version="1.0" encoding="UTF-8"?>
   <Topic name="/nao/status" type="bytes"/>
   <Node name="robot" kind="service"/>
   <SmartResource name="RoboticArm" node="robot">
-    <Plugin name="moveit" kind="arm-poses"><Param name="poses" value="{POSES}"/></Plugin>
+    <Plugin name="moveit" kind="arm-poses"><Param name="poses" value="{POSES}"/><Param name="model" value="turtlebot"/>
+      <Param name="joints" value="{JOINTS}"/></Plugin>
     <Profile name="MOVEIT" output="moveit"><Use plugin="moveit"/></Profile>
     <Service name="MoveIt" performance="active">
       <Input name="goal" topic="/arm/goal"/>

@@ -96,6 +96,10 @@ def _laser_types() -> dict[str, MessageType]:
     return {m.name: m for m in system.message_types}
 
 
+TURTLEBOT = {"robotRadius": 0.18, "robotHeight": 0.45, "laserPose": "0.10 0 0", "laserHeight": 0.14}
+"""The Turtlebot's footprint and laser mount, as configs/usecase/resources.xml gives them to the navigation."""
+
+
 def plugin(kind: str, cls: type[ProcessingPlugin], file: Path | None = None, /, **params: object) -> Any:
     """A service plugin built from a ``<Plugin>`` record (declared in ``file``, for relative Params)."""
     loc = None if file is None else ckmconf.Loc(str(file), 1, 1, "/Plugin")
@@ -150,7 +154,7 @@ class Bench:
             ),
         }
         if nav is not None:
-            params = {"environment": environment.name, **nav}
+            params = {"environment": environment.name, **TURTLEBOT, **nav}
             navigation = plugin("amcl-navigation", AmclNavigation, environment, **params)
             navigation.setup()
             self.services["nav"] = Service(

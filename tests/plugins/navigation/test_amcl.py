@@ -22,7 +22,7 @@ from runtime.kernel.interfaces import ParamError
 from runtime.resources import codec
 from runtime.resources.spt import Context
 
-from .loop import plugin, room
+from .loop import TURTLEBOT, plugin, room
 
 LASER = (0.10, 0.0, 0.0)
 ANGLES = np.linspace(-4.1888 / 2, 4.1888 / 2, 683)
@@ -35,9 +35,9 @@ def grid(path: Path, *extra: shapely.Geometry) -> GridMap:
     return GridMap.from_shapes(bounds, [*environment_obstacles(env, 0.14), *extra], 0.02)
 
 
-def scan(world: GridMap, truth: Pose) -> dict[str, Any]:
-    """The LaserScan the laser-scan service makes of the sweep from ``truth`` (the laser 0.1 m ahead)."""
-    laser = compose(truth, LASER)
+def scan(world: GridMap, truth: Pose, mount: Pose = LASER) -> dict[str, Any]:
+    """The LaserScan the laser-scan service makes of the sweep from ``truth`` (the laser at ``mount``)."""
+    laser = compose(truth, mount)
     ranges = cast(world, np.array([laser]), ANGLES, 5.6)[0]
     service: LaserScanService = plugin("laser-scan", LaserScanService)
     return service.process({"stamp": 1.0, "ranges": ranges.astype(np.float32)}, Context(0, 1.0))
@@ -50,7 +50,7 @@ def odometry(pose: Pose) -> dict[str, Any]:
 
 def navigation(file: Path, **params: object) -> AmclNavigation:
     made: AmclNavigation = plugin("amcl-navigation", AmclNavigation, file,
-                                  **{"environment": file.name, "particles": 500, **params})
+                                  **{"environment": file.name, "particles": 500, **TURTLEBOT, **params})
     made.setup()
     return made
 
@@ -271,3 +271,46 @@ def test_once_reached_a_heading_moved_off_only_turns_the_base_on_the_spot(file: 
         result = nav.process({"scan": scan(grid(file), (3.95, 1.85, 1.56)), "odom": odometry((0.0, 0.0, 0.01))},
                              Context(k, 0.8 * k))
     assert result["path"]["points"] == [] and result["status"]["state"] == "arrived"
+
+
+ROVER = {"robotRadius": 0.35, "robotHeight": 0.5, "laserPose": "0.25 0 0", "laserHeight": 0.3}
+"""A second robot model (plugins/sim/models/rover.urdf's size): a wider base, its laser further ahead."""
+
+
+def _clearance(nav: AmclNavigation, world: GridMap, mount: Pose) -> float:
+    truth = (1.0, 1.8, 0.0)
+    result: dict[str, Any] = {}
+    for k in range(3):
+        inputs = {"scan": scan(world, truth, mount), "odom": odometry((0.0, 0.0, 0.0))}
+        result = nav.process(inputs, Context(k, 0.8 * k))
+    assert result["status"]["state"] == "active", result["status"]
+    correction = compose(truth, inverse((0.0, 0.0, 0.0)))
+    pillar = shapely.box(2.3, 1.1, 2.7, 2.9)
+    points = [shapely.Point(transform_point(correction, tuple(p))) for p in result["path"]["points"]]
+    return float(min(pillar.distance(point) for point in points))
+
+
+def test_the_footprint_and_laser_mount_are_the_configured_robots(file: Path) -> None:
+    """Two robot models through the same room: each path keeps its own radius from the pillar."""
+    start = {"initialPose": "1 1.8 0", "initialSpread": "0.05 0.03", "goal": "4 1.8 0"}
+    turtlebot = navigation(file, **start)
+    rover = navigation(file, **{**start, **ROVER})
+    assert rover.laser == pytest.approx((0.25, 0.0, 0.0)) and turtlebot.laser == pytest.approx(LASER)
+    near = _clearance(turtlebot, grid(file), LASER)
+    wide = _clearance(rover, grid(file), (0.25, 0.0, 0.0))
+    assert 0.18 < near < 0.35 < wide
+
+
+def test_a_robot_too_wide_for_either_gap_fails_with_the_planners_reason(file: Path) -> None:
+    nav = navigation(file, initialPose="1 1.8 0", initialSpread="0.05 0.03", goal="4 1.8 0",
+                     **{**ROVER, "robotRadius": 0.6})
+    status = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0))["status"]
+    assert status["state"] == "failed" and status["reason"]
+
+
+def test_no_footprint_or_map_is_taken_from_any_robot(file: Path) -> None:
+    for missing in ("environment", "robotRadius", "laserPose"):
+        given = {"environment": file.name, **TURTLEBOT}
+        del given[missing]
+        with pytest.raises(ParamError, match=f"needs parameter '{missing}'"):
+            plugin("amcl-navigation", AmclNavigation, file, **given)

@@ -18,13 +18,12 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 import ckmconf
-
-from .odometry import OdometryNoise, OdometrySimulator, wrap
-from .raster import GridMap
-from .raycast import LaserSpec, simulate_scan
+from plugins.localization.odometry import OdometryNoise, OdometrySimulator, wrap
+from plugins.localization.raster import GridMap
+from plugins.localization.raycast import LaserSpec, simulate_scan
 
 Array = npt.NDArray[np.float64]
-LAB = Path(__file__).resolve().parents[2] / "configs" / "usecase" / "environment.xml"
+LAB = Path(__file__).resolve().parents[1] / "configs" / "usecase" / "environment.xml"
 
 LAB_WAYPOINTS = (
     (1.5, 0.8),

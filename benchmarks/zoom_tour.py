@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .geometry import Footprint
-from .map_model import MapModel
-from .planner import Planner
-from .zoom import Recentring, ZoomMap
+from plugins.environment.geometry import Footprint
+from plugins.environment.map_model import MapModel
+from plugins.environment.planner import Planner
+from plugins.environment.zoom import Recentring, ZoomMap
 
 TURTLEBOT = Footprint.round(0.18, height=0.45)
 """A Turtlebot 2 base: 0.354 m across, about 0.42 m tall with its sensors."""
