@@ -97,7 +97,10 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
           type=float, min=0.0),
         P("initialPose", "", "Start: 'x y yaw' or an Area name (its centroid); empty: global localization."),
         P("initialSpread", "0.3 0.2", "Standard deviations 'metres radians' of the initial particles."),
-        P("goal", "", "Goal until the service Parameter 'goal' sets one: an Area name or 'x y yaw'."),
+        P("goal", "", "Goal until the service Parameter 'goal' sets one: 'x y yaw', an Area's name or an "
+          "Object's name."),
+        P("objectStandoff", 0.1, "Gap left between the robot's footprint and a map Object given as goal.", unit="m",
+          min=0.0),
         P("robotRadius", REQUIRED, "Radius of the robot's round footprint (the URDF base's half width).", unit="m",
           type=float, above=0.0),
         P("robotHeight", REQUIRED, "Height of the robot: objects above it do not obstruct it.", unit="m",
@@ -144,6 +147,8 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         self.zoom: NavigationZoom | None = None
         self.goal_text = ""
         self.goal: tuple[float, float, float | None] | None = None
+        self.goal_object: str | None = None  # a map Object as goal: its standoff pose is placed at the first plan
+        self.object_placed = False
         self._pending_goal: str | None = p["goal"] or None
         self.phase, self.reason = "planning", ""
         self.plan: list[Point] | None = None
@@ -180,8 +185,9 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         if self._pending_goal is not None:
             self.apply_service_parameters({"goal": self._pending_goal})
 
-    def _place(self, text: str, where: str) -> tuple[float, float, float | None]:
-        """An Area name (its centroid, no heading) or 'x y yaw'; ValueError naming the areas otherwise."""
+    def _place(self, text: str, where: str, objects: bool = False) -> tuple[float, float, float | None]:
+        """An Area name (its centroid, no heading), 'x y yaw', or (``objects``) an Object's name (its
+        centre: the standoff pose is placed when planning); ValueError naming the choices otherwise."""
         assert self.env is not None
         pose = parse_pose(text)
         if pose is not None:
@@ -190,9 +196,13 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         if name in self.model.areas:
             centre = self.model.areas[name].centroid
             return float(centre.x), float(centre.y), None
+        if objects and name in self.model.objects:
+            found = self.model.objects[name]
+            return float(found.x), float(found.y), None
         areas = ", ".join(sorted(self.model.areas)) or "none"
+        also = f", an Object of it ({', '.join(sorted(self.model.objects)) or 'none'})" if objects else ""
         raise ValueError(f"{self.owner}: {where} = {text!r} is neither an Area of environment "
-                         f"{self.env.name!r} ({areas}) nor 'x y yaw' in the map frame")
+                         f"{self.env.name!r} ({areas}){also} nor 'x y yaw' in the map frame")
 
     def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
         """The service's ``goal`` Parameter (Table 7.1 "Goal"): navigate there from the next frame.
@@ -207,7 +217,12 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             raise ValueError(f"{self.owner}: service parameter 'goal' = {text!r} must be an Area name or 'x y yaw'")
         if self.env is None:
             self.setup()
-        self.goal = self._place(text, "service parameter 'goal'") if text.strip() else None
+        self.goal = self._place(text, "service parameter 'goal'", objects=True) if text.strip() else None
+        named = text.strip()
+        self.goal_object = named if (named in self.model.objects and named not in self.model.areas
+                                     and parse_pose(text) is None) else None
+        self.object_placed = False
+        self.routes.aim_at(self.goal_object)
         self.goal_text = text
         self._pending_goal = None
         self.phase, self.reason, self.plan, self.target = "planning", "", None, None
@@ -223,6 +238,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             return {}
         return {
             "kind": "amcl-navigation", "goal_text": self.goal_text,
+            "goal_object": self.goal_object, "object_placed": self.object_placed,
             "goal": None if self.goal is None else list(self.goal), "pending": self._pending_goal,
             "phase": self.phase, "reason": self.reason,
             "plan": None if self.plan is None else [list(p) for p in self.plan], "segment": self.segment,
@@ -247,6 +263,8 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             goal = state["goal"]
             self.goal = None if goal is None else (float(goal[0]), float(goal[1]), goal[2])
             self.goal_text, self._pending_goal = str(state["goal_text"]), state["pending"]
+            self.goal_object, self.object_placed = state.get("goal_object"), bool(state.get("object_placed"))
+            self.routes.aim_at(self.goal_object)
             self.phase, self.reason = str(state["phase"]), str(state["reason"])
             plan = state["plan"]
             self.plan = None if plan is None else [(float(x), float(y)) for x, y in plan]

@@ -4,9 +4,11 @@ Given the estimate of each frame (plugins/navigation/amcl.py): plan on the Envir
 the A* planner when the goal is set, when the robot strays more than ``strayDistance`` from the
 path, or when scan points fall on the path ahead (they become obstacles of a new plan; D152); take
 a new plan when obstacles cleared make the way ``replanGain`` metres shorter; stop at the goal and
-report ``arrived`` once the base has stopped (D109, D128); once reached, a heading the estimate moved
-off the goal's only makes the base turn on the spot (D255); wait stopped for a localization and
-fail after ``localizeTimeout`` (D108). The ``status`` and ``path`` outputs are made here.
+report ``arrived`` once the base has stopped (D109, D128); a map Object as goal is gone up to, short
+of its outline and facing it, without counting it or scan points on it as obstacles (D260); once
+reached, a heading the estimate moved off the goal's only makes the base turn on the spot (D255);
+wait stopped for a localization and fail after ``localizeTimeout`` (D108). The ``status`` and
+``path`` outputs are made here.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from plugins.environment.planner import Unreachable
 
 from .frames import Point, Pose, compose, inverse, polyline_length, project, remaining_length, transform_point, wrap
 from .localizer import Localizer
+from .object_goals import on_object, standoff_pose
 from .routes import Routes, blocking
 
 
@@ -33,6 +36,8 @@ class NavigationCourse:
     localizer: Localizer | None
     goal_text: str
     goal: tuple[float, float, float | None] | None
+    goal_object: str | None
+    object_placed: bool
     phase: str
     reason: str
     plan: list[Point] | None
@@ -49,7 +54,17 @@ class NavigationCourse:
     def _replan(self, start: Pose) -> None:
         """A new plan from ``start`` to the goal; an unreachable goal fails with the planner's reason."""
         assert self.goal is not None
-        here, goal = (start[0], start[1]), (self.goal[0], self.goal[1])
+        here = (start[0], start[1])
+        if self.goal_object is not None and not self.object_placed:  # up to the object, from where the robot is
+            p = self.params
+            try:
+                self.goal = standoff_pose(self.routes.model, self.routes.model.objects[self.goal_object], here,
+                                          p["robotRadius"] + p["objectStandoff"], self.routes.footprint)
+            except ValueError as refused:
+                self.phase, self.reason, self.plan = "failed", str(refused), None
+                return
+            self.object_placed = True
+        goal = (self.goal[0], self.goal[1])
         try:
             points = self.routes.plan(here, goal)
         except Unreachable as refused:
@@ -66,6 +81,8 @@ class NavigationCourse:
             return []
         self.segment, near, _ = project(self.plan, (pose[0], pose[1]), self.segment)
         p = self.params
+        if self.goal_object is not None:  # the object gone up to is where the path ends, not in its way
+            hits = hits[~on_object(hits, self.routes.model.objects[self.goal_object], p["objectStandoff"] + 0.05)]
         return blocking(self.plan, self.segment, near, hits, p["robotRadius"], p["blockLookahead"], p["blockPoints"])
 
     def _shorter(self, pose: Pose) -> None:

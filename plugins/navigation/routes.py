@@ -54,6 +54,19 @@ class Routes:
         self.obstacles = ScanObstacles() if obstacles is None else obstacles
         self.extra: list[AvoidedArea] = []
         """The scan obstacles as the planner's avoided areas (rebuilt when they change)."""
+        self.excluded: str | None = None
+        """The map object the goal is at, left out of the obstacles (:meth:`aim_at`)."""
+        self.planned_env = env
+
+    def aim_at(self, name: str | None) -> None:
+        """Plan with the map object ``name`` (an object goal's) left out of the obstacles; None: with all."""
+        if name == self.excluded:
+            return
+        self.excluded = name
+        self.planned_env = self.env if name is None else dataclasses.replace(
+            self.env, objects=tuple(o for o in self.env.objects if o.name != name))
+        self.static = Planner(MapModel.from_environment(self.planned_env), self.footprint, resolution=self.resolution)
+        self._rebuild()
 
     def reset(self) -> None:
         """Forget the obstacles scans added (a new goal)."""
@@ -132,7 +145,7 @@ class Routes:
         if not self.extra:
             self.planner = self.static
             return
-        env = dataclasses.replace(self.env, avoided=self.env.avoided + tuple(self.extra))
+        env = dataclasses.replace(self.planned_env, avoided=self.planned_env.avoided + tuple(self.extra))
         self.planner = Planner(MapModel.from_environment(env), self.footprint, resolution=self.resolution)
 
 
