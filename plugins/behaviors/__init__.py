@@ -1,1 +1,2 @@
-"""Behaviors (thesis §5.1): general-purpose ones and the use case's (Tables 7.5 and 7.7)."""
+"""Behaviors (thesis §5.1) over the standard service interfaces (docs/interfaces.md): general ones (timer,
+emit, wait-input), navigation goals, manipulation, perception, approach, docking, recovery."""

@@ -1,6 +1,5 @@
 """APPR (Table 7.7): the approach to the spotted object, with its re-aim after a long drive (D207).
 
-Split from :mod:`plugins.behaviors.usecase` (which re-exports it) to keep modules small.
 """
 
 from __future__ import annotations

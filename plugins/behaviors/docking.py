@@ -19,7 +19,7 @@ from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
-from .usecase import _Goals, _share_done, _state, robot_pose
+from .messages import _Goals, _share_done, _state, robot_pose
 
 
 def _map_pose(text: str, owner: str) -> tuple[float, float, float]:

@@ -1,4 +1,4 @@
-"""The messages the use-case behaviors exchange with the services (Tables 7.5, 7.7; configs/usecase/network.xml).
+"""The messages the behaviors exchange with the services of the standard interfaces (docs/interfaces.md).
 
 What the simulated or real services implement:
 
@@ -27,8 +27,15 @@ from collections.abc import Mapping
 from typing import Any
 
 from runtime.missions.behaviors import Behavior
+from runtime.verification.manifest import P
 
 _ids = itertools.count(1)  # goal ids, fresh across every behavior of the process
+
+TARGET_PARAMS = (
+    P("target", "", "Shape (or name) of the object looked for."),
+    P("targetTexture", "", "Texture of the object looked for."),
+)
+"""The Params that choose a recognised object (:func:`find_target`)."""
 
 
 def _state(message: Any, goal_id: int | None = None) -> str | None:
@@ -97,7 +104,7 @@ def in_robot_frame(position: Mapping[str, Any], pose: tuple[float, float, float]
 
 
 def object_position(found: Mapping[str, Any], stamp: float) -> dict[str, Any]:
-    """A recognised object as an ``ObjectPosition`` message (configs/usecase/network.xml)."""
+    """A recognised object as an ``ObjectPosition``: ``{stamp, label, frame, x, y, z, reliability, observer}``."""
 
     def number(key: str) -> float:
         value = found.get(key)

@@ -21,7 +21,7 @@ home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/useca
   search: the robot looks from where it stopped, unless ``blockedMoves`` moves failed in a row.
   Writes the target's position (an ``ObjectPosition``) like SPOT, so APPR can approach it.
 
-Messages are those of :mod:`plugins.behaviors.usecase` (``/base/move_goal``, ``/base/move_status``,
+Messages are those of :mod:`plugins.behaviors.messages` (``/base/move_goal``, ``/base/move_status``,
 the fused recognition's objects).
 """
 
@@ -37,8 +37,8 @@ from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
-from .usecase import (
-    _TARGET,
+from .messages import (
+    TARGET_PARAMS,
     _Goals,
     _share_done,
     _state,
@@ -77,7 +77,7 @@ class SearchObject(_Goals):
                     optional=True))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        *_TARGET,
+        *TARGET_PARAMS,
         P("minSources", 1, "Fewest recognition sources that must have seen the object."),
         P("minReliability", 0.0, "Least fused reliability a sighting must have.", min=0.0, max=1.0),
         P("turn", 0.6, "Turn between two views (positive: to the left).", unit="rad"),
