@@ -33,7 +33,7 @@ import numpy.typing as npt
 from sklearn.neighbors import KDTree
 
 from ckmconf.model.resources import Plugin
-from plugins.processing.cameras import XTION, Camera
+from plugins.processing.cameras import camera_of
 from plugins.processing.clusters import (
     Cluster,
     Depth,
@@ -51,7 +51,7 @@ from plugins.processing.pcd import PcdError, ShapeModel, read_pcd
 from plugins.processing.shape_training import SHAPE_LABELS, TRAINING_PROFILES, generate_model, write_model
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import ANY, ARRAY, MAPPING, P, Params, Ports
+from runtime.verification.manifest import ANY, ARRAY, MAPPING, REQUIRED, P, Params, Ports
 
 __all__ = [
     "ENCODINGS",
@@ -117,6 +117,21 @@ def _decode(message: Mapping[str, Any], owner: str) -> npt.NDArray[Any]:
     return np.ndarray((height, width), dtype=dtype, buffer=data, strides=(step, dtype.itemsize))
 
 
+INTRINSICS = (
+    P("fx", REQUIRED, "Focal length x at the calibration size.", type=float, unit="px", above=0.0),
+    P("fy", None, "Focal length y at the calibration size (default: fx).", type=float, unit="px", above=0.0),
+    P("cx", None, "Principal point x at the calibration size (default: (calibrationWidth - 1) / 2).", type=float,
+      unit="px"),
+    P("cy", None, "Principal point y at the calibration size (default: (calibrationHeight - 1) / 2).", type=float,
+      unit="px"),
+    P("calibrationWidth", REQUIRED, "Image width the intrinsics are given for.", type=int, unit="px", above=0),
+    P("calibrationHeight", REQUIRED, "Image height the intrinsics are given for.", type=int, unit="px", above=0),
+)
+"""The camera's intrinsics as Params: ``fx`` and the calibration size are required (the depth images
+the clustering plugins receive carry none, and no lab's camera is a default); ``fy``, ``cx``, ``cy``
+default to the ideal pinhole's (:meth:`~plugins.processing.cameras.Camera.pinhole`)."""
+
+
 class DepthAcquisition(ProcessingPlugin):
     """``plugin.depth-acquisition``: a depth frame as float32 metres (NaN where the sensor saw nothing).
 
@@ -155,8 +170,9 @@ class EuclideanClustering(ProcessingPlugin):
     plane (within ``planeAngle`` degrees of the image's up) is found by RANSAC and only points
     more than ``planeDistance`` above it are kept: the objects standing on the floor or a table,
     not what lies below a table edge. Clusters link points closer than ``tolerance`` and keep at
-    least ``minPoints``. ``fx fy cx cy`` are given for a ``calibrationWidth`` ×
-    ``calibrationHeight`` image (the Xtion's at VGA) and scaled to the image received.
+    least ``minPoints``. The camera's intrinsics are Params, required (the depth images carry none):
+    ``fx`` at a ``calibrationWidth`` × ``calibrationHeight`` image, ``fy`` (default ``fx``), ``cx``,
+    ``cy`` (default the image's centre), scaled to the image received (a resize profile's).
     """
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ANY})  # a list of Clusters: in-process objects
@@ -167,25 +183,20 @@ class EuclideanClustering(ProcessingPlugin):
         P("plane", True, "Remove the dominant near-horizontal plane (floor, table) first."),
         P("planeDistance", 0.015, "Points must stand this far above the plane.", unit="m", above=0.0),
         P("planeAngle", 45.0, "Largest tilt of the plane from the image's up, in (0, 90].", unit="deg"),
-        P("fx", XTION.fx, "Focal length x at the calibration size.", unit="px", above=0.0),
-        P("fy", XTION.fy, "Focal length y at the calibration size.", unit="px", above=0.0),
-        P("cx", XTION.cx, "Principal point x at the calibration size.", unit="px"),
-        P("cy", XTION.cy, "Principal point y at the calibration size.", unit="px"),
-        P("calibrationWidth", XTION.width, "Image width the intrinsics are given for.", unit="px", above=0),
-        P("calibrationHeight", XTION.height, "Image height the intrinsics are given for.", unit="px", above=0),
+        *INTRINSICS,
     )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
         p = self.params
-        for name in ("tolerance", "maxRange", "planeDistance", "fx", "fy", "calibrationWidth", "calibrationHeight"):
+        for name in ("tolerance", "maxRange", "planeDistance"):
             if not p[name] > 0:
                 raise ParamError(f"{self.owner}: parameter {name!r} = {p[name]} must be greater than 0")
         if p["minPoints"] < 1:
             raise ParamError(f"{self.owner}: parameter 'minPoints' = {p['minPoints']} must be at least 1")
         if not 0 < p["planeAngle"] <= 90:
             raise ParamError(f"{self.owner}: parameter 'planeAngle' = {p['planeAngle']} is not in (0, 90] degrees")
-        self.camera = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
+        self.camera = camera_of(p, self.owner)
 
     def depth_image(self, data: Any) -> npt.NDArray[Any]:
         """``data`` as the float depth image in metres (H, W) this plugin clusters, else ValueError."""

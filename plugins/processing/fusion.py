@@ -40,7 +40,8 @@ Parameter ``max_sensors`` sets it at run time (:meth:`FeatureFusion.apply_servic
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -49,9 +50,9 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, Entries, P, Params, Ports
+from runtime.verification.manifest import MAPPING, Entries, P, Params, Parsed, Ports
 
-from .cameras import XTION, Camera
+from .cameras import Camera, camera_of
 from .fusion_model import Observation, fused_object, number, reinforce, share_at_bound
 from .geometry import IDENTITY, Geometry, Point, Pose, Ray, distance, estimate
 from .placement import BASE, MOUNT, Placement
@@ -63,8 +64,38 @@ KIND = Entries("line|point", choices=KINDS)
 """``inputs``: each input's feature kind (eq. 6.32)."""
 POSE = Entries("x y z roll pitch yaw", 6, numbers=True, of="inputs", noun="an input")
 """``poses``: a sensor's optical frame in the common frame (m, rad)."""
-CAMERA = Entries("fx fy cx cy width height", 6, numbers=True, of="inputs", of_value="line", noun="a line input")
-"""``cameras``: a line input's intrinsics at its calibration size (px)."""
+DEFAULT_CAMERA = ("fx", "calibrationWidth", "calibrationHeight")
+"""The Params the default camera of line inputs needs (``fy cx cy`` default to the ideal pinhole's)."""
+
+
+@dataclass(frozen=True)
+class CameraEntries(Entries):
+    """``cameras``: a line input's intrinsics at its calibration size (px); and every line input has a
+    camera, its entry or the default one (:data:`DEFAULT_CAMERA`): no lab's camera is a default, and
+    the recognition results carry none (normalized ``x y`` and the image's ``width height`` only).
+
+    The check runs where every per-name Param is checked against the others (``strays``), so
+    ``verify`` refuses a line input with no camera before anything is built, at the ``cameras``
+    Param when it is given, else at the Plugin element.
+    """
+
+    def strays(self, param: str, value: Parsed, text: str | None, values: Mapping[str, Any]) -> Iterator[ParamError]:
+        yield from super().strays(param, value, text, values)
+        inputs = values.get("inputs")
+        missing = [name for name in DEFAULT_CAMERA if values.get(name) is None]
+        if not isinstance(inputs, Mapping) or not missing:
+            return
+        needed = " and ".join(", ".join(repr(name) for name in missing).rsplit(", ", 1))
+        for name, kind in inputs.items():
+            if tuple(kind)[:1] == ("line",) and name not in value:
+                yield ParamError(
+                    f"line input {name!r} has no intrinsics: give it a {param!r} entry, "
+                    f"or parameter{'s' if len(missing) > 1 else ''} {needed} (the line inputs' default camera)"
+                )
+
+
+CAMERA = CameraEntries("fx fy cx cy width height", 6, numbers=True, of="inputs", of_value="line", noun="a line input")
+"""``cameras``: a line input's intrinsics at its calibration size (px); every line input needs a camera."""
 SIGMA = Entries("σ", numbers=True, above=0.0, of="inputs", noun="an input")
 """``sigmas``: an input's own uncertainty."""
 OBJECT = Entries("shape [texture]", 1, 2, need="a shape and maybe a texture")
@@ -82,8 +113,9 @@ class FeatureFusion(ProcessingPlugin):
 
     Params: ``inputs`` (``"name: line|point; …"``); ``poses`` (``"name: x y z roll pitch yaw; …"``,
     the sensor's optical frame in the common frame; default identity, so the common frame is the
-    RGB-D camera's); ``cameras`` (``"name: fx fy cx cy width height; …"`` for line inputs, default
-    ``fx fy cx cy calibrationWidth calibrationHeight``); ``lineSigma`` (rad) / ``pointSigma`` (m)
+    RGB-D camera's); ``cameras`` (``"name: fx fy cx cy width height; …"`` for line inputs; a line
+    input without an entry takes ``fx fy cx cy calibrationWidth calibrationHeight``, of which ``fx``
+    and the size must then be given: no camera is a default); ``lineSigma`` (rad) / ``pointSigma`` (m)
     and per-input ``sigmas`` (``"name: σ; …"``); ``dThreshold`` (eq. 6.38); ``minReliability``
     (r_th of eq. 6.31); ``minRange`` (m, nearest feature along a ray); ``objects`` (``"name: shape
     [texture]; …"``) and ``environment`` (an environment XML file, relative to the configuration
@@ -106,13 +138,16 @@ class FeatureFusion(ProcessingPlugin):
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind.", entries=KIND),
         P("poses", "", "Sensor frames in the common frame (default identity).", entries=POSE),
-        P("cameras", "", "Intrinsics of line inputs.", entries=CAMERA),
-        P("fx", XTION.fx, "Default focal length x of line inputs.", unit="px"),
-        P("fy", XTION.fy, "Default focal length y of line inputs.", unit="px"),
-        P("cx", XTION.cx, "Default principal point x.", unit="px"),
-        P("cy", XTION.cy, "Default principal point y.", unit="px"),
-        P("calibrationWidth", XTION.width, "Image width the default intrinsics are given for.", unit="px"),
-        P("calibrationHeight", XTION.height, "Image height the default intrinsics are given for.", unit="px"),
+        P("cameras", "", "Intrinsics of line inputs (one without an entry takes fx fy cx cy).", entries=CAMERA),
+        P("fx", None, "Focal length x of line inputs without a 'cameras' entry (then required).", type=float,
+          unit="px", above=0.0),
+        P("fy", None, "Their focal length y (default: fx).", type=float, unit="px", above=0.0),
+        P("cx", None, "Their principal point x (default: (calibrationWidth - 1) / 2).", type=float, unit="px"),
+        P("cy", None, "Their principal point y (default: (calibrationHeight - 1) / 2).", type=float, unit="px"),
+        P("calibrationWidth", None, "Image width fx, fy, cx, cy are given for (required with fx).", type=int,
+          unit="px", above=0),
+        P("calibrationHeight", None, "Image height fx, fy, cx, cy are given for (required with fx).", type=int,
+          unit="px", above=0),
         P("lineSigma", 0.01, "Angular uncertainty of a line (2D) observation.", unit="rad"),
         P("pointSigma", 0.03, "Positional uncertainty of a point (3D) observation.", unit="m"),
         P("sigmas", "", "Per-input uncertainties (rad for a line, m for a point).", entries=SIGMA),
@@ -135,7 +170,7 @@ class FeatureFusion(ProcessingPlugin):
         for name, value in p.items():
             if isinstance(value, float) and not math.isfinite(value):
                 raise ParamError(f"{owner}: parameter {name!r} = {value} is not finite")
-        for name in ("fx", "fy", "calibrationWidth", "calibrationHeight", "lineSigma", "pointSigma", "dThreshold"):
+        for name in ("lineSigma", "pointSigma", "dThreshold"):
             if not p[name] > 0:
                 raise ParamError(f"{owner}: parameter {name!r} = {p[name]} must be greater than 0")
         if not p["minRange"] > 0:
@@ -144,8 +179,10 @@ class FeatureFusion(ProcessingPlugin):
             raise ParamError(f"{owner}: parameter 'minReliability' = {p['minReliability']} is not in [0, 1]")
         self.max_sensors = self._max_sensors(p["maxSensors"], "parameter 'maxSensors'")
         self.kinds: dict[str, str] = {name: values[0] for name, values in p["inputs"].items()}
-        default = Camera(p["fx"], p["fy"], p["cx"], p["cy"], p["calibrationWidth"], p["calibrationHeight"])
-        self.cameras = {name: default for name, kind in self.kinds.items() if kind == "line"}
+        self.cameras: dict[str, Camera] = {}
+        if all(p[name] is not None for name in DEFAULT_CAMERA):  # else every line input has its entry
+            default = camera_of(p, owner)
+            self.cameras = {name: default for name, kind in self.kinds.items() if kind == "line"}
         for name, (fx, fy, cx, cy, width, height) in p["cameras"].items():
             if min(fx, fy, width, height) <= 0 or width != int(width) or height != int(height):
                 raise ParamError(f"{owner}: parameter 'cameras' for {name!r} needs fx, fy > 0 and a whole size")

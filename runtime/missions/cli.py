@@ -184,33 +184,35 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _html_arguments(rep: argparse.ArgumentParser) -> None:
-    """``report --html``: one self-contained HTML page (runtime.missions.html_report)."""
-    from .report_bag import ReportTopics
-
-    topics = ReportTopics()
+    """``report --html``: one self-contained HTML page (runtime.missions.html_report). A topic not
+    named here is the configuration's own (runtime.missions.report_topics)."""
     html = rep.add_argument_group("--html", "one self-contained HTML page; --out names it (RUN_DIR/report.html)")
     html.add_argument("--html", action="store_true", help="write the HTML report instead of the table and plots")
     html.add_argument("--config", type=Path, help="the run's System file (default: the one stats.json names)")
     html.add_argument("--bag", type=Path, action="append", help="a rosbag2 bag to read (default: those in RUN_DIR)")
     html.add_argument("--target", help="words naming the target object (default: the one recognised most reliably)")
-    html.add_argument("--pose-topic", default=topics.estimate, help=f"estimated pose topic ({topics.estimate})")
-    html.add_argument("--truth-topic", action="append", help=f"ground-truth pose topic ({', '.join(topics.truth)})")
-    html.add_argument("--camera-topic", action="append", help=f"camera image topic ({', '.join(topics.cameras)})")
-    html.add_argument("--zoom-topic", action="append", help=f"zoom-map area topic ({', '.join(topics.zoom)})")
+    defaults = {
+        "pose": "estimated pose topic (default: the pose Output of the configuration's navigation or localization "
+        "service)",
+        "truth": "ground-truth pose topic (default: those of the configuration's simulated true-pose sensors)",
+        "camera": "camera image topic (default: the configuration's image topics)",
+        "zoom": "zoom-map area topic (default: the zoom Output of the services giving the pose estimate)",
+    }
+    html.add_argument("--pose-topic", help=defaults["pose"])
+    html.add_argument("--truth-topic", action="append", help=defaults["truth"])
+    html.add_argument("--camera-topic", action="append", help=defaults["camera"])
+    html.add_argument("--zoom-topic", action="append", help=defaults["zoom"])
 
 
 def _html_report(args: argparse.Namespace) -> int:
     from . import html_report
     from .report_bag import ReportTopics
 
-    defaults = ReportTopics()
     topics = ReportTopics(
-        estimate=args.pose_topic,
-        truth=tuple(args.truth_topic or defaults.truth),
-        fused=defaults.fused,
-        recognition=defaults.recognition,
-        cameras=tuple(args.camera_topic or defaults.cameras),
-        zoom=tuple(args.zoom_topic or defaults.zoom),
+        estimate=args.pose_topic or "",
+        truth=tuple(args.truth_topic or ()),
+        cameras=tuple(args.camera_topic or ()),
+        zoom=tuple(args.zoom_topic or ()),
     )
     options = html_report.Options(config=args.config, bags=args.bag, topics=topics, target=args.target)
     return html_report.main(args.run_dir, out=args.out, options=options)

@@ -7,12 +7,13 @@ object), Table 7.9 per agent (:func:`.report.build_report`) next to the thesis' 
 (:mod:`.report_thesis`), the Fig. 7.23 progress plots (:func:`.report.write_plots`), the Fig. 7.16
 map (:mod:`.report_figures`, the configuration's ``<Environment>`` with the trajectories and
 zoom-map areas of the run's bag, :mod:`.report_bag`), the Fig. 7.19 recognition reliability, each
-agent's camera frames at the moments of Fig. 7.22 and 7.24 (entering and ending NAV, SPOT, APPR,
-PICK, PLACE, OBJ_FIX: :mod:`.report_snapshots`), the simulated world's scenario, disturbances and
+agent's camera frames at the moments of Fig. 7.22 and 7.24 (entering and ending each state of its
+mission's success route: :mod:`.report_snapshots`), the simulated world's scenario, disturbances and
 final state (:mod:`.report_world`), and every problem of the run counted (:mod:`.report_problems`).
 What a run lacks (no bag, no such topic, no configuration) is said where it would have been shown.
 The configuration is the one ``stats.json`` names (or ``--config``); the bags are the rosbag2
-folders in the run directory (or ``--bag``).
+folders in the run directory (or ``--bag``). The topics read and the states shown are the
+configuration's own (:mod:`.report_topics`), those the command line names first.
 """
 
 from __future__ import annotations
@@ -34,13 +35,10 @@ from .report_bag import BagData, Moment, ReportTopics, find_bags, read_bags
 from .report_problems import Problems, collect
 from .report_snapshots import snapshots_section
 from .report_thesis import TABLE_SOURCE, compare
+from .report_topics import key_states, recognising_states, topics_of
 from .report_views import map_section, note, png_tag, reliability_section
 from .report_world import world_rows
 from .validation.online import replay
-
-SNAPSHOT_STATES = ("NAV", "SPOT", "APPR", "PICK", "PLACE", "OBJ_FIX")
-"""States whose entries and ends are the moments of Fig. 7.22 (the Turtlebot navigates to the goal
-area, recognises, grasps and places the object) and Fig. 7.24 (the Nao fixes on it)."""
 
 CSS = """
 body{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}
@@ -56,13 +54,18 @@ img{max-width:100%}
 
 @dataclass
 class Options:
-    """What ``--html`` may be told: the configuration, the bags, topics, the target object."""
+    """What ``--html`` may be told: the configuration, the bags, topics, the target object.
+
+    ``topics`` it names are read instead of the configuration's (:func:`.report_topics.topics_of`);
+    ``snapshot_states`` (state names or paths) instead of each agent's key states
+    (:func:`.report_topics.key_states`, every state it entered without the configuration's mission).
+    """
 
     config: Path | None = None
     bags: list[Path] | None = None
     topics: ReportTopics = field(default_factory=ReportTopics)
     target: str | None = None
-    snapshot_states: tuple[str, ...] = SNAPSHOT_STATES
+    snapshot_states: tuple[str, ...] | None = None
 
 
 def _table(header: list[str] | None, rows: list[list[str]], css: str = "") -> str:
@@ -243,15 +246,35 @@ def _progress(run: Run) -> str:
         return "".join(png_tag(p.read_bytes(), f"Fig. 7.23 {p.stem}") for p in paths)
 
 
+def _snapshot_states(run: Run, report: Report, system: System | None) -> tuple[str, ...]:
+    """The paths of the states whose moments are shown: each agent's key states
+    (:func:`.report_topics.key_states`), or every behavior state it entered when the configuration
+    does not have its mission."""
+    paths: list[str] = []
+    for agent in report.agents:
+        known = key_states(system, agent.mission) if system is not None and agent.mission else None
+        if known is None:
+            entered = (e for e in run.events if e.agent == agent.agent and e.kind == "enter" and not e.get("nested"))
+            known = tuple(str(e.get("path")) for e in entered)
+        paths += known
+    return tuple(dict.fromkeys(paths))
+
+
 def _moments(run: Run, states: tuple[str, ...], origin: float | None) -> list[Moment]:
-    """Each agent entering and leaving one of ``states`` (Fig. 7.22 / 7.24), on the bags' epoch clock."""
+    """Each agent entering and leaving one of ``states`` (names or paths; Fig. 7.22 / 7.24), on the
+    bags' epoch clock."""
     if origin is None:
         return []
     return [
         Moment(origin + e.t, e.t, e.agent, str(e.get("state")), str(e.get("path")), _edge(e.kind, e.get("reason")))
         for e in run.events
-        if e.kind in ("enter", "exit") and e.get("state") in states
+        if e.kind in ("enter", "exit") and (e.get("state") in states or e.get("path") in states)
     ]
+
+
+def _labels(states: tuple[str, ...]) -> list[str]:
+    """State paths without their top mission (``Navigation/NAV``), once each, to name them in a note."""
+    return list(dict.fromkeys(s.split("/", 1)[-1] for s in states))
 
 
 def _edge(kind: str, reason: object) -> str:
@@ -305,10 +328,16 @@ def build_html(run_dir: Path, options: Options | None = None) -> tuple[str, list
     report = build_report(run, "leaf")
     notes: list[str] = []
     system, config, name = _system(run_dir, options, notes)
+    topics = options.topics.filled_from(topics_of(system)) if system is not None else options.topics
     origin = _origin(run)
-    moments = _moments(run, options.snapshot_states, origin)
+    states = options.snapshot_states
+    if states is None:
+        states = _snapshot_states(run, report, system)
+    moments = _moments(run, states, origin)
+    missions = {a.mission for a in report.agents if a.mission}
+    recognising = recognising_states(system, missions, topics) if system is not None else set()
     bags = options.bags if options.bags is not None else find_bags(run_dir)
-    data = read_bags(bags, options.topics, moments)
+    data = read_bags(bags, topics, moments)
     if origin is None:
         notes.append("the recordings have no wall time: the bag's times are shown from its first message")
     first = min((m[0][0] for m in data.poses.values() if m), default=0.0)
@@ -328,11 +357,11 @@ def build_html(run_dir: Path, options: Options | None = None) -> tuple[str, list
         "<h2>Fig. 7.23: state and mission progress</h2>",
         _progress(run),
         "<h2>Fig. 7.16: map, trajectories and zoom-map areas</h2>",
-        map_section(system, config, data, options.topics, clock),
+        map_section(system, config, data, topics, clock),
         "<h2>Fig. 7.19: recognition reliability along the approach</h2>",
-        reliability_section(data, options.topics, report, options.target, clock),
+        reliability_section(data, topics, report, options.target, clock, recognising),
         "<h2>Fig. 7.22 / 7.24: camera frames at the mission's key moments</h2>",
-        snapshots_section(data, options.topics, moments, options.snapshot_states),
+        snapshots_section(data, topics, moments, _labels(states)),
         '<h2 id="problems">Problems seen in the run</h2>',
         _problems(problems),
         "<h2>Data sources and notes</h2>",

@@ -1,13 +1,14 @@
 """What the HTML run report (:mod:`.html_report`) reads from a run's rosbag2 bags (§7.4–7.5).
 
 ``ckm-run --record TOPICS`` leaves a rosbag2 bag (MCAP or sqlite3, :mod:`runtime.ros.bag`) in the
-run directory. The report takes from it, by topic (:class:`ReportTopics`, every name configurable):
+run directory. The report takes from it, by topic (:class:`ReportTopics`: the recorded system's own,
+:mod:`.report_topics`, or given on the command line):
 
-- the **estimated trajectory** (``/nav/pose``, PoseEstimate) and the **true trajectory** (a
+- the **estimated trajectory** (a localization's pose estimate) and the **true trajectory** (a
   simulator's ground-truth topic, when recorded) for the Fig. 7.16 picture;
 - the **zoom-map areas** (§6.1.3) when a topic carries them (``{x, y, width, depth}``, the shape of
   ``plugins.environment.zoom.Recentring``);
-- the **recognition results** (``/recog/objects`` fused, and each source's) for Fig. 7.19;
+- the **recognition results** (the fused ones, and each source's) for Fig. 7.19;
 - the **camera frame nearest** each moment of Fig. 7.22 / 7.24 (:class:`Moment`: an agent entering
   or ending a state): an ``Image`` on a camera topic, or its ``CompressedImage`` on
   ``CAMERA/compressed`` as ``ckm-run --record CAMERA@HZ:jpeg`` records it (runtime.ros.sparse, D197).
@@ -38,16 +39,30 @@ STORAGE_SUFFIXES = (".mcap", ".db3")
 
 @dataclass(frozen=True)
 class ReportTopics:
-    """The topics the report looks for in the bags (all configurable on the command line). An
-    internal topic is in the bag under its node's name (``xtion_rgb_raw`` of node ``turtlebot`` is
-    ``/turtlebot/xtion_rgb_raw``, runtime.ros.recording)."""
+    """The topics the report looks for in the bags, by their names in the bag; empty: none known.
 
-    estimate: str = "/nav/pose"
-    truth: tuple[str, ...] = ("/sim/turtlebot/pose", "/sim/turtlebot/true_pose", "/sim/truth/turtlebot")
-    fused: str = "/recog/objects"
-    recognition: tuple[str, ...] = ("/rgbd/rgb/objects", "/rgbd/depth/objects", "/pantilt/objects")
-    cameras: tuple[str, ...] = ("/turtlebot/xtion_rgb_raw", "/nao/camera/image", "/nao/camera_raw")
-    zoom: tuple[str, ...] = ("/nav/zoom", "/env/zoom", "/zoom_map/area")
+    Nothing is looked for by default: :func:`.report_topics.topics_of` takes them from the recorded
+    system, and the command line may name others (:meth:`filled_from` joins the two). An internal
+    topic is in the bag under its node's name (``camera_raw`` of node ``robot1`` is
+    ``/robot1/camera_raw``, runtime.ros.recording)."""
+
+    estimate: str = ""
+    truth: tuple[str, ...] = ()
+    fused: str = ""
+    recognition: tuple[str, ...] = ()
+    cameras: tuple[str, ...] = ()
+    zoom: tuple[str, ...] = ()
+
+    def filled_from(self, other: ReportTopics) -> ReportTopics:
+        """These topics where they name some, ``other``'s where they name none."""
+        return ReportTopics(
+            estimate=self.estimate or other.estimate,
+            truth=self.truth or other.truth,
+            fused=self.fused or other.fused,
+            recognition=self.recognition or other.recognition,
+            cameras=self.cameras or other.cameras,
+            zoom=self.zoom or other.zoom,
+        )
 
     def camera_topics(self) -> tuple[str, ...]:
         """Each camera topic and its compressed stream (``CAMERA/compressed``, image_transport's name)."""
@@ -55,7 +70,8 @@ class ReportTopics:
 
     def wanted(self) -> set[str]:
         """Every topic the report reads, to load only those from the bags."""
-        return {self.estimate, self.fused, *self.truth, *self.recognition, *self.camera_topics(), *self.zoom}
+        every = {self.estimate, self.fused, *self.truth, *self.recognition, *self.camera_topics(), *self.zoom}
+        return every - {""}
 
 
 @dataclass(frozen=True)
@@ -72,7 +88,7 @@ class Moment:
 
     @property
     def label(self) -> str:
-        """``turtlebot Agent1Fetch/ObjectInteraction/PICK ended at 80.0 s``."""
+        """``robot1 Fetch/Interaction/PICK ended at 80.0 s``."""
         return f"{self.agent} {self.path} {self.edge} at {self.run_time:.1f} s"
 
 

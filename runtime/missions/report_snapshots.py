@@ -1,11 +1,12 @@
 """The camera snapshots of the HTML run report: what each robot saw at the moments of Fig. 7.22 / 7.24 (§7.5).
 
-Fig. 7.22 shows the Turtlebot's individual mission as a sequence of frames (navigating to the goal
-area, recognising the object, grasping it, placing it); Fig. 7.24 the steps the Nao adds (its camera
-fixed on the object, the Turtlebot spotting it with the Nao's help). The report takes the run's
-:class:`.report_bag.Moment` s — each agent entering and ending one of the snapshot states — and shows,
-per agent, the frame of its own cameras nearest each moment (:func:`agent_cameras`), with the state,
-the run time and the frame's distance from the moment under it. A frame further than
+Fig. 7.22 shows one robot's individual mission as a sequence of frames (navigating to the goal
+area, recognising the object, grasping it, placing it); Fig. 7.24 the steps a second robot adds
+(its camera fixed on the object, the first one spotting it with its help). The report takes the
+run's :class:`.report_bag.Moment` s — each agent entering and ending one of the snapshot states, the
+states on its mission's success route (:func:`.report_topics.key_states`) — and shows, per agent,
+the frame of its own cameras nearest each moment (:func:`agent_cameras`), with the state, the run
+time and the frame's distance from the moment under it. A frame further than
 :data:`MAX_FRAME_GAP` from its moment is not shown as if it were of it.
 
 Frames are embedded in the page: a ``CompressedImage`` (``ckm-run --record CAMERA@HZ:jpeg``, D197)
@@ -25,13 +26,14 @@ from PIL import Image as PilImage
 from .report_bag import BagData, Frame, Moment, ReportTopics, compressed_picture, image_pixels
 from .report_figures import image_png
 
-MAX_MOMENTS = 24
-"""Most moments shown per agent (a run that re-spots often enters SPOT many times)."""
+MAX_MOMENTS = 40
+"""Most moments shown per agent (a run that retries enters the same states many times)."""
 MAX_FRAME_GAP = 5.0
 """Seconds: a frame further than this from a moment is not taken as what the camera saw then."""
 PER_ROW = 4
 """Snapshots per table row."""
-HOW_TO_RECORD = "record the cameras sparsely: ckm-run --record '…,/nao/camera/image@0.5:jpeg' (D197)"
+HOW_TO_RECORD = "record the cameras sparsely: ckm-run --record '…,{camera}@0.5:jpeg' (D197)"
+"""How to get camera frames into the bag, for one of the camera topics."""
 
 
 def _note(text: str, kind: str = "note") -> str:
@@ -40,8 +42,8 @@ def _note(text: str, kind: str = "note") -> str:
 
 def agent_cameras(agent: str, cameras: Sequence[str]) -> list[str]:
     """The camera topics of ``agent``: those with the agent's name as a part of the topic name
-    (``/turtlebot/xtion_rgb_raw`` for ``turtlebot``, ``/nao/camera/image`` for ``nao``); every camera
-    when no topic names it (one robot, or cameras named otherwise)."""
+    (``/robot1/camera_raw`` for ``robot1``, ``/robot2/head/image`` for ``robot2``); every camera when
+    no topic names it (one robot, or cameras named otherwise)."""
     own = [c for c in cameras if agent.lower() in c.lower().strip("/").split("/")]
     return own or list(cameras)
 
@@ -85,12 +87,17 @@ def _cell(frame: Frame | None, moment: Moment, camera: str, several: bool) -> st
 def snapshots_section(data: BagData, topics: ReportTopics, moments: Sequence[Moment], states: Sequence[str]) -> str:
     """Per agent, the frame of its cameras nearest each of its ``moments`` (entering or ending ``states``)."""
     if not moments:
-        return _note(f"No moment to show: no agent entered {', '.join(states)} (or the recordings have no wall time).")
+        entered = ", ".join(states) or "a state"
+        return _note(f"No moment to show: no agent entered {entered} (or the recordings have no wall time).")
+    if not topics.cameras:
+        return _note("No camera frames: no camera topic (none known from the configuration; name one with "
+                     "--camera-topic).")  # fmt: skip
     wanted = topics.camera_topics()
     present = [t for t in wanted if t in data.topics]
     if not data.bags or not present:
         where = "no bag in the run" if not data.bags else "none of them in the bag"
-        return _note(f"No camera frames: topic {' / '.join(topics.cameras)}: {where}; {HOW_TO_RECORD}.")
+        how = HOW_TO_RECORD.format(camera=topics.cameras[0])
+        return _note(f"No camera frames: topic {' / '.join(topics.cameras)}: {where}; {how}.")
     cameras = [c for c in present if any(f.topic == c for f in data.frames)]
     if not cameras:
         counts = ", ".join(f"{t} {data.stored.get(t, 0)} message(s)" for t in present)

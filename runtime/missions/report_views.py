@@ -12,7 +12,7 @@ from __future__ import annotations
 import base64
 import math
 from bisect import bisect_left
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from html import escape
 from pathlib import Path
 
@@ -24,8 +24,6 @@ from .report_bag import BagData, ReportTopics, Sighting
 from .report_figures import Approach, map_png, reliability_png
 
 ZoomArea = tuple[float, float, float, float, float]  # run time, centre x, y, width, depth
-APPROACH_STATES = ("SPOT", "APPR", "PICK", "OBJ_TRACK", "OBJ_FIX")
-"""States shaded on the reliability plot: where recognition matters (§7.4.1, Fig. 7.19)."""
 POSE_GAP = 1.0
 """Longest time (s) between a recognition and the robot pose it is measured from."""
 
@@ -40,8 +38,13 @@ def note(text: str, kind: str = "note") -> str:
     return f'<p class="{kind}">{escape(text)}</p>'
 
 
-def _missing(what: str, topics: Sequence[str], data: BagData) -> str:
-    """Why ``what`` is not shown: no bag, none of ``topics`` in it, or there without (usable) messages."""
+def _missing(what: str, topics: Sequence[str], data: BagData, option: str = "") -> str:
+    """Why ``what`` is not shown: no topic for it (the configuration has none, the command line named
+    none with ``option``), no bag, none of ``topics`` in it, or there without (usable) messages."""
+    topics = [t for t in topics if t]
+    if not topics:
+        given = f"; name one with {option}" if option else ""
+        return note(f"No {what}: no topic to read it from (none known from the configuration{given}).")
     if not data.bags:
         return note(f"No {what}: topic {' / '.join(topics)}: no bag in the run.")
     there = [t for t in topics if t in data.topics]
@@ -64,15 +67,15 @@ def map_section(
     if estimate:
         tracks.append((f"estimated ({topics.estimate})", "tab:blue", [(clock(t), x, y) for t, x, y in estimate]))
     else:
-        out.append(_missing("estimated trajectory", [topics.estimate], data))
+        out.append(_missing("estimated trajectory", [topics.estimate], data, "--pose-topic"))
     truth = next((t for t in topics.truth if data.poses.get(t)), None)
     if truth is not None:
         tracks.append((f"true ({truth})", "tab:green", [(clock(t), x, y) for t, x, y in data.poses[truth]]))
     else:
-        out.append(_missing("true trajectory", topics.truth, data))
+        out.append(_missing("true trajectory", topics.truth, data, "--truth-topic"))
     zoom = [(clock(t), x, y, w, d) for t, x, y, w, d in data.zoom]
     if not zoom:
-        out.append(_missing("zoom-map areas recorded", topics.zoom, data))
+        out.append(_missing("zoom-map areas recorded", topics.zoom, data, "--zoom-topic"))
         settings = env.zoom if env is not None else None
         if settings is not None and estimate and settings.max_objects is None:
             zoom = replay_zoom([(clock(t), x, y) for t, x, y in estimate], settings)
@@ -162,10 +165,17 @@ def _approach(data: BagData, topics: ReportTopics, terms: list[str], clock: Call
 
 
 def reliability_section(
-    data: BagData, topics: ReportTopics, report: Report, target: str | None, clock: Callable[[float], float]
+    data: BagData,
+    topics: ReportTopics,
+    report: Report,
+    target: str | None,
+    clock: Callable[[float], float],
+    recognising: Collection[str] = (),
 ) -> str:
     """Fig. 7.19: the target's reliability vs run time on each recognition topic; the robot's distance
-    and bearing to the (fused) target vs run time; the fused reliability vs distance."""
+    and bearing to the (fused) target vs run time; the fused reliability vs distance. The visits of
+    the ``recognising`` states (paths or names: where recognition matters, §7.4.1,
+    :func:`.report_topics.recognising_states`) are shaded."""
     present = [t for t in [topics.fused, *topics.recognition] if data.detections.get(t)]
     if not present:
         return _missing("recognition results", [topics.fused, *topics.recognition], data)
@@ -182,7 +192,8 @@ def reliability_section(
     approach = _approach(data, topics, terms, clock)
     if not approach:
         out.append(note("No distance or angle to the target: no fused target position with a robot pose near it."))
-    spans = [(r.state, begin, end) for r in report.rows if r.state in APPROACH_STATES for begin, end in r.spans]
+    shaded = [r for r in report.rows if r.path in recognising or r.state in recognising]
+    spans = [(r.state, begin, end) for r in shaded for begin, end in r.spans]
     if not series:
         return "".join(out) + note("The target was never recognised: nothing to plot.")
     return "".join(out) + png_tag(reliability_png(series, approach, spans), "Fig. 7.19")

@@ -22,7 +22,12 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ckmconf.model import Service, SmartResource
+
+    from ..registry import Registry
 
 
 @dataclass(frozen=True)
@@ -97,8 +102,9 @@ STANDARD: dict[str, Interface] = {
                 Port("status", "`{goal, state: planning | active | arrived | failed, path_length, remaining "
                                "(m), reason}` of the newest goal; `reason` says why it failed"),
             ),
-            parameters=(Port("goal", "the goal on the map: `\"x y yaw\"` (m, m, rad) or an Area's name; empty: "
-                                     "none (the base stands)"),),
+            parameters=(Port("goal", "the goal on the map: `\"x y yaw\"` (m, m, rad), an Area's name, or an "
+                                     "Object's name (the pose short of it, facing it); empty: none (the base "
+                                     "stands)"),),
             goals="The status echoes the goal it reports (`goal`), so a status of an earlier goal is never read as "
                   "this one's; setting a goal preempts the older one, an empty goal cancels it.",
         ),
@@ -192,4 +198,26 @@ def provided_by(cls: type[Any] | None) -> str | None:
     return provided if isinstance(provided, str) and provided in STANDARD else None
 
 
-__all__ = ["STANDARD", "Interface", "Port", "Use", "Uses", "provided_by", "uses_of"]
+def service_interface(resource: SmartResource, service: Service, registry: Registry) -> str | None:
+    """The interface ``service`` of ``resource`` offers, resolved as ``verify`` does without its checks:
+    its ``interface=``, else the one interface its scenarios' profiles' output plugin kinds ``PROVIDES``
+    (looked up in ``registry``). None: an unknown name, no kind saying one, or kinds saying several.
+
+    Raises:
+        RegistryError: a plugin kind's entry point cannot be imported.
+    """
+    if service.interface is not None:
+        return service.interface if service.interface in STANDARD else None
+    plugins = {p.name: p.kind for p in resource.plugins} if resource.kernel != "ros" else {}
+    profiles = {p.name: p for p in resource.profiles}
+    provided = set()
+    for scenario in service.scenarios:
+        profile = profiles.get(scenario.profile)
+        kind = plugins.get(profile.output_plugin()) if profile is not None else None
+        name = provided_by(registry.find("plugin", kind)) if kind is not None else None
+        if name is not None:
+            provided.add(name)
+    return provided.pop() if len(provided) == 1 else None
+
+
+__all__ = ["STANDARD", "Interface", "Port", "Use", "Uses", "provided_by", "service_interface", "uses_of"]

@@ -18,6 +18,7 @@ import pytest
 from ckmconf.errors import ConfigError, Loc
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin, SmartResource
+from plugins.processing.cameras import XTION
 from plugins.processing.depth import (
     DepthAcquisition,
     EuclideanClustering,
@@ -30,7 +31,6 @@ from plugins.processing.depth import (
 from plugins.processing.image import resize
 from plugins.processing.shapes import (
     LAB_SCENE,
-    Camera,
     PcdError,
     Shape,
     describe,
@@ -49,6 +49,8 @@ MODEL = CONFIGS / "usecase" / "models" / "lab_objects_shapes.pcd"
 PROFILES = ("DEPTH_VGA", "DEPTH_QVGA", "DEPTH_QQVGA")
 LAB_NAMES = ["box", "cylinder", "box", "sphere"]  # LAB_SCENE's shapes, left to right
 LOC = Loc(str(RESOURCES), 1, 1, "/Part/SmartResource/Plugin")  # models/… resolve next to it
+LAB_CAMERA = {"fx": XTION.fx, "calibrationWidth": XTION.width, "calibrationHeight": XTION.height}
+"""The intrinsics Params of the camera the synthetic scenes are rendered with (fy, cx, cy: the pinhole's)."""
 
 
 def plugin(kind: str, params: Mapping[str, object] | None = None, *, name: str = "p", loc: Loc | None = None) -> Plugin:
@@ -61,7 +63,7 @@ def metres(depth: Any) -> np.ndarray[Any, Any]:
 
 
 def clustering(**params: object) -> EuclideanClustering:
-    return EuclideanClustering(plugin("euclidean-clustering", params))
+    return EuclideanClustering(plugin("euclidean-clustering", LAB_CAMERA | params))
 
 
 def classifier(k: int = 5, threshold: float = 0.75) -> KdTreeShapeClassifier:
@@ -107,8 +109,9 @@ def test_bad_params_are_refused(kind: str, params: Mapping[str, object], message
     cls = {"depth-acquisition": DepthAcquisition, "euclidean-clustering": EuclideanClustering}.get(
         kind, KdTreeShapeClassifier
     )
+    given = LAB_CAMERA | dict(params) if kind == "euclidean-clustering" else params
     with pytest.raises(ParamError) as caught:
-        cls(plugin(kind, params))
+        cls(plugin(kind, given))
     assert str(caught.value) == f"plugin 'p' ({kind}): {message}"
 
 
@@ -201,7 +204,7 @@ def test_bad_depth_frames_raise_naming_the_plugin(data: Any, message: str) -> No
 
 
 def test_renderer_gives_millimetres_of_the_floor_and_ground_truth() -> None:
-    camera = Camera()
+    camera = XTION
     scene = render_depth_scene(LAB_SCENE, seed=3, noise=False, camera=camera)
     assert scene.depth.shape == (480, 640) and scene.depth.dtype == np.uint16
     row = 400  # a floor pixel: depth = elevation / (y/fy·cos(tilt) + sin(tilt))
@@ -217,7 +220,7 @@ def test_renderer_gives_millimetres_of_the_floor_and_ground_truth() -> None:
 
 
 def test_support_plane_is_the_floor() -> None:
-    camera = Camera(elevation=0.6, tilt=0.3)
+    camera = dataclasses.replace(XTION, elevation=0.6, tilt=0.3)
     depth = metres(render_depth_scene(seed=1, camera=camera).depth)
     plane = find_support_plane(backproject(depth, camera, 3.5), distance=0.015, max_angle=math.radians(45))
     assert plane is not None
@@ -436,7 +439,8 @@ def topology(depth_camera: SmartResource) -> Iterator[Topology]:
 
 def test_depth_profiles_run_through_the_topology(topology: Topology) -> None:
     topology.reset_stats()
-    scene = render_depth_scene(seed=0, camera=Camera(fx=577.3, fy=577.3))  # the simulated Xtion resources.xml names
+    simulated = dataclasses.replace(XTION, fx=577.3, fy=577.3)  # the simulated Xtion resources.xml names
+    scene = render_depth_scene(seed=0, camera=simulated)
     frame = topology.run({"width": 640, "height": 480, "encoding": "16UC1", "data": scene.depth.tobytes()})
     assert set(frame.outputs) == set(PROFILES)
     for profile in PROFILES:

@@ -29,10 +29,12 @@ CTX = Context(frame=0, stamp=0.0, resource="GlobalRecog")
 LOC = Loc(str(CONFIGS / "usecase" / "resources.xml"), 1, 1, "/Part/SmartResource/Plugin")
 CATALOG = "cylinder_red_stripes: cylinder red_stripes; cylinder_blue_dots: cylinder blue_dots; box_cereal: box"
 OWNER = "plugin 'f' (feature-fusion)"
+LAB_CAMERA = {"fx": 525, "calibrationWidth": 640, "calibrationHeight": 480}
+"""The line inputs' default camera these tests project with (the lab's Xtion: fy, cx, cy the pinhole's)."""
 
 
 def fusion(params: Mapping[str, object] | None = None, *, loc: Loc | None = None) -> FeatureFusion:
-    given = {"objects": CATALOG, **(params or {})}
+    given = {"objects": CATALOG, **LAB_CAMERA, **(params or {})}
     record = Plugin(
         name="f", kind="feature-fusion", params=tuple(Param(name=k, value=str(v)) for k, v in given.items())
     )
@@ -503,7 +505,8 @@ def test_real_depth_results_fuse_with_rgb_results_of_the_same_scene() -> None:
     """
     scene = render_depth_scene(seed=3, resolution=(240, 320))
     metres = DepthAcquisition(Plugin(name="a", kind="depth-acquisition")).process(scene.depth, CTX)
-    params = (Param(name="tolerance", value="0.03"), Param(name="minPoints", value="100"))
+    params = (Param(name="tolerance", value="0.03"), Param(name="minPoints", value="100"),
+              *(Param(name=k, value=str(v)) for k, v in LAB_CAMERA.items()))
     clusters = EuclideanClustering(Plugin(name="c", kind="euclidean-clustering", params=params)).process(metres, CTX)
     model = (Param(name="model", value="models/lab_objects_shapes.pcd"),)
     shapes = KdTreeShapeClassifier(Plugin(name="s", kind="kdtree-shape-classifier", params=model, loc=LOC))

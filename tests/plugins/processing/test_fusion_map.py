@@ -40,8 +40,9 @@ NAO = (8.75, 5.55, 2.3)
 
 
 def fusion(params: Mapping[str, object]) -> FeatureFusion:
+    given = {"fx": 525, "calibrationWidth": 640, "calibrationHeight": 480} | dict(params)  # the line inputs' camera
     return FeatureFusion(
-        Plugin(name="f", kind="feature-fusion", params=tuple(Param(name=k, value=str(v)) for k, v in params.items()))
+        Plugin(name="f", kind="feature-fusion", params=tuple(Param(name=k, value=str(v)) for k, v in given.items()))
     )
 
 
@@ -267,6 +268,9 @@ def test_the_use_case_resources_still_load_the_fusion() -> None:
             Param(name="environment", value="environment.xml"),
             Param(name="mounts", value="rgb: turtlebot camera_rgb_optical_frame; pantilt: nao CameraTop_optical_frame"),
             Param(name="bases", value="pantilt: 5.5 5.2 0"),
+            Param(
+                name="cameras", value="rgb: 577.3 577.3 319.5 239.5 640 480; pantilt: 723.3 723.3 319.5 239.5 640 480"
+            ),
         ),
     )
     plugin = FeatureFusion(record)

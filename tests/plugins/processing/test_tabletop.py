@@ -35,7 +35,8 @@ def frame() -> Iterator[tuple[Lab, np.ndarray]]:
 
 def plugin(cls: type[EuclideanClustering], lab: Lab, **extra: object) -> EuclideanClustering:
     focal = lab.fusion.cameras["rgb"].fx
-    given = {"tolerance": 0.03, "minPoints": 100, "fx": focal, "fy": focal, "cx": 319.5, "cy": 239.5} | extra
+    camera = {"fx": focal, "fy": focal, "cx": 319.5, "cy": 239.5, "calibrationWidth": 640, "calibrationHeight": 480}
+    given = {"tolerance": 0.03, "minPoints": 100} | camera | extra
     kind = "tabletop-clustering" if cls is TabletopClustering else "euclidean-clustering"
     return cls(Plugin(name="c", kind=kind, params=tuple(Param(name=k, value=str(v)) for k, v in given.items())))
 
@@ -78,7 +79,13 @@ def test_the_classifier_names_them_cylinders(frame: tuple[Lab, np.ndarray]) -> N
 
 
 def test_bad_params_are_refused() -> None:
+    camera = (Param(name="fx", value="525"), Param(name="calibrationWidth", value="640"),
+              Param(name="calibrationHeight", value="480"))
     with pytest.raises(ParamError, match="parameter 'planes' = 0 must be at least 1"):
-        TabletopClustering(Plugin(name="c", kind="tabletop-clustering", params=(Param(name="planes", value="0"),)))
+        TabletopClustering(
+            Plugin(name="c", kind="tabletop-clustering", params=(*camera, Param(name="planes", value="0")))
+        )
     with pytest.raises(ParamError, match="parameter 'plane' must stay true"):
-        TabletopClustering(Plugin(name="c", kind="tabletop-clustering", params=(Param(name="plane", value="false"),)))
+        TabletopClustering(
+            Plugin(name="c", kind="tabletop-clustering", params=(*camera, Param(name="plane", value="false")))
+        )

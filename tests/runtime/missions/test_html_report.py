@@ -46,6 +46,14 @@ TOPICS = {
     "/turtlebot/xtion_rgb_raw": "ckm_msgs/msg/Image",
     "/nao/camera/image": "sensor_msgs/msg/Image",
 }
+LAB_TOPICS = ReportTopics(
+    estimate="/nav/pose",
+    truth=("/sim/turtlebot/pose",),
+    fused="/recog/objects",
+    cameras=("/turtlebot/xtion_rgb_raw", "/nao/camera/image"),
+    zoom=("/nav/zoom",),
+)
+"""The topics of TOPICS as the command line names them, for a run reported without its configuration."""
 TURTLEBOT = [  # (enter, exit, path, nested mission or None, performance)
     (0.0, 2.0, "INIT", None, 1.0),
     (2.0, 40.0, "Navigation", "NavigationCoop", None),
@@ -265,26 +273,30 @@ def test_the_page_holds_table_7_9_figures_snapshots_and_problems(
     assert summary["Mission time"] == "151.0 s" and summary["Run date"].startswith("2027-01-15")
     assert summary["Off-line validation"].startswith("not in the run directory")
     assert summary["Problems"] == "5 in 3 kind(s)"
-    # camera frames: per agent, its own camera's frame nearest each entry and end of the states of
-    # Fig. 7.22 (turtlebot: NAV, SPOT, APPR, PICK, PLACE) and Fig. 7.24 (nao: OBJ_FIX)
+    # camera frames: per agent, its own camera's frame nearest each entry and end of the states on
+    # its mission's success route (Fig. 7.22, 7.24; the cameras and states are the configuration's)
     frames = {alt: decode(src) for alt, src in page.images if " at " in alt and alt.split()[0] in ("turtlebot", "nao")}
-    assert len(frames) == 14  # turtlebot: 6 visits entered and ended; nao: OBJ_FIX entered and ended
+    assert len(frames) == 26  # turtlebot: 11 visits entered and ended (no DOCK in this run); nao: 2
     spot = frames["turtlebot Agent1FetchCoop/ObjectInteraction/SPOT entered at 40.0 s"]
     assert round(float(spot.reshape(-1)[0]) * 255) == 40  # the frame of t = 40 (stamped 40.3 s)
     fixed = frames["nao Agent2Spot/OBJ_FIX ended at 45.0 s"]
     assert fixed.shape[:2] == (4, 5) and abs(float(fixed.reshape(-1)[0]) * 255 - 45) <= 1  # the Nao's own camera
     turtlebot = [cell for row in page.table("snapshots agent-turtlebot") for cell in row]
     assert turtlebot[:4] == [
+        "INIT entered at 0.0 sframe +0.30 s from it",
+        "INIT ended at 2.0 sframe +0.30 s from it",
         "NAV entered at 2.0 sframe +0.30 s from it",
         "NAV ended at 10.0 sframe +0.30 s from it",
-        "SPOT entered at 40.0 sframe +0.30 s from it",
-        "SPOT ended at 50.0 sframe +0.30 s from it",
     ]
     assert [c.split(" at ")[0] for c in turtlebot[4:]] == [
-        "APPR entered", "APPR ended", "PICK entered", "PICK ended", "NAV entered", "NAV ended", "PLACE entered",
-        "PLACE ended",
-    ]  # fmt: skip
+        f"{state} {edge}"
+        for state in ("WAIT", "SPOT", "APPR", "PICK", "NAV", "WAIT", "PLACE", "BACK", "END")
+        for edge in ("entered", "ended")
+    ]
+    assert turtlebot[-1] == "END ended at 151.0 sframe -0.70 s from it"  # the last frame, of t = 150
     assert [cell for row in page.table("snapshots agent-nao") for cell in row] == [
+        "OBJ_TRACK entered at 0.0 sframe +0.30 s from it",
+        "OBJ_TRACK ended at 20.0 sframe +0.30 s from it",
         "OBJ_FIX entered at 20.0 sframe +0.30 s from it",
         "OBJ_FIX ended at 45.0 sframe +0.30 s from it",
     ]
@@ -308,7 +320,8 @@ def test_a_run_without_bag_or_configuration_says_what_is_missing(tmp_path: Path)
     notes = " | ".join(page.notes)
     assert "No bag in the run directory" in notes
     assert "no configuration (no stats.json naming it, no --config)" in notes
-    assert "No estimated trajectory: topic /nav/pose: no bag in the run." in notes
+    no_pose = "No estimated trajectory: no topic to read it from (none known from the configuration; name one with "
+    assert no_pose + "--pose-topic)." in notes
     assert "No recognition results" in notes and "No camera frames" in notes
     assert {"Fig. 7.23 plan"} <= {alt for alt, _ in page.images}  # the recordings still give Table 7.9 and Fig. 7.23
     assert "Fig. 7.16" not in {alt for alt, _ in page.images}
@@ -320,9 +333,9 @@ def test_topics_absent_from_the_bag_are_noted_and_others_drawn(tmp_path: Path) -
     run_dir = make_run(tmp_path / "run", bag=False, config=False)
     write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]}, empty={"/nav/zoom": TOPICS["/nav/zoom"]})
     (run_dir / "validation.json").write_text('{"ok": true, "missions": [{"mission": "Agent1FetchCoop", "ok": true}]}')
-    page = parse(build_html(run_dir)[0])
+    page = parse(build_html(run_dir, Options(topics=LAB_TOPICS))[0])
     notes = " | ".join(page.notes)
-    assert "No true trajectory: topic /sim/turtlebot/pose / /sim/turtlebot/true_pose" in notes
+    assert "No true trajectory: topic /sim/turtlebot/pose not in the bag." in notes
     assert "No zoom-map areas recorded: in the bag /nav/zoom 0 message(s), none usable" in notes
     assert "replayed" not in notes  # no configuration, no <ZoomMap>
     assert "No recognition results" in notes and "No camera frames" in notes
@@ -340,7 +353,7 @@ def test_a_corrupt_bag_is_named_and_the_report_still_written(
     data = storage.read_bytes()
     storage.write_bytes(data[:40] + b"\xff" * 200 + data[240:])
     out = tmp_path / "report.html"
-    assert cli.main(["report", str(run_dir), "--html", "--out", str(out)]) == 1
+    assert cli.main(["report", str(run_dir), "--html", "--pose-topic", "/nav/pose", "--out", str(out)]) == 1
     err = capsys.readouterr().err
     assert str(storage) in err and "rosbag2 bag" in err
     page = parse(out.read_text(encoding="utf-8"))
@@ -352,11 +365,12 @@ def test_cli_options_choose_topics_target_and_bag(tmp_path: Path, capsys: pytest
     (tmp_path / "elsewhere").mkdir()
     bag = write_bag(tmp_path / "elsewhere")
     args = ["report", str(run_dir), "--html", "--bag", str(bag), "--target", "box orange", "--truth-topic", "/none"]
+    args += ["--config", str(LAB)]  # the topics not named are the configuration's
     assert cli.main([*args, "--camera-topic", "/nao/camera/image", "--out", str(tmp_path / "r.html")]) == 0
     page = parse((tmp_path / "r.html").read_text(encoding="utf-8"))
     assert "No true trajectory: topic /none not in the bag." in page.notes
     # one camera now, the Nao's: shown for the turtlebot too, no camera being named after it
-    assert len([alt for alt, _ in page.images if alt.startswith(("turtlebot Agent1", "nao Agent2"))]) == 14
+    assert len([alt for alt, _ in page.images if alt.startswith(("turtlebot Agent1", "nao Agent2"))]) == 26
     assert page.table("snapshots agent-turtlebot") and page.table("snapshots agent-nao")
     assert capsys.readouterr().err == ""
     text = (tmp_path / "r.html").read_text(encoding="utf-8")
@@ -371,7 +385,8 @@ def test_the_configuration_named_by_a_node_process_statistics_gives_the_map(tmp_
     system = '<System xmlns="urn:ckm:1" version="1.0" name="tiny"><Include href="environment.xml"/></System>'
     (tmp_path / "tiny.xml").write_text(system)
     (run_dir / "stats-remote_pc.json").write_text(json.dumps({"config": "tiny.xml", "system": "tiny"}))
-    page = parse(build_html(run_dir)[0])  # tiny.xml is found next to the run directory
+    # tiny.xml is found next to the run directory; it has no service, so the pose topic is named
+    page = parse(build_html(run_dir, Options(topics=ReportTopics(estimate="/nav/pose")))[0])
     summary = dict(page.table("summary"))
     assert summary["System"] == "tiny" and summary["Configuration"] == str(run_dir.parent / "tiny.xml")
     assert "Fig. 7.16" in {alt for alt, _ in page.images}
@@ -396,12 +411,12 @@ def test_the_bags_of_several_processes_are_merged_in_time_order(tmp_path: Path) 
     write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"]}).rename(run_dir / "bag-remote_pc")
     write_bag(run_dir, {"/nao/camera/image": TOPICS["/nao/camera/image"], "/recog/objects": TOPICS["/recog/objects"]})
     moment = Moment(WALL + 20.0, 20.0, "nao", "OBJ_FIX", "Agent2Spot/OBJ_FIX", "entered")
-    data = read_bags(find_bags(run_dir), ReportTopics(), [moment])
+    data = read_bags(find_bags(run_dir), LAB_TOPICS, [moment])
     assert data.bags == [run_dir / "bag", run_dir / "bag-remote_pc"] and data.errors == []
     assert [t for t, _, _ in data.poses["/nav/pose"]] == sorted(t for t, _, _ in data.poses["/nav/pose"])
     assert [f.topic for f in data.frames] == ["/nao/camera/image"]
     assert [f.time - WALL for f in data.frames] == pytest.approx([20.3])
-    page = parse(build_html(run_dir)[0])
+    page = parse(build_html(run_dir, Options(topics=LAB_TOPICS))[0])
     assert {"Fig. 7.16", "Fig. 7.19"} <= {alt for alt, _ in page.images}
     assert not [n for n in page.notes if n.startswith("No distance")]  # poses of one bag, objects of the other
 
@@ -415,14 +430,15 @@ def test_html_refuses_json_and_depth_and_a_missing_run(tmp_path: Path, capsys: p
     assert not (tmp_path / "none").exists()
 
 
-def test_options_default_to_the_use_case_topics() -> None:
-    topics = Options().topics
-    assert topics == ReportTopics() and topics.estimate == "/nav/pose" and "/nao/camera/image" in topics.cameras
+def test_options_name_no_topic_and_no_state_of_their_own() -> None:
+    options = Options()  # the configuration's own are taken (runtime.missions.report_topics)
+    assert options.topics == ReportTopics("", (), "", (), (), ()) and options.topics.wanted() == set()
+    assert options.snapshot_states is None
 
 
 def test_a_sqlite3_bag_is_read_like_an_mcap_one(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run", bag=False, config=False)
     write_bag(run_dir, {"/nav/pose": TOPICS["/nav/pose"], "/recog/objects": TOPICS["/recog/objects"]}, "sqlite3")
-    page = parse(build_html(run_dir)[0])
+    page = parse(build_html(run_dir, Options(topics=LAB_TOPICS))[0])
     assert {"Fig. 7.16", "Fig. 7.19"} <= {alt for alt, _ in page.images}
     assert ["/recog/objects", "ckm_msgs/msg/Detections", "61"] in page.table("topics")

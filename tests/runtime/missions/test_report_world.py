@@ -60,7 +60,7 @@ def test_a_frame_too_far_from_its_moment_is_not_shown_as_of_it() -> None:
     moments = [Moment(1000.0, 10.0, "turtlebot", "PICK", "Fetch/PICK", "ended")]
     near = Frame("/turtlebot/xtion_rgb_raw", moments[0], 1000.0 + MAX_FRAME_GAP + 3.0, {"format": "x", "data": b""})
     data = BagData(bags=[Path("bag")], topics={"/turtlebot/xtion_rgb_raw": "sensor_msgs/msg/Image"}, frames=[near])
-    page = parse(snapshots_section(data, ReportTopics(), moments, ["PICK"]))
+    page = parse(snapshots_section(data, ReportTopics(cameras=("/turtlebot/xtion_rgb_raw",)), moments, ["PICK"]))
     assert page.images == []
     assert page.table("snapshots agent-turtlebot") == [
         ["no framePICK ended at 10.0 sthe nearest frame is +8.0 s from it (more than 5 s)"]

@@ -28,6 +28,8 @@ SYSTEM = f"""<?xml version="1.0" encoding="UTF-8"?>
     <Plugin name="fusion" kind="feature-fusion">
       <Param name="poses" value="{POSE}"/>
       <Param name="objects" value="cylinder_red_stripes: cylinder red_stripes"/>
+      <Param name="fx" value="525"/>
+      <Param name="calibrationWidth" value="640"/><Param name="calibrationHeight" value="480"/>
     </Plugin>
     <Profile name="FUSION"><Use plugin="fusion"/></Profile>
     <Service name="Fusion" rate="0.02" performance="reliability">
