@@ -49,6 +49,8 @@ class Localization(ProcessingPlugin):
 
     PORTS = Ports(inputs={"odometry": NUMBERS, "ranges": NUMBERS, "*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "localization"  # docs/interfaces.md
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"pose": ("x", "y", "yaw", "covariance", "dispersion", "filter",
+                                                                "reliability")}
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P(
             "filter",

@@ -245,6 +245,9 @@ class KdTreeShapeClassifier(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability
     PROVIDES = "object-detection"  # docs/interfaces.md
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"objects": (
+        "objects[].name", "objects[].reliability", "objects[].x", "objects[].y", "objects[].z", "objects[].points",
+        "reliability")}
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "", "ASCII PCD file of labelled descriptors, relative to the configuration file (required)."),
         P("k", 5, "Nearest training descriptors that vote.", min=1),

@@ -135,6 +135,11 @@ class FeatureFusion(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})  # one recognition result per input
     PROVIDES = "fusion"  # docs/interfaces.md
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"objects": (
+        *(f"objects[].{name}" for name in ("name", "shape", "texture", "x", "y", "z", "sigma", "origin", "direction",
+                                           "centre", "frame", "reliability", "reinforcement", "sources",
+                                           "observations", "observer")),
+        "reliability", "unplaced")}
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind.", entries=KIND),
         P("poses", "", "Sensor frames in the common frame (default identity).", entries=POSE),

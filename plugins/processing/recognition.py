@@ -204,6 +204,9 @@ class KeypointMatching(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability, keypoints, size
     PROVIDES = "object-detection"  # docs/interfaces.md
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"objects": (
+        "objects[].name", "objects[].matches", "objects[].inliers", "objects[].x", "objects[].y",
+        "objects[].reliability", "reliability", "keypoints", "width", "height")}
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("model", "", "Texture model file, relative to the configuration file (required)."),
         P("ratio", 0.75, "Lowe's ratio test threshold, in (0, 1]."),

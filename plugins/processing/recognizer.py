@@ -28,6 +28,7 @@ class OrbRecognition(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": MAPPING})  # an image in, objects + reliability out
     PROVIDES = "object-detection"  # docs/interfaces.md
+    WRITES = KeypointMatching.WRITES
     PARAMS: ClassVar[Mapping[str, Any]] = as_params(OrbKeypoints.PARAMS) | KeypointMatching.PARAMS
 
     def __init__(self, record: Plugin) -> None:

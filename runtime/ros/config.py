@@ -19,7 +19,8 @@ A CKM value that is not a dict stands for the ``data`` field of a ROS type that 
 their defaults (decision D131). :meth:`ConfigRosTypes.value_problems` is what ``verify`` checks a
 producer's or consumer's value type with (:func:`runtime.ros.compat.compatibility_problems` for
 MessageTypes); :meth:`ConfigRosTypes.payload` turns a CKM value into the payload
-:mod:`runtime.ros.convert` encodes.
+:mod:`runtime.ros.convert` encodes (a standard kind's planar result as its interface's standard
+type: :mod:`runtime.ros.interface_types`, D279).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from ..resources import codec
 from ..verification.manifest import ANY, ARRAY, MAPPING, NUMBER, NUMBERS
 from .compat import compatibility_problems, field_problems, snake_case
 from .convert import _DEFAULT_ENCODING, IMAGE, TIME_TYPES
+from .interface_types import to_standard
 from .types import RosTypeError, RosTypes
 
 CKM_PACKAGE = "ckm_msgs"
@@ -219,6 +221,8 @@ class ConfigRosTypes:
         if not isinstance(value, Mapping):
             return {"data": value} if "data" in fields else value  # else to_message says what is wrong
         names = self.field_names.get(ros_type)
+        if names is None:  # CKM's planar conventions as the standard type's fields (D279)
+            value = to_standard(ros_type, fields, value)
         result: dict[Any, Any] = {}
         for key, item in value.items():
             # generated types: the names they were made with; others: as written, or in snake_case

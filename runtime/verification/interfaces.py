@@ -32,10 +32,18 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Port:
-    """One Input, Output, Parameter or quality measure an interface requires, and what it carries."""
+    """One Input, Output, Parameter or quality measure an interface requires, and what it carries.
+
+    ``messages`` names the ROS 2 types its topic may carry as they are (the first a standard one
+    where ROS 2 has one, else a ``ckm_interfaces`` type CKM ships; D276), ``fields`` the fields every
+    kind of the interface writes (``pose.x`` a nested field, ``objects[].name`` one of a list's
+    elements); a kind that writes more declares them itself (:func:`writes_of`).
+    """
 
     name: str
     doc: str
+    messages: tuple[str, ...] = ()
+    fields: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,11 @@ class Interface:
     measures: tuple[Port, ...] = ()
     goals: str = ""
 
+    def port(self, output: str, outputs: int) -> Port | None:
+        """The Output port a service Output of this name is (with one Output and one port, that one)."""
+        found = next((p for p in self.outputs if p.name == output), None)
+        return found if found is not None or outputs != 1 or len(self.outputs) != 1 else self.outputs[0]
+
     def missing(self, inputs: set[str], outputs: set[str], parameters: set[str], measures: set[str]) -> list[str]:
         """What a service with these port and measure names lacks to be of this interface, in words."""
         lacking = []
@@ -68,27 +81,39 @@ _ID_GOALS = (
     "left over from an earlier goal is never read as this one's; a newer goal preempts the older one."
 )
 
+_SCAN = ("stamp", "angle_min", "angle_max", "angle_increment", "time_increment", "scan_time", "range_min",
+         "range_max", "ranges", "intensities")
+_STATUS = ("stamp", "id", "group", "pose", "state", "active", "error", "holding", "contact", "opening")
+_ESTIMATE = ("stamp", "pose.x", "pose.y", "pose.yaw", "covariance", "dispersion")
+LASER_SCAN, ODOMETRY = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry"
+POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+CKM = "ckm_interfaces/msg/"
+"""The package of the message types CKM ships (ckmconf/ros/ckm_interfaces, D278)."""
+
 STANDARD: dict[str, Interface] = {
     i.name: i
     for i in (
         Interface(
             "laser-scan",
             "A planar range scanner's scans, in the frame of its mount.",
-            outputs=(Port("scan", "sensor_msgs/LaserScan's fields: `stamp`, `angle_min`, `angle_max`, "
-                                  "`angle_increment` (rad), `time_increment`, `scan_time` (s), `range_min`, "
-                                  "`range_max` (m), `ranges` (m, one per beam; REP 117's inf, -inf, nan), "
-                                  "`intensities`"),),
+            outputs=(Port("scan", "sensor_msgs/LaserScan's fields: `stamp` (its `header.stamp` on the ROS type), "
+                                  "`angle_min`, `angle_max`, `angle_increment` (rad), `time_increment`, "
+                                  "`scan_time` (s), `range_min`, `range_max` (m), `ranges` (m, one per beam; "
+                                  "REP 117's inf, -inf, nan), `intensities`", (LASER_SCAN,), _SCAN),),
         ),
         Interface(
             "base-drive",
             "A mobile base driven by relative moves, with wheel odometry.",
             inputs=(Port("move_goal", "a move `{id, frame: robot, x, y (m), yaw (rad)}` from where the base "
-                                      "stands; the behaviors' `move` Output is this topic"),),
+                                      "stands; the behaviors' `move` Output is this topic", (f"{CKM}MoveGoal",),
+                         ("id", "frame", "x", "y", "yaw")),),
             outputs=(
                 Port("move_status", "`{id, state: moving | done | failed, remaining, total (m)}` of the newest "
-                                    "move"),
+                                    "move", (f"{CKM}MoveStatus",), ("id", "state", "remaining", "total")),
                 Port("odom", "`{stamp, pose: {x, y, yaw}, twist: {linear, angular}, dispersion}` (m, rad, m/s, "
-                             "rad/s; dispersion in m)"),
+                             "rad/s; dispersion in m); as nav_msgs/Odometry the pose's covariance holds the "
+                             "dispersion d (σx² = σy² = d²/2)", (ODOMETRY,),
+                     ("stamp", "pose.x", "pose.y", "pose.yaw", "twist.linear", "twist.angular", "dispersion")),
             ),
             parameters=(Port("speed", "the top linear speed of a move (m/s)"),),
             goals=_ID_GOALS,
@@ -98,13 +123,16 @@ STANDARD: dict[str, Interface] = {
             "Localization on the system's map and path planning to a goal pose.",
             outputs=(
                 Port("pose", "the estimate `{stamp, pose: {x, y, yaw}, covariance (3x3, row-major), dispersion}` "
-                             "on the map (m, rad)"),
+                             "on the map (m, rad); geometry_msgs/PoseWithCovarianceStamped carries all but the "
+                             "`dispersion` (the service's own quality measure), ckm_interfaces/PoseEstimate all",
+                     (POSE, f"{CKM}PoseEstimate"), _ESTIMATE),
                 Port("status", "`{goal, state: planning | active | arrived | failed, path_length, remaining "
-                               "(m), reason}` of the newest goal; `reason` says why it failed"),
+                               "(m), reason}` of the newest goal; `reason` says why it failed",
+                     (f"{CKM}NavigationStatus",), ("goal", "state", "path_length", "remaining", "reason")),
             ),
             parameters=(Port("goal", "the goal on the map: `\"x y yaw\"` (m, m, rad), an Area's name, or an "
                                      "Object's name (the pose short of it, facing it); empty: none (the base "
-                                     "stands)"),),
+                                     "stands). A Parameter, not a topic: no message type"),),
             goals="The status echoes the goal it reports (`goal`), so a status of an earlier goal is never read as "
                   "this one's; setting a goal preempts the older one, an empty goal cancels it.",
         ),
@@ -112,40 +140,50 @@ STANDARD: dict[str, Interface] = {
             "arm-motion",
             "An arm and its gripper moved to named poses.",
             inputs=(Port("goal", "a goal `{id, group: arm | gripper, pose}`; the behaviors' `arm_goal` Output "
-                                 "is this topic"),),
+                                 "is this topic", (f"{CKM}ArmGoal",), ("id", "group", "pose")),),
             outputs=(Port("status", "`{stamp, id, group, pose, state: moving | reached | failed, active, error, "
                                     "holding, contact, opening}` of the newest goal: `holding` a gripper goal "
                                     "that closed on an object, `contact` an arm goal stopped by one, `opening` "
-                                    "the gripper's share of its range"),),
+                                    "the gripper's share of its range", (f"{CKM}ArmStatus",), _STATUS),),
             goals=_ID_GOALS,
         ),
         Interface(
             "object-detection",
             "Objects recognised in a sensor's frames (texture, depth shape or colour).",
-            outputs=(Port("objects", "`{objects: [{name, shape, texture, x, y, z (m), reliability, sources}], "
-                                     "reliability}` in the sensor's frame"),),
+            outputs=(Port("objects", "`{objects: [{name, x, y, …, reliability}], reliability}` in the sensor's "
+                                     "frame; each kind's further fields below", (f"{CKM}Detections",),
+                          ("objects[].name", "objects[].x", "objects[].y", "objects[].reliability", "reliability")),),
         ),
         Interface(
             "fusion",
             "Recognitions of several sensors fused into one set of objects on the map.",
-            outputs=(Port("objects", "`{objects: [{name, shape, texture, frame, x, y, z, centre, reliability, "
-                                     "sources}], reliability}`"),),
+            outputs=(Port("objects", "`{objects: [{name, shape, texture, frame, x, y, z, reliability, "
+                                     "sources, …}], reliability}`", (f"{CKM}Detections",),
+                          ("objects[].name", "objects[].shape", "objects[].texture", "objects[].frame",
+                           "objects[].x", "objects[].y", "objects[].z", "objects[].reliability", "objects[].sources",
+                           "reliability")),),
         ),
         Interface(
             "pan-tilt-tracking",
             "A camera head kept on a recognised object, placing it on the map.",
-            outputs=(Port("target", "the tracked object `{stamp, label, frame, x, y, z, reliability}`"),),
+            outputs=(Port("target", "the tracked object `{stamp, label, frame, x, y, z, reliability}`",
+                          (f"{CKM}ObjectPosition",), ("stamp", "label", "frame", "x", "y", "z", "reliability")),),
             measures=(Port("moving", "1 while the head follows the target"),),
         ),
         Interface(
             "localization",
             "A pose estimate on the system's map from odometry and range readings.",
-            outputs=(Port("pose", "the pose estimate `{stamp, x, y, yaw, dispersion}` (m, rad)"),),
+            outputs=(Port("pose", "the pose estimate `{x, y, yaw, covariance (3x3, row-major), dispersion}` (m, "
+                                  "rad); geometry_msgs/PoseWithCovarianceStamped carries all but the `dispersion` "
+                                  "(the service's own quality measure)", (POSE, f"{CKM}PoseEstimate"),
+                          ("x", "y", "yaw", "covariance", "dispersion")),),
         ),
         Interface(
             "map-sharing",
             "The environment map's objects, updated from perception and shared between robots.",
-            outputs=(Port("objects", "`{type: objects, map, stamp, objects: [...]}` updates of the map"),),
+            outputs=(Port("objects", "`{type: objects, map, stamp, objects: [...]}` updates of the map (a "
+                                     "MessageType of the system or `bytes`: no ROS type holds a map object)",
+                          (), ("type", "map", "stamp", "objects")),),
         ),
     )
 }
@@ -192,6 +230,13 @@ def uses_of(cls: type[Any] | None) -> Uses | None:
     return declared if isinstance(declared, Uses) else None
 
 
+def writes_of(cls: type[Any] | None) -> Mapping[str, tuple[str, ...]]:
+    """The fields a kind declares it writes (``WRITES``: Output name → field paths, as :class:`Port`'s
+    ``fields``); empty when it declares none (its interface's ports then say what it writes)."""
+    declared = getattr(cls, "WRITES", None) if cls is not None else None
+    return declared if isinstance(declared, Mapping) else {}
+
+
 def provided_by(cls: type[Any] | None) -> str | None:
     """The interface a processing plugin kind implements as a service's output plugin (None: none declared)."""
     provided = getattr(cls, "PROVIDES", None) if cls is not None else None
@@ -220,4 +265,5 @@ def service_interface(resource: SmartResource, service: Service, registry: Regis
     return provided.pop() if len(provided) == 1 else None
 
 
-__all__ = ["STANDARD", "Interface", "Port", "Use", "Uses", "provided_by", "service_interface", "uses_of"]
+__all__ = ["CKM", "STANDARD", "Interface", "Port", "Use", "Uses", "provided_by", "service_interface", "uses_of",
+           "writes_of"]

@@ -21,6 +21,8 @@ single node; ``verify`` does the same for a loaded System:
   Input's name). A ``bytes`` topic carries the codec's encoding of any value (D98);
 - each service's interface (``interface=`` or its output plugin kind's ``PROVIDES``) and its ports,
   and each behavior's ``<Uses>`` against the services its kind ``USES`` (:mod:`.interface_checks`);
+- each ``<Output>``'s topic type holds every field its output plugin writes (its ``WRITES``, else its
+  interface port's fields; :mod:`.message_checks`);
 - channel sizes are ones the backend serves (a loopback plant has one output);
 - what the runtime would silently not run is refused: Smart Resources on a ROS kernel (no ROS
   kernel runs here), services without scenarios (only SPT scenarios are executed), services whose
@@ -58,6 +60,7 @@ from ..kernel.vectors import chain_refusal, is_vector, problem, refusal, scalar_
 from ..registry import Registry, default_registry
 from .interface_checks import InterfaceChecks
 from .manifest import ANY, MAPPING, NUMBER, NUMBERS, ports_of
+from .message_checks import MessageChecks
 from .types import describe, fits
 
 _ChannelRead = tuple[HWChannel, str | None, type[Any] | None]
@@ -76,7 +79,7 @@ def verify(system: System, registry: Registry | None = None) -> list[ConfigError
     return sorted(set(checker.report.errors), key=ConfigError.sort_key)
 
 
-class _Verifier(InterfaceChecks):
+class _Verifier(InterfaceChecks, MessageChecks):
     """One pass over a system, element by element (the shared checks are :class:`Checker`'s)."""
 
     def run(self) -> None:
@@ -239,6 +242,7 @@ class _Verifier(InterfaceChecks):
             used = [profiles[s.profile] for s in service.scenarios if s.profile in profiles]
             self._service_outputs(resource, service, used, kinds, node)
             self._service_interface(resource, service, used, kinds)
+            self._output_fields(resource, service, used, kinds, node)
         for root, services in streams.items():
             self._stream_inputs(resource, root, services, kinds, node)
             if not any(service.inputs for service in services):
