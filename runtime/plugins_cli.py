@@ -19,11 +19,12 @@ import inspect
 import json
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from .registry import CATEGORIES, Registry, RegistryError, default_registry
-from .verification.interfaces import STANDARD, Interface, provided_by, uses_of
+from .ros.interface_types import ADAPTATIONS
+from .verification.interfaces import STANDARD, Interface, Port, provided_by, uses_of, writes_of
 from .verification.manifest import Params, Ports, params_of, ports_of
 
 _NAMES = re.compile(r"^``[\w.-]+``(?:\s*/\s*``[\w.-]+``)*:\s*")
@@ -178,12 +179,41 @@ def _implementers(registry: Registry, interface: str, package: str | None) -> tu
     return kinds, behaviors
 
 
-def _interface_section(interface: Interface, kinds: list[str], behaviors: list[str]) -> list[str]:
+def _codes(names: Sequence[str]) -> str:
+    return ", ".join(f"`{n}`" for n in names)
+
+
+def _port_fields(interface: Interface, label: str, port: Port, writers: Mapping[str, type[Any] | None]) -> list[str]:
+    """The fields of one port, kind by kind (an Input: what a goal carries), and what its types drop."""
+    out, every = [], set(port.fields)
+    if label == "Output":
+        for kind, cls in writers.items():
+            written = writes_of(cls).get(port.name) or (
+                next(iter(writes_of(cls).values())) if len(writes_of(cls)) == 1 and len(interface.outputs) == 1
+                else port.fields)
+            every |= set(written)
+            out.append(f"- `{kind}` writes {_codes(written)}")
+    elif port.fields:
+        out.append(f"- a goal carries {_codes(port.fields)}")
+    for message in port.messages:
+        adaptation = ADAPTATIONS.get(message)
+        for name, why in (adaptation.dropped.items() if adaptation is not None else ()):
+            if name in every:
+                out.append(f"- on `{message}`, `{name}` is not carried: {why}")
+    return [f"{label} `{port.name}`:", "", *out, ""] if out else []
+
+
+def _interface_section(interface: Interface, kinds: list[str], behaviors: list[str], registry: Registry) -> list[str]:
     out = ["", f"## `{interface.name}`", "", interface.summary, ""]
-    out += ["| port | name | what it carries |", "| --- | --- | --- |"]
+    out += ["| port | name | message types | what it carries |", "| --- | --- | --- | --- |"]
     for label, ports in (("Input", interface.inputs), ("Output", interface.outputs),
                          ("Parameter", interface.parameters), ("QualityMeasure", interface.measures)):
-        out += [f"| {label} | `{port.name}` | {_cell(port.doc)} |" for port in ports]
+        out += [f"| {label} | `{port.name}` | {_codes(port.messages) or '—'} | {_cell(port.doc)} |" for port in ports]
+    writers = {kind: registry.find("plugin", kind.removeprefix("plugin.")) for kind in kinds}
+    fields = [line for label, ports in (("Input", interface.inputs), ("Output", interface.outputs))
+              for port in ports for line in _port_fields(interface, label, port, writers)]
+    if fields:
+        out += ["", "Fields (`a.b` nested, `a[].b` in each element of a list), kind by kind:", "", *fields[:-1]]
     if interface.goals:
         out += ["", f"Goals: {interface.goals}"]
     out += ["", "Implemented by: " + (", ".join(f"`{k}`" for k in kinds) or "no kind of this distribution "
@@ -207,9 +237,16 @@ def interfaces_markdown(registry: Registry, package: str | None = None) -> str:
         "`ckm-validate` refuses, at its line, a required alias missing, an alias bound to a service of "
         "another interface or of none, and a service of an interface missing one of its ports. Further "
         "`<Uses>` (services a behavior only configures or asks a quality of, for eq. 5.1) are accepted.",
+        "",
+        "Each port names the ROS 2 types its topic may carry: a standard one (sensor_msgs, nav_msgs, "
+        "geometry_msgs) where ROS 2 has one, else one of the `ckm_interfaces` package CKM ships "
+        "(docs/ros.md). A standard kind's planar result becomes its port's standard type on the wire and in "
+        "the recording (`stamp` in the `header`, a yaw as a quaternion); a topic may also carry a "
+        "MessageType of the system's own. Either way `ckm-validate` refuses, at the Output's line, a topic "
+        "type that lacks a field its kind writes (the lists below), so nothing is lost silently.",
     ]
     for interface in STANDARD.values():
-        out += _interface_section(interface, *_implementers(registry, interface.name, package))
+        out += _interface_section(interface, *_implementers(registry, interface.name, package), registry)
     return "\n".join(out) + "\n"
 
 

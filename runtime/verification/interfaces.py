@@ -175,7 +175,7 @@ STANDARD: dict[str, Interface] = {
             "A pose estimate on the system's map from odometry and range readings.",
             outputs=(Port("pose", "the pose estimate `{x, y, yaw, covariance (3x3, row-major), dispersion}` (m, "
                                   "rad); geometry_msgs/PoseWithCovarianceStamped carries all but the `dispersion` "
-                                  "(the service's own quality measure)", (POSE, f"{CKM}PoseEstimate"),
+                                  "(the service's own quality measure)", (POSE,),
                           ("x", "y", "yaw", "covariance", "dispersion")),),
         ),
         Interface(

@@ -417,9 +417,19 @@ if __name__ == "__main__":  # regenerate expected.json (see tests/data/verify/RE
 
 # ---------------------------------------------------------------- service topics against processing plugins
 
+DETECTIONS = (
+    '<MessageType name="Detection"><Field name="name" type="string"/><Field name="matches" type="uint32"/>'
+    '<Field name="inliers" type="uint32"/><Field name="x" type="float64"/><Field name="y" type="float64"/>'
+    '<Field name="reliability" type="float64"/></MessageType><MessageType name="Detections">'
+    '<Field name="objects" type="Detection" count="0"/><Field name="reliability" type="float64"/>'
+    '<Field name="keypoints" type="uint32"/><Field name="width" type="uint32"/><Field name="height" type="uint32"/>'
+    "</MessageType>"
+)
+"""Every field orb-recognition writes (docs/interfaces.md), so the type loses none of them (D277)."""
+
 SERVICE = """<?xml version="1.0" encoding="UTF-8"?>
 <System xmlns="urn:ckm:1" version="1.0" name="ports">
-  <MessageType name="Detections"><Field name="reliability" type="float64"/></MessageType>
+  {detections}
   {topics}
   <Node name="pc"/>
   <SmartResource name="R" node="pc">
@@ -440,7 +450,7 @@ def service_problems(tmp_path: Path, first: str, last: str, topics: dict[str, st
     """verify's messages for one service whose profile is first → last (the output plugin)."""
     path = tmp_path / "service.xml"
     declared = "\n  ".join(f'<Topic name="{name}" type="{kind}"/>' for name, kind in topics.items())
-    path.write_text(SERVICE.format(topics=declared, first=first, last=last, ports=ports))
+    path.write_text(SERVICE.format(detections=DETECTIONS, topics=declared, first=first, last=last, ports=ports))
     return [f"{e.line}: {e.message}" for e in verify(ckmconf.load(path), builtin())]
 
 
@@ -480,7 +490,7 @@ def test_several_outputs_take_fields_of_a_dict_result(tmp_path: Path) -> None:
 
 
 def test_several_inputs_are_checked_by_name_against_the_acquisition_plugin(tmp_path: Path) -> None:
-    topics = {"/odom": "float64", "/ranges": "string", "/pose": "Detections"}
+    topics = {"/odom": "float64", "/ranges": "string", "/pose": "bytes"}
     ports = (
         '<Input name="odometry" topic="/odom"/><Input name="ranges" topic="/ranges"/>'
         '<Output name="pose" topic="/pose"/>'
