@@ -140,8 +140,9 @@ def markdown(registry: Registry, package: str | None = None) -> str:
         "configuration against these declarations (see `docs/writing-plugins.md` to add a kind).",
         "",
         "Value types of ports: a built-in or MessageType name, `number` (one float), `numbers` "
-        "(one float per channel element), `mapping` (a dict of fields, fits any MessageType), "
-        "`array` (an n-dimensional array such as an image, fits only `bytes`), `any` (not checked). "
+        "(one float per channel element), `mapping` (a dict of fields, fits a MessageType holding every "
+        "field the kind writes: docs/interfaces.md), `array` (an n-dimensional array such as an image, "
+        "fits only `bytes`), `any` (not checked). "
         "Ranges: `[a, b]` inclusive, `(a, b)` exclusive.",
     ]
     for category in CATEGORIES:

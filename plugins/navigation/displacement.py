@@ -2,7 +2,8 @@
 
 Inputs (a mapping, the service's ``<Input>`` names): ``path`` (Path2D from Navigation.AMCL, in the
 odom frame, re-anchored every 0.8 s), ``move_goal`` (Move2D, a relative move of APPR or BACK, in the
-robot frame, with an optional ``yaw_tolerance`` of its own for the final heading) and
+robot frame, with an optional ``yaw_tolerance`` of its own for the final heading, 0 or none for the
+service's own, as a ``ckm_interfaces/msg/MoveGoal`` carries it when not given) and
 ``wheel_odom`` (the Odometry of the kobuki's diff-drive-odometry controller).
 
 Outputs: ``odom`` (Odometry: the wheel odometry's pose and twist with this service's dispersion),
@@ -216,7 +217,8 @@ class BaseDisplacement(ProcessingPlugin):
         local = (number(goal, "x", self.owner, where), number(goal, "y", self.owner, where),
                  wrap(number(goal, "yaw", self.owner, where)))
         gains = self.gains
-        if goal.get("yaw_tolerance") is not None:  # a move that must end aimed finer (APPR_FLOOR, D252)
+        # a move that must end aimed finer (APPR_FLOOR, D252); 0 is ckm_interfaces/msg/MoveGoal's "not given"
+        if goal.get("yaw_tolerance") not in (None, 0, 0.0):
             tolerance = number(goal, "yaw_tolerance", self.owner, where)
             if not 0.005 <= tolerance <= 0.5:
                 raise ValueError(f"{self.owner}: {where} field 'yaw_tolerance' = {tolerance!r} must be in "

@@ -221,7 +221,7 @@ class ConfigRosTypes:
         if not isinstance(value, Mapping):
             return {"data": value} if "data" in fields else value  # else to_message says what is wrong
         names = self.field_names.get(ros_type)
-        if names is None:  # CKM's planar conventions as the standard type's fields (D279)
+        if names is None:  # CKM's planar conventions as the standard type's fields
             value = to_standard(ros_type, fields, value)
         result: dict[Any, Any] = {}
         for key, item in value.items():

@@ -113,7 +113,7 @@ def test_relative_moves_end_at_the_goal_pose(goal: dict[str, Any], backwards: bo
     assert (min(v for v, _ in robot.commands) < 0) == backwards  # BACK reverses, it does not turn round
 
 
-@pytest.mark.parametrize("tolerance", [None, 0.01, 0.005])
+@pytest.mark.parametrize("tolerance", [None, 0.0, 0.01, 0.005])  # 0: a MoveGoal message's "not given"
 def test_a_move_with_its_own_yaw_tolerance_ends_aimed_within_it_and_keeps_it_in_its_state(
     tolerance: float | None,
 ) -> None:
@@ -133,7 +133,7 @@ def test_a_move_with_its_own_yaw_tolerance_ends_aimed_within_it_and_keeps_it_in_
             service = copy
     assert status["state"] == "done"
     error = abs(math.remainder(robot.yaw - 0.3 - 0.4, 2 * math.pi))
-    if tolerance is None:
+    if not tolerance:
         assert 0.01 < error <= 0.03  # the service's own tolerance: the last turn stops early
     else:
         assert error <= tolerance
@@ -198,7 +198,7 @@ def test_odometry_dispersion_grows_with_distance_and_rotation_and_resets_with_a_
         ({"path": path([]) | {"points": 3}}, "field 'points' must be a list"),
         ({"move_goal": move(1, 0.5) | {"frame": "map"}}, "input 'move_goal' must be in the robot frame"),
         ({"move_goal": move(1, math.inf)}, "input 'move_goal' field 'x' must be a finite number"),
-        ({"move_goal": move(1, 0.5) | {"yaw_tolerance": 0.0}}, "field 'yaw_tolerance' = 0.0 must be in"),
+        ({"move_goal": move(1, 0.5) | {"yaw_tolerance": 0.001}}, "field 'yaw_tolerance' = 0.001 must be in"),
         ({"move_goal": move(1, 0.5) | {"yaw_tolerance": "fine"}}, "field 'yaw_tolerance' must be a finite number"),
         ({"wheel_odom": {"pose": {"x": 0.0}}}, "input 'wheel_odom' pose field 'y'"),
     ],

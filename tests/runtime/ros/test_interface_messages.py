@@ -245,3 +245,22 @@ def test_a_field_no_adaptation_knows_still_fails_the_encoder_naming_it(tmp_path:
     with pytest.raises(ValueError, match="wheel_ticks"):
         CdrWire(ConfigRosTypes(system), system).encode(
             "nav_msgs/msg/Odometry", {"stamp": 1.0, "pose": {"x": 0, "y": 0, "yaw": 0}, "wheel_ticks": 3})
+
+
+@pytest.mark.parametrize("params", [{"speed": 0.3}, {"speed": 0.6, "maxAngular": 1.0, "accel": 0.8}])
+def test_a_move_goal_received_as_ckm_interfaces_move_goal_drives_the_base(
+    tmp_path: Path, params: dict[str, float]
+) -> None:
+    """A goal from a ROS 2 node (its unset yaw_tolerance 0: the service's own), on the Kobuki's and the rover's
+    limits."""
+    system = typed(tmp_path, move="ckm_interfaces/msg/MoveGoal")
+    wire = CdrWire(ConfigRosTypes(system), system)
+    goal = across(wire, "ckm_interfaces/msg/MoveGoal", {"id": 4, "frame": "robot", "x": 0.4, "y": 0.0, "yaw": 0.0})
+    assert goal["yaw_tolerance"] == 0.0
+    robot, service = Unicycle((0.0, 0.0, 0.0)), base(**params)
+    status: dict[str, Any] = {}
+    for _ in range(300):
+        status = robot.frame(service, move_goal=goal)["move_status"]
+        if status["state"] != "moving":
+            break
+    assert (status["id"], status["state"]) == (4, "done") and robot.x == pytest.approx(0.4, abs=0.05)
