@@ -83,6 +83,7 @@ def describe(registry: Registry, category: str, kind: str) -> dict[str, Any]:
         "outputs": dict(ports.outputs),
         "sizes": list(ports.sizes),
         "provides": provided_by(cls),
+        "writes": {name: list(fields) for name, fields in writes_of(cls).items()},
         "uses": [{"alias": u.alias, "interface": u.interface, "optional": u.optional, "doc": u.doc}
                  for u in (uses_of(cls) or ())],
     }
@@ -90,6 +91,7 @@ def describe(registry: Registry, category: str, kind: str) -> dict[str, Any]:
 
 def _uses_text(info: dict[str, Any]) -> list[str]:
     lines = [f"implements interface: {info['provides']}"] if info.get("provides") else []
+    lines += [f"writes onto Output {name!r}: {', '.join(fields)}" for name, fields in info.get("writes", {}).items()]
     for use in info.get("uses", ()):
         optional = ", optional" if use["optional"] else ""
         lines.append(f"uses as {use['alias']!r}: {use['interface']} service{optional} ({use['doc']})")
