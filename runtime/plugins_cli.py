@@ -191,9 +191,7 @@ def _port_fields(interface: Interface, label: str, port: Port, writers: Mapping[
     out, every = [], set(port.fields)
     if label == "Output":
         for kind, cls in writers.items():
-            written = writes_of(cls).get(port.name) or (
-                next(iter(writes_of(cls).values())) if len(writes_of(cls)) == 1 and len(interface.outputs) == 1
-                else port.fields)
+            written = writes_of(cls).get(port.name) or port.fields
             every |= set(written)
             out.append(f"- `{kind}` writes {_codes(written)}")
     elif port.fields:
@@ -215,6 +213,11 @@ def _interface_section(interface: Interface, kinds: list[str], behaviors: list[s
     writers = {kind: registry.find("plugin", kind.removeprefix("plugin.")) for kind in kinds}
     fields = [line for label, ports in (("Input", interface.inputs), ("Output", interface.outputs))
               for port in ports for line in _port_fields(interface, label, port, writers)]
+    names = {p.name for p in interface.outputs}
+    further = [f"- `{kind}` Output `{name}`: {_codes(written)}" for kind, cls in writers.items()
+               for name, written in writes_of(cls).items() if name not in names]
+    if further:
+        fields += ["Further Outputs of its kinds (not the interface's):", "", *further, ""]
     if fields:
         out += ["", "Fields (`a.b` nested, `a[].b` in each element of a list), kind by kind:", "", *fields[:-1]]
     if interface.goals:

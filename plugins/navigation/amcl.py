@@ -84,6 +84,12 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "navigation"  # docs/interfaces.md
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {  # beyond the interface's pose and status
+        "path": ("id", "goal", "frame", "points", "yaw", "speed"),
+        "particles": ("stamp", "frame", "total", "x", "y", "yaw", "weight"),
+        "zoom": ("stamp", "frame", "mode", "x", "y", "width", "depth", "height", "reason", "since", "objects",
+                 "avoided"),
+    }
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
           "configuration file.", type=str),

@@ -70,6 +70,7 @@ class BaseDisplacement(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "base-drive"  # docs/interfaces.md
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"wheel_cmd": ("linear", "angular")}  # beyond its ports
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("speed", 0.3, "Top linear speed (Table 7.1 Speed); the service Parameter 'speed' overrides it.",
           unit="m/s", above=0.0, max=0.7),

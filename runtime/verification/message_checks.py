@@ -59,7 +59,8 @@ class MessageChecks(Checker):
                 if plugin is None or cls is None:
                     continue
                 interface, port = self._port(ref, cls, out.name, len(service.outputs))
-                lacking = tuple(self._lacking(carried, self._written(cls, out.name, len(service.outputs), port)))
+                written = self._written(cls, out.name, len(service.outputs), interface, port)
+                lacking = tuple(self._lacking(carried, written))
                 if lacking:  # one problem per Output and missing set, naming every plugin (one per profile)
                     plugins = refused.setdefault(lacking, ([], interface, port))[0]
                     if plugin not in plugins:
@@ -75,14 +76,17 @@ class MessageChecks(Checker):
         return interface, STANDARD[interface].port(output, outputs)
 
     @staticmethod
-    def _written(cls: type[Any], output: str, outputs: int, port: Port | None) -> tuple[str, ...]:
-        """What the kind writes onto this Output: its own ``WRITES``, else its port's fields."""
+    def _written(
+        cls: type[Any], output: str, outputs: int, interface: str | None, port: Port | None
+    ) -> tuple[str, ...]:
+        """What the kind writes onto this Output: its own ``WRITES`` entry, else its port's fields. A
+        service of one Output publishes the whole result: known only for a kind of one result port."""
         writes = writes_of(cls)
-        if output in writes:
-            return tuple(writes[output])
-        if outputs == 1 and len(writes) == 1:
-            return tuple(next(iter(writes.values())))
-        return port.fields if port is not None and not writes else ()
+        if outputs > 1:
+            return tuple(writes.get(output, port.fields if port is not None else ()))
+        ports = {p.name: p.fields for p in STANDARD[interface].outputs} if interface is not None else {}
+        entries = {**ports, **writes}
+        return tuple(next(iter(entries.values()))) if len(entries) == 1 else ()
 
     def _lacking(self, carried: str, written: Iterable[str]) -> list[str]:
         """The fields of ``written`` a topic of type ``carried`` does not hold."""

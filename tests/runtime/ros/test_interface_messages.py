@@ -103,6 +103,13 @@ def test_every_port_type_is_a_ros_2_standard_type_or_a_shipped_one() -> None:
     assert STANDARD["navigation"].port("pose", 2).messages[0] == "geometry_msgs/msg/PoseWithCovarianceStamped"  # type: ignore[union-attr]
 
 
+def test_every_topic_port_names_its_message_types() -> None:
+    """Issue M: each interface with its message types (an interface added later types its ports too:
+    ckm_interfaces/msg/GripperCommand and GripperStatus are there for a gripper)."""
+    untyped = {(i.name, p.name) for i in STANDARD.values() for p in (*i.inputs, *i.outputs) if not p.messages}
+    assert untyped <= {("map-sharing", "objects")}, f"ports without message types: {sorted(untyped)}"
+
+
 def test_the_shipped_package_is_a_ros_package_whose_types_all_load(tmp_path: Path) -> None:
     names = shipped_ros_types()
     assert {"ckm_interfaces/msg/Detections", "ckm_interfaces/msg/GripperCommand", "ckm_interfaces/msg/GripperStatus",
