@@ -7,7 +7,8 @@ groups, ``arm`` and ``gripper``. This SPT service plugin plays that role on its 
 - ``goal`` (ArmGoal, ``/arm/goal``): ``{"id": int, "group": "arm" | "gripper", "pose": name,
   "speed": optional share in (0, 1]}``, or an arm goal by Cartesian target instead of a pose name,
   ``{"id", "group": "arm", "target": {"x", "y", "z" (m, base frame), "pitch" (rad, optional on an
-  arm of two pitch joints, D264)}}`` solved when it comes (IK from the URDF, seeded with the arm's
+  arm of two pitch joints, D264)}, "contact": optional, true: reached when stopped by contact, as
+  a ``contactPoses`` pose is}`` solved when it comes (IK from the URDF, seeded with the arm's
   present posture); a goal with a new id (or new content) preempts the old;
 - ``joint_states`` (JointState, ``/arm/joint_states``): ``{"stamp", "name": [...], "position":
   [...]}``; with no names (as the arm's bus sensor publishes it, D99) the positions are taken in
@@ -37,8 +38,8 @@ Outputs (only the keys naming a service Output are published):
 Reached: every joint of the group within ``tolerance`` (rad) of its target (the gripper within
 ``gripperTolerance`` of its range); a gripper *closing* whose fingers have stopped short — an
 object between them — for ``settle`` seconds after the planned time is reached too, with
-``holding`` true. An arm goal to one of the ``contactPoses`` (the place) whose joints have stood
-still (each within ``stillness``) short of the target for ``settle`` seconds after the planned time is
+``holding`` true. An arm goal to one of the ``contactPoses`` (the place), or one that asks
+``"contact": true``, whose joints have stood still (each within ``stillness``) short of the target for ``settle`` seconds after the planned time is
 reached too, with ``contact`` true in its status: the held object stands on the table and holds
 the arm back (a carried object hangs lower after a grasp that tilted it, D251); a last trajectory
 then holds the arm where it stopped, so that it stops pressing the object and the fingers open.
@@ -81,6 +82,7 @@ class _Goal:
         self.error = ""
         self.holding = False
         self.contact = False
+        self.stops_on_contact = False  # a contactPoses pose, or a goal asking "contact": true
         self.indices: list[int] = []
         self.target: list[float] = []
         self.started: float | None = None  # planned once joint states are known
@@ -277,6 +279,7 @@ class ArmPoses(ProcessingPlugin):
             goal.target_asked = {"x": parsed.x, "y": parsed.y, "z": parsed.z, "pitch": parsed.pitch}
         elif pose not in known:
             return self._fail(goal, f"goal {goal.id}: unknown {group} pose {pose!r} (defined: {', '.join(known)})")
+        goal.stops_on_contact = group == "arm" and (pose in self.contact_poses or message.get("contact") is True)
         speed = message.get("speed")
         if speed:
             try:
@@ -334,7 +337,7 @@ class ArmPoses(ProcessingPlugin):
             if max(errors) <= self.params["tolerance"]:
                 goal.state = "reached"
                 return
-            if goal.pose in self.contact_poses and self._still(goal, positions, now, self.params["stillness"]):
+            if goal.stops_on_contact and self._still(goal, positions, now, self.params["stillness"]):
                 goal.state, goal.contact = "reached", True
                 return
         else:
@@ -347,7 +350,8 @@ class ArmPoses(ProcessingPlugin):
                 return
         if now - goal.started > goal.duration + self.params["timeout"]:
             worst = max(range(len(errors)), key=errors.__getitem__)
-            self._fail(goal, f"goal {goal.id}: {goal.group} pose {goal.pose!r} not reached in "
+            what = f"pose {goal.pose!r}" if goal.target_asked is None else f"target {target_text(goal.target_asked)}"
+            self._fail(goal, f"goal {goal.id}: {goal.group} {what} not reached in "
                              f"{goal.duration + self.params['timeout']:.1f} s ({self.joints[goal.indices[worst]]} "
                              f"still {errors[worst]:.3f} from its target)")
 
