@@ -69,8 +69,8 @@ def arm_service(model: Model, **params: object) -> ArmPoses:
 
 def gripper_service(model: Model, **params: object) -> ParallelGripper:
     """plugin.parallel-gripper on the model's measured finger joint."""
-    return ParallelGripper(plugin_record("gripper", "parallel-gripper", model=model.name, joints=model.finger,
-                                         **params))
+    given = {"model": model.name, "joints": model.finger, **params}
+    return ParallelGripper(plugin_record("gripper", "parallel-gripper", **given))
 
 
 def _controller(joints: tuple[str, ...], velocity: str) -> JointTrajectory:
