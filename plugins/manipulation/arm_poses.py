@@ -39,10 +39,11 @@ Reached: every joint of the group within ``tolerance`` (rad) of its target (the 
 ``gripperTolerance`` of its range); a gripper *closing* whose fingers have stopped short — an
 object between them — for ``settle`` seconds after the planned time is reached too, with
 ``holding`` true. An arm goal to one of the ``contactPoses`` (the place), or one that asks
-``"contact": true``, whose joints have stood still (each within ``stillness``) short of the target for ``settle`` seconds after the planned time is
-reached too, with ``contact`` true in its status: the held object stands on the table and holds
-the arm back (a carried object hangs lower after a grasp that tilted it, D251); a last trajectory
-then holds the arm where it stopped, so that it stops pressing the object and the fingers open.
+``"contact": true``, whose joints have stood still (each within ``stillness``) short of the target
+for ``settle`` seconds after the planned time is reached too, with ``contact`` true in its status:
+the held object stands on the table and holds the arm back (a carried object hangs lower after a
+grasp that tilted it, D251); a last trajectory then holds the arm where it stopped, so that it
+stops pressing the object and the fingers open.
 Failed: an unknown pose, a pose or target the IK left out of reach or out of the joint limits (a
 pose solved once, at set-up, a target when it comes, in a private pybullet client:
 :mod:`.kinematics`), a pitch the arm cannot set there, or not reached ``timeout`` seconds after the
@@ -78,6 +79,7 @@ class _Goal:
         self.id = message.get("id")
         self.group, self.pose, self.speed = group, pose, speed
         self.target_asked: dict[str, float | None] | None = None  # a Cartesian target, as the goal gave it
+        self.point: ArmTarget | None = None  # that target, parsed
         self.state = "moving"
         self.error = ""
         self.holding = False
@@ -139,7 +141,8 @@ class ArmPoses(ProcessingPlugin):
         except ValueError:
             raise ParamError(f"{self.owner}: parameter 'maxVelocity' = {v['maxVelocity']!r} is not numbers") from None
         count = len(self.joints)
-        if len(self.max_velocity) not in (0, 1, count) or not all(x > 0 and math.isfinite(x) for x in self.max_velocity):
+        positive = all(x > 0 and math.isfinite(x) for x in self.max_velocity)
+        if len(self.max_velocity) not in (0, 1, count) or not positive:
             raise ParamError(f"{self.owner}: parameter 'maxVelocity' needs one or {count} positive numbers")
         self.speed: float = v["speed"]
         self.contact_poses = frozenset(str(v["contactPoses"]).split())
@@ -276,6 +279,7 @@ class ArmPoses(ProcessingPlugin):
             parsed = target_of(target)
             if isinstance(parsed, str):
                 return self._fail(goal, f"goal {goal.id}: {parsed}")
+            goal.point = parsed
             goal.target_asked = {"x": parsed.x, "y": parsed.y, "z": parsed.z, "pitch": parsed.pitch}
         elif pose not in known:
             return self._fail(goal, f"goal {goal.id}: unknown {group} pose {pose!r} (defined: {', '.join(known)})")
@@ -287,8 +291,8 @@ class ArmPoses(ProcessingPlugin):
             except ValueError as exc:
                 return self._fail(goal, str(exc))
         assert self.model is not None
-        if group == "arm" and goal.target_asked is not None:
-            solution = self.model.solve(ArmTarget(**goal.target_asked), self._posture,
+        if group == "arm" and goal.point is not None and goal.target_asked is not None:
+            solution = self.model.solve(goal.point, self._posture,
                                         pitch_tolerance=self.params["pitchTolerance"])
             if solution.error:
                 return self._fail(goal, f"goal {goal.id}: target {target_text(goal.target_asked)} cannot be reached: "

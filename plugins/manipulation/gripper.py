@@ -267,4 +267,4 @@ class ParallelGripper(ProcessingPlugin):
         if now - command.started < command.duration or now - self._history[0][0] < settle:
             return False
         values = [q for _, q in self._history]
-        return max(values) - min(values) < self.params["stillness"] * self.span
+        return bool(max(values) - min(values) < self.params["stillness"] * self.span)

@@ -146,7 +146,8 @@ def target_of(value: Any) -> ArmTarget | str:
 def target_text(target: Mapping[str, float | None]) -> str:
     """A target ``{x, y, z, pitch}`` in words, for a refusal's reason."""
     pitch = target.get("pitch")
-    return f"({target['x']:.3f}, {target['y']:.3f}, {target['z']:.3f}" + (")" if pitch is None else f", pitch {pitch:.3f})")
+    point = f"({target['x']:.3f}, {target['y']:.3f}, {target['z']:.3f}"
+    return point + (")" if pitch is None else f", pitch {pitch:.3f})")
 
 
 @dataclass(frozen=True)

@@ -149,7 +149,7 @@ class LoopService:
         return True
 
 
-def run(loop: ManipulatorLoop, kind: str, limit: float = 30.0, **params: str) -> BehaviorStatus:
+def run(loop: ManipulatorLoop, kind: str, params: Mapping[str, str], limit: float = 30.0) -> BehaviorStatus:
     """The behavior stepped every 0.05 s of simulated time with the loop, until it ends."""
 
     def publish(name: str, value: Any) -> None:
@@ -198,13 +198,13 @@ def cell(request: pytest.FixtureRequest) -> Iterator[tuple[ManipulatorLoop, int,
 def test_pick_then_place_on_two_robot_models(cell: tuple[ManipulatorLoop, int, dict[str, str], dict[str, str]]) -> None:
     loop, body, pick, place = cell
     resting = p.getBasePositionAndOrientation(body, physicsClientId=loop.world.client)[0]
-    picked = run(loop, "pick-object", **pick)
+    picked = run(loop, "pick-object", pick)
     assert picked.done and picked.progress == 1.0, picked
     assert loop.grasp.held == body and _height(loop, body) - resting[2] > 0.03
-    placed = run(loop, "place-object", **place)
+    placed = run(loop, "place-object", place)
     assert placed.done, placed
     assert loop.grasp.held is None and loop.gripper_result["holding"] == 0
     loop.run(1.0)
     back = p.getBasePositionAndOrientation(body, physicsClientId=loop.world.client)[0]
     assert math.dist(back, resting) < 0.03  # set down where it was picked, standing
-    assert run(loop, "place-object", **place).detail == "the gripper holds nothing to place"
+    assert run(loop, "place-object", place).detail == "the gripper holds nothing to place"

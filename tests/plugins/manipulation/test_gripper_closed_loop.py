@@ -13,7 +13,7 @@ import pytest
 
 from plugins.sim.robots import Robot
 from plugins.sim.world import World
-from tests.plugins.sim.conftest import ROOM, add_box
+from tests.plugins.sim.conftest import ROOM
 
 from .arm_loop import to_world
 from .manipulator_loop import STATION, TURTLEBOT, ManipulatorLoop, Model, arm_service, gripper_service
