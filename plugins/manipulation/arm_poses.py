@@ -108,7 +108,7 @@ class ArmPoses(ProcessingPlugin):
         P("maxVelocity", "", "Velocity limit per joint, one value or one per joint (empty: the URDF's).",
           unit="rad/s"),
         P("pitchTolerance", 0.1, "On an arm of two pitch joints, the largest difference between a target's "
-          "pitch and the pitch the arm has at its point (D264).", unit="rad", above=0.0),
+          "pitch and the pitch the arm has at its point (see the module docstring).", unit="rad", above=0.0),
         P("speed", 0.5, "Velocity scaling until the service Parameter 'speed' sets it.", above=0.0, max=1.0),
         P("tolerance", 0.02, "Largest arm joint error at which a pose counts as reached.", unit="rad", above=0.0),
         P("gripperTolerance", 0.05, "Largest gripper error, as a share of its range.", above=0.0, max=1.0),

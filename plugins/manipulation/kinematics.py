@@ -55,7 +55,7 @@ class ArmTarget:
     y: float
     z: float
     pitch: float | None = None
-    """None: any pitch (only on an arm that cannot set it, D264)."""
+    """None: any pitch (only on an arm that cannot set it)."""
 
 
 @dataclass(frozen=True)

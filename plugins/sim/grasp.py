@@ -19,7 +19,7 @@ LOG = logging.getLogger("ckm.sim.grasp")
 class Gripper:
     """Two fingers (``left`` and its mirror ``right``, each joint its finger's travel from closed at
     its lower limit) on the ``wrist`` link that holds what they grasp: the Turtlebot's by default;
-    any parallel jaw so made (the station arm's) by its joint and link names."""
+    any parallel jaw so made (the station arm's, D267) by its joint and link names."""
 
     def __init__(
         self, robot: Robot, *, left: str = "gripper_joint", right: str = "gripper_right_joint",
