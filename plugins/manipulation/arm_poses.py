@@ -23,10 +23,10 @@ Outputs (only the keys naming a service Output are published):
   1.5·|Δq|/(v·speed) — the cubic rest-to-rest profile's peak speed stays within v·speed, v the
   joint's velocity limit (URDF, or Param ``maxVelocity``), speed the service Parameter ``speed``
   (Table 7.1's configuration) or the goal's own;
-- ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose", "target",
-  "state": "moving" | "reached" | "failed", "active", "error", "holding", "contact", "opening"}``
-  (pose: the goal's pose name, "" for a target; target: the goal's Cartesian target, None for a
-  pose; holding: a gripper goal's; contact: an arm goal to a ``contactPoses`` pose ended by
+- ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose",
+  "state": "moving" | "reached" | "failed", "active", "error", "holding", "contact", "opening"}``,
+  and ``"target"`` for a target goal (pose: the goal's pose name, "" for a target; target: the
+  goal's Cartesian target, its pitch None when it gave none; holding: a gripper goal's; contact: an arm goal to a ``contactPoses`` pose ended by
   contact; opening: the gripper's measured opening as a share of its range, 0 before joint states,
   None on an arm whose gripper is a service of its own, Param ``gripper`` false);
 - the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
@@ -235,12 +235,14 @@ class ArmPoses(ProcessingPlugin):
         if goal is not None:
             error = goal.error or reading
             opening = None if not self.has_gripper else 0.0 if positions is None else self._opening(positions[grip])
-            result["status"] = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose,
-                                "target": goal.target_asked, "state": goal.state, "active": active,
-                                "error": error,
-                                "holding": goal.holding,  # never true for an arm goal
-                                "contact": goal.contact,  # never true for a gripper goal
-                                "opening": opening}
+            status = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose, "state": goal.state,
+                      "active": active, "error": error,
+                      "holding": goal.holding,  # never true for an arm goal
+                      "contact": goal.contact,  # never true for a gripper goal
+                      "opening": opening}
+            if goal.target_asked is not None:  # (a pose goal's status keeps the fields it always had)
+                status["target"] = goal.target_asked
+            result["status"] = status
         return result
 
     def _opening(self, position: float) -> float:

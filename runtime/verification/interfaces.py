@@ -115,8 +115,9 @@ STANDARD: dict[str, Interface] = {
                                  "target: {x, y, z (m, base frame), pitch (rad from the vertical; optional on "
                                  "an arm that cannot set it)}}`; the behaviors' `arm_goal` Output is this "
                                  "topic"),),
-            outputs=(Port("status", "`{stamp, id, group, pose, target, state: moving | reached | failed, active, "
-                                    "error, holding, contact, opening}` of the newest goal: `error` why it "
+            outputs=(Port("status", "`{stamp, id, group, pose, state: moving | reached | failed, active, error, "
+                                    "holding, contact, opening}` of the newest goal, and `target` for a target "
+                                    "goal: `error` why it "
                                     "failed (unreachable, beyond a joint limit, a pitch the arm cannot set), "
                                     "`holding` a gripper goal that closed on an object, `contact` an arm goal "
                                     "stopped by one, `opening` the gripper's share of its range"),),

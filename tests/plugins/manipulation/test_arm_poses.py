@@ -49,8 +49,7 @@ def test_a_goal_gets_one_trajectory_from_the_measured_start_and_is_reached_only_
     peak = max(1.5 * abs(q) / end["time_from_start"] for q in target)
     assert peak == pytest.approx(1.5)
     assert first["status"] == {"stamp": 0.0, "id": 7, "group": "arm", "pose": "ready", "state": "moving",
-                               "target": None, "active": True, "error": "", "holding": False, "contact": False,
-                               "opening": 0.0}
+                               "active": True, "error": "", "holding": False, "contact": False, "opening": 0.0}
     assert first["active"] == 1
     halfway = [q / 2 for q in target] + [0.0]
     assert "trajectory" not in frame(arm, goal, halfway, 0.2)  # the same goal is not planned twice
