@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import ckmconf
+from ckmconf.model import System
 from plugins.manipulation.gripper import ParallelGripper
 from runtime.network import TopicQoS, Transport
 from runtime.registry import Registry
@@ -95,7 +96,7 @@ def system_text(gripper_alias_service: str = "Station.Gripper") -> str:
 """
 
 
-def _load(tmp_path: Path, text: str) -> ckmconf.System:
+def _load(tmp_path: Path, text: str) -> System:
     path = tmp_path / "station.xml"
     path.write_text(text, encoding="utf-8")
     return ckmconf.load(path)
