@@ -28,7 +28,8 @@ Outputs (only the keys naming a service Output are published):
   and ``"target"`` for a target goal (pose: the goal's pose name, "" for a target; target: the
   goal's Cartesian target, its pitch None when it gave none; holding: a gripper goal's; contact:
   an arm goal to a ``contactPoses`` pose, or asking for contact, ended by contact; opening: the
-  gripper's measured opening as a share of its range, 0 before joint states, None on an arm whose gripper is a service of its own, Param ``gripper`` false);
+  gripper's measured opening as a share of its range, 0 before joint states, None on an arm whose
+  gripper is a service of its own, Param ``gripper`` false);
 - the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
   readable), else 0;
 - the measure ``holding`` (the gripper's measure, issue K): 1 from a closing gripper goal that
