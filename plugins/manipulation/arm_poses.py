@@ -5,7 +5,11 @@ groups, ``arm`` and ``gripper``. This SPT service plugin plays that role on its 
 (``{input name: newest value or None}``, configs/usecase/resources.xml ``RoboticArm.MoveIt``):
 
 - ``goal`` (ArmGoal, ``/arm/goal``): ``{"id": int, "group": "arm" | "gripper", "pose": name,
-  "speed": optional share in (0, 1]}``; a goal with a new id (or new content) preempts the old;
+  "speed": optional share in (0, 1]}``, or an arm goal by Cartesian target instead of a pose name,
+  ``{"id", "group": "arm", "target": {"x", "y", "z" (m, base frame), "pitch" (rad, optional on an
+  arm of two pitch joints, D264)}, "contact": optional, true: reached when stopped by contact, as
+  a ``contactPoses`` pose is}`` solved when it comes (IK from the URDF, seeded with the arm's
+  present posture); a goal with a new id (or new content) preempts the old;
 - ``joint_states`` (JointState, ``/arm/joint_states``): ``{"stamp", "name": [...], "position":
   [...]}``; with no names (as the arm's bus sensor publishes it, D99) the positions are taken in
   the order of the Param ``joints``.
@@ -20,9 +24,12 @@ Outputs (only the keys naming a service Output are published):
   joint's velocity limit (URDF, or Param ``maxVelocity``), speed the service Parameter ``speed``
   (Table 7.1's configuration) or the goal's own;
 - ``status`` (ArmStatus, every frame once a goal came): ``{"stamp", "id", "group", "pose",
-  "state": "moving" | "reached" | "failed", "active", "error", "holding", "contact", "opening"}``
-  (holding: a gripper goal's; contact: an arm goal to a ``contactPoses`` pose ended by contact;
-  opening: the gripper's measured opening as a share of its range, 0 before joint states);
+  "state": "moving" | "reached" | "failed", "active", "error", "holding", "contact", "opening"}``,
+  and ``"target"`` for a target goal (pose: the goal's pose name, "" for a target; target: the
+  goal's Cartesian target, its pitch None when it gave none; holding: a gripper goal's; contact:
+  an arm goal to a ``contactPoses`` pose, or asking for contact, ended by contact; opening: the
+  gripper's measured opening as a share of its range, 0 before joint states, None on an arm whose
+  gripper is a service of its own, Param ``gripper`` false);
 - the measure ``active`` (Table 7.1): 1 while there is no error (no failed goal, joint states
   readable), else 0;
 - the measure ``holding`` (the gripper's measure, issue K): 1 from a closing gripper goal that
@@ -32,14 +39,16 @@ Outputs (only the keys naming a service Output are published):
 Reached: every joint of the group within ``tolerance`` (rad) of its target (the gripper within
 ``gripperTolerance`` of its range); a gripper *closing* whose fingers have stopped short — an
 object between them — for ``settle`` seconds after the planned time is reached too, with
-``holding`` true. An arm goal to one of the ``contactPoses`` (the place) whose joints have stood
-still (each within ``stillness``) short of the target for ``settle`` seconds after the planned time is
-reached too, with ``contact`` true in its status: the held object stands on the table and holds
-the arm back (a carried object hangs lower after a grasp that tilted it, D251); a last trajectory
-then holds the arm where it stopped, so that it stops pressing the object and the fingers open.
-Failed: an unknown pose, a pose the IK left out of reach or out of the joint limits (solved once,
-at set-up, in a private pybullet client: :mod:`.kinematics`), or not reached ``timeout`` seconds
-after the planned time. Time is the frame's stamp (``Context.stamp``).
+``holding`` true. An arm goal to one of the ``contactPoses`` (the place), or one that asks
+``"contact": true``, whose joints have stood still (each within ``stillness``) short of the target
+for ``settle`` seconds after the planned time is reached too, with ``contact`` true in its status:
+the held object stands on the table and holds the arm back (a carried object hangs lower after a
+grasp that tilted it, D251); a last trajectory then holds the arm where it stopped, so that it
+stops pressing the object and the fingers open.
+Failed: an unknown pose, a pose or target the IK left out of reach or out of the joint limits (a
+pose solved once, at set-up, a target when it comes, in a private pybullet client:
+:mod:`.kinematics`), a pitch the arm cannot set there, or not reached ``timeout`` seconds after the
+planned time; ``error`` says which. Time is the frame's stamp (``Context.stamp``).
 """
 
 from __future__ import annotations
@@ -55,7 +64,8 @@ from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
-from .kinematics import MODELS, ArmModel, PoseFile, Solution, read_poses
+from .joint_states import joint_values
+from .kinematics import MODELS, ArmModel, ArmTarget, PoseFile, Solution, read_poses, target_of, target_text
 
 CUBIC_PEAK = 1.5
 """Peak over mean speed of the controller's cubic rest-to-rest segment (plugins/controllers/trajectory.py)."""
@@ -69,10 +79,13 @@ class _Goal:
     def __init__(self, message: Mapping[str, Any], group: str, pose: str, speed: float) -> None:
         self.id = message.get("id")
         self.group, self.pose, self.speed = group, pose, speed
+        self.target_asked: dict[str, float | None] | None = None  # a Cartesian target, as the goal gave it
+        self.point: ArmTarget | None = None  # that target, parsed
         self.state = "moving"
         self.error = ""
         self.holding = False
         self.contact = False
+        self.stops_on_contact = False  # a contactPoses pose, or a goal asking "contact": true
         self.indices: list[int] = []
         self.target: list[float] = []
         self.started: float | None = None  # planned once joint states are known
@@ -89,9 +102,14 @@ class ArmPoses(ProcessingPlugin):
           "configuration file.", type=str),
         P("poses", REQUIRED, "Pose file (the named poses' targets, docs/manipulation.md), relative to the "
           "configuration file.", type=str),
-        P("joints", REQUIRED, "The pan, shoulder, elbow and wrist joints, then the gripper joint (also the "
-          "order of a JointState without names).", type=str),
-        P("maxVelocity", "", "Velocity limit per joint, one value or five (empty: the URDF's).", unit="rad/s"),
+        P("joints", REQUIRED, "The pan joint and the two or three pitch joints, in chain order, then the "
+          "gripper joint when 'gripper' is true (also the order of a JointState without names).", type=str),
+        P("gripper", True, "Whether the last of 'joints' is a gripper moved by 'gripper' goals (false: the "
+          "arm alone; its gripper, if any, is a gripper service of its own)."),
+        P("maxVelocity", "", "Velocity limit per joint, one value or one per joint (empty: the URDF's).",
+          unit="rad/s"),
+        P("pitchTolerance", 0.1, "On an arm of two pitch joints, the largest difference between a target's "
+          "pitch and the pitch the arm has at its point (see the module docstring).", unit="rad", above=0.0),
         P("speed", 0.5, "Velocity scaling until the service Parameter 'speed' sets it.", above=0.0, max=1.0),
         P("tolerance", 0.02, "Largest arm joint error at which a pose counts as reached.", unit="rad", above=0.0),
         P("gripperTolerance", 0.05, "Largest gripper error, as a share of its range.", above=0.0, max=1.0),
@@ -108,8 +126,11 @@ class ArmPoses(ProcessingPlugin):
         super().__init__(record)
         v = self.params
         self.joints: list[str] = v["joints"].split()
-        if len(self.joints) != 5 or len(set(self.joints)) != 5:
-            raise ParamError(f"{self.owner}: parameter 'joints' must name 4 arm joints and the gripper joint, "
+        self.has_gripper: bool = v["gripper"]
+        self.arm_count = len(self.joints) - self.has_gripper
+        if self.arm_count not in (3, 4) or len(set(self.joints)) != len(self.joints):
+            gripper = " and the gripper joint" if self.has_gripper else ""
+            raise ParamError(f"{self.owner}: parameter 'joints' must name 3 or 4 arm joints{gripper}, "
                              f"each once, got {v['joints']!r}")
         base = config_dir(record)
         model = str(v["model"])
@@ -120,8 +141,10 @@ class ArmPoses(ProcessingPlugin):
             self.max_velocity = [float(x) for x in velocity]
         except ValueError:
             raise ParamError(f"{self.owner}: parameter 'maxVelocity' = {v['maxVelocity']!r} is not numbers") from None
-        if len(self.max_velocity) not in (0, 1, 5) or not all(x > 0 and math.isfinite(x) for x in self.max_velocity):
-            raise ParamError(f"{self.owner}: parameter 'maxVelocity' needs one or five positive numbers")
+        count = len(self.joints)
+        positive = all(x > 0 and math.isfinite(x) for x in self.max_velocity)
+        if len(self.max_velocity) not in (0, 1, count) or not positive:
+            raise ParamError(f"{self.owner}: parameter 'maxVelocity' needs one or {count} positive numbers")
         self.speed: float = v["speed"]
         self.contact_poses = frozenset(str(v["contactPoses"]).split())
         self.model: ArmModel | None = None
@@ -131,6 +154,7 @@ class ArmPoses(ProcessingPlugin):
         self.goal: _Goal | None = None
         self._message: Any = None
         self._history: deque[tuple[float, tuple[float, ...]]] = deque()  # the goal's joints over 'settle' s
+        self._posture: list[float] | None = None  # the arm joints' last measured positions (the IK's seed)
         self.held: float | None = None  # the closing target of the gripper goal now holding an object
 
     # ------------------------------------------------------------------ set-up
@@ -146,10 +170,11 @@ class ArmPoses(ProcessingPlugin):
         if not self.model_path.is_file():
             raise FileNotFoundError(f"{self.owner}: robot model {self.model_path} does not exist")
         try:
-            self.model = ArmModel(self.model_path, self.joints[:4], self.joints[4], self.file.tool)
+            gripper = self.joints[-1] if self.has_gripper else None
+            self.model = ArmModel(self.model_path, self.joints[: self.arm_count], gripper, self.file.tool)
         except ValueError as exc:
             raise ValueError(f"{self.owner}: {exc}") from None
-        given = self.max_velocity * 5 if len(self.max_velocity) == 1 else self.max_velocity
+        given = self.max_velocity * len(self.joints) if len(self.max_velocity) == 1 else self.max_velocity
         self.velocity = [min(u, g) for u, g in zip(self.model.velocity, given, strict=True)] if given else list(
             self.model.velocity)
         self.solutions = {name: self.model.solve(target) for name, target in self.file.arm.items()}
@@ -202,50 +227,36 @@ class ArmPoses(ProcessingPlugin):
             self._judge(goal, positions, now)
             if goal.contact:  # stop pressing the object onto the table: the fingers must open freely
                 result["trajectory"] = self._stay(goal, positions)
-        if positions is not None:
-            self._hold(goal, positions[4])
+        grip = self.arm_count  # the gripper joint's index, when there is one
+        if positions is not None and self.has_gripper:
+            self._hold(goal, positions[grip])
         active = not reading and (goal is None or goal.state != "failed")
         result["active"] = 1 if active else 0
         result["holding"] = 0 if self.held is None else 1
         if goal is not None:
             error = goal.error or reading
-            result["status"] = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose,
-                                "state": goal.state, "active": active, "error": error,
-                                "holding": goal.holding,  # never true for an arm goal
-                                "contact": goal.contact,  # never true for a gripper goal
-                                "opening": 0.0 if positions is None else self._opening(positions[4])}
+            opening = None if not self.has_gripper else 0.0 if positions is None else self._opening(positions[grip])
+            status = {"stamp": now, "id": goal.id, "group": goal.group, "pose": goal.pose, "state": goal.state,
+                      "active": active, "error": error,
+                      "holding": goal.holding,  # never true for an arm goal
+                      "contact": goal.contact,  # never true for a gripper goal
+                      "opening": opening}
+            if goal.target_asked is not None:  # (a pose goal's status keeps the fields it always had)
+                status["target"] = goal.target_asked
+            result["status"] = status
         return result
 
     def _opening(self, position: float) -> float:
         """The gripper joint's ``position`` as a share of its range (the pose file's gripper scale)."""
         assert self.model is not None
-        low, high = self.model.lower[4], self.model.upper[4]
+        low, high = self.model.lower[-1], self.model.upper[-1]
         return round((position - low) / (high - low), 4)
 
     def _positions(self, state: Any) -> list[float] | None:
-        """The five joint positions (Param ``joints`` order) of a JointState, None before the first."""
-        if state is None:
-            return None
-        if not isinstance(state, Mapping) or "position" not in state:
-            raise ValueError(f"{self.owner}: joint_states is not a JointState (no 'position')")
-        try:
-            values = [float(q) for q in state["position"]]
-        except (TypeError, ValueError):
-            raise ValueError(f"{self.owner}: joint_states 'position' is not a list of numbers") from None
-        names = [str(n) for n in (state.get("name") or [])]
-        if names:
-            if len(names) != len(values):
-                raise ValueError(f"{self.owner}: joint_states has {len(names)} names for {len(values)} positions")
-            by_name = dict(zip(names, values, strict=True))
-            missing = [j for j in self.joints if j not in by_name]
-            if missing:
-                raise ValueError(f"{self.owner}: joint_states has no {', '.join(missing)}")
-            values = [by_name[j] for j in self.joints]
-        elif len(values) != len(self.joints):
-            raise ValueError(f"{self.owner}: joint_states has {len(values)} unnamed positions, expected "
-                             f"{len(self.joints)} ({' '.join(self.joints)})")
-        if not all(math.isfinite(q) for q in values):
-            raise ValueError(f"{self.owner}: joint_states holds a position that is not finite")
+        """The joint positions (Param ``joints`` order) of a JointState, None before the first."""
+        values = joint_values(state, self.joints, self.owner)
+        if values is not None:
+            self._posture = values[: self.arm_count]
         return values
 
     def _accept(self, message: Any) -> _Goal:
@@ -260,23 +271,43 @@ class ArmPoses(ProcessingPlugin):
             return self._fail(goal, f"goal id {goal.id!r} is not an integer")
         if group not in ("arm", "gripper"):
             return self._fail(goal, f"goal {goal.id}: group {group!r} is not 'arm' or 'gripper'")
+        if group == "gripper" and not self.has_gripper:
+            return self._fail(goal, f"goal {goal.id}: this arm moves no gripper (its gripper is a service of "
+                                    "its own)")
+        target = message.get("target")
         known = self.file.arm if group == "arm" else self.file.gripper
-        if pose not in known:
+        if target is not None:
+            if group != "arm" or pose:
+                return self._fail(goal, f"goal {goal.id}: a target is an arm goal's, instead of a pose")
+            parsed = target_of(target)
+            if isinstance(parsed, str):
+                return self._fail(goal, f"goal {goal.id}: {parsed}")
+            goal.point = parsed
+            goal.target_asked = {"x": parsed.x, "y": parsed.y, "z": parsed.z, "pitch": parsed.pitch}
+        elif pose not in known:
             return self._fail(goal, f"goal {goal.id}: unknown {group} pose {pose!r} (defined: {', '.join(known)})")
+        goal.stops_on_contact = group == "arm" and (pose in self.contact_poses or message.get("contact") is True)
         speed = message.get("speed")
         if speed:
             try:
                 goal.speed = self._speed(speed, f"goal {goal.id} speed")
             except ValueError as exc:
                 return self._fail(goal, str(exc))
-        if group == "arm":
+        assert self.model is not None
+        if group == "arm" and goal.point is not None and goal.target_asked is not None:
+            solution = self.model.solve(goal.point, self._posture,
+                                        pitch_tolerance=self.params["pitchTolerance"])
+            if solution.error:
+                return self._fail(goal, f"goal {goal.id}: target {target_text(goal.target_asked)} cannot be reached: "
+                                        f"{solution.error}")
+            goal.indices, goal.target = list(range(self.arm_count)), list(solution.joints)
+        elif group == "arm":
             solution = self.solutions[goal.pose]
             if solution.error:
                 return self._fail(goal, f"goal {goal.id}: arm pose {goal.pose!r} cannot be reached: {solution.error}")
-            goal.indices, goal.target = [0, 1, 2, 3], list(solution.joints)
+            goal.indices, goal.target = list(range(self.arm_count)), list(solution.joints)
         else:
-            assert self.model is not None
-            goal.indices, goal.target = [4], [self.model.gripper_position(self.file.gripper[goal.pose])]
+            goal.indices, goal.target = [self.arm_count], [self.model.gripper_position(self.file.gripper[goal.pose])]
         return goal
 
     def _fail(self, goal: _Goal, error: str) -> _Goal:
@@ -313,11 +344,11 @@ class ArmPoses(ProcessingPlugin):
             if max(errors) <= self.params["tolerance"]:
                 goal.state = "reached"
                 return
-            if goal.pose in self.contact_poses and self._still(goal, positions, now, self.params["stillness"]):
+            if goal.stops_on_contact and self._still(goal, positions, now, self.params["stillness"]):
                 goal.state, goal.contact = "reached", True
                 return
         else:
-            span = self.model.upper[4] - self.model.lower[4]
+            span = self.model.upper[-1] - self.model.lower[-1]
             if errors[0] <= self.params["gripperTolerance"] * span:
                 goal.state = "reached"
                 return
@@ -326,7 +357,8 @@ class ArmPoses(ProcessingPlugin):
                 return
         if now - goal.started > goal.duration + self.params["timeout"]:
             worst = max(range(len(errors)), key=errors.__getitem__)
-            self._fail(goal, f"goal {goal.id}: {goal.group} pose {goal.pose!r} not reached in "
+            what = f"pose {goal.pose!r}" if goal.target_asked is None else f"target {target_text(goal.target_asked)}"
+            self._fail(goal, f"goal {goal.id}: {goal.group} {what} not reached in "
                              f"{goal.duration + self.params['timeout']:.1f} s ({self.joints[goal.indices[worst]]} "
                              f"still {errors[worst]:.3f} from its target)")
 
@@ -340,13 +372,13 @@ class ArmPoses(ProcessingPlugin):
             elif goal.state != "failed" and (self.held is None or goal.target[0] > self.held):
                 self.held = None  # an opening goal lets the object go (or nothing was held)
         if self.held is not None:
-            span = self.model.upper[4] - self.model.lower[4]
+            span = self.model.upper[-1] - self.model.lower[-1]
             if abs(position - self.held) <= self.params["gripperTolerance"] * span:
                 self.held = None
 
     def _holding(self, goal: _Goal, positions: Sequence[float], now: float, span: float) -> bool:
         """Whether closing fingers have stood still short of their target for ``settle`` s (an object)."""
-        closing = goal.target[0] < positions[4]
+        closing = goal.target[0] < positions[self.arm_count]
         return self._still(goal, positions, now, 0.01 * span) and closing
 
     def _still(self, goal: _Goal, positions: Sequence[float], now: float, bound: float) -> bool:

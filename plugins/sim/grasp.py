@@ -17,7 +17,9 @@ LOG = logging.getLogger("ckm.sim.grasp")
 
 
 class Gripper:
-    """Two prismatic fingers (``gripper_joint`` and its mirror) on the wrist link."""
+    """Two fingers (``left`` and its mirror ``right``, each joint its finger's travel from closed at
+    its lower limit) on the ``wrist`` link that holds what they grasp: the Turtlebot's by default;
+    any parallel jaw so made (the station arm's, D267) by its joint and link names."""
 
     def __init__(
         self, robot: Robot, *, left: str = "gripper_joint", right: str = "gripper_right_joint",
@@ -28,6 +30,7 @@ class Gripper:
         self.finger_links = self.fingers  # a joint's child link has the joint's index
         self.wrist = robot.link(wrist)
         self.force, self.hold_force = force, hold_force
+        self.open_limit = float(p.getJointInfo(robot.body, self.fingers[0], physicsClientId=robot.world.client)[9])
         self.held: int | None = None
         self._constraint: int | None = None
 
@@ -39,8 +42,8 @@ class Gripper:
             self.release()
 
     def open(self) -> None:
-        """Open fully (releases a held object)."""
-        self.set_opening(0.045)
+        """Open fully, to the finger joint's upper limit (releases a held object)."""
+        self.set_opening(self.open_limit)
 
     def close(self) -> None:
         """Close under the force limit; call :meth:`update` while closing to catch the object."""

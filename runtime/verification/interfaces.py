@@ -138,13 +138,36 @@ STANDARD: dict[str, Interface] = {
         ),
         Interface(
             "arm-motion",
-            "An arm and its gripper moved to named poses.",
-            inputs=(Port("goal", "a goal `{id, group: arm | gripper, pose}`; the behaviors' `arm_goal` Output "
-                                 "is this topic", (f"{CKM}ArmGoal",), ("id", "group", "pose")),),
+            "An arm (and its gripper) moved to named poses or to Cartesian targets.",
+            inputs=(Port("goal", "a goal `{id, group: arm | gripper, pose}`, or an arm goal `{id, group: arm, "
+                                 "target: {x, y, z (m, base frame), pitch (rad from the vertical; optional on "
+                                 "an arm that cannot set it)}}`; the behaviors' `arm_goal` Output is this "
+                                 "topic", (f"{CKM}ArmGoal",), ("id", "group", "pose")),),
             outputs=(Port("status", "`{stamp, id, group, pose, state: moving | reached | failed, active, error, "
-                                    "holding, contact, opening}` of the newest goal: `holding` a gripper goal "
-                                    "that closed on an object, `contact` an arm goal stopped by one, `opening` "
-                                    "the gripper's share of its range", (f"{CKM}ArmStatus",), _STATUS),),
+                                    "holding, contact, opening}` of the newest goal, and `target` for a target "
+                                    "goal: `error` why it "
+                                    "failed (unreachable, beyond a joint limit, a pitch the arm cannot set), "
+                                    "`holding` a gripper goal that closed on an object, `contact` an arm goal "
+                                    "stopped by one, `opening` the gripper's share of its range",
+                          (f"{CKM}ArmStatus",), _STATUS),),
+            goals=_ID_GOALS,
+        ),
+        Interface(
+            "gripper",
+            "A gripper opened, closed or set to an opening, reporting whether it holds an object "
+            "(control_msgs/GripperCommand as an action).",
+            inputs=(Port("command", "a command `{id, action: open | close | position, position (a share 0..1 of "
+                                    "the range, or m), max_effort (N)}`; the behaviors' `gripper_command` "
+                                    "Output is this topic", (f"{CKM}GripperCommand",),
+                         ("id", "action", "position", "max_effort")),),
+            outputs=(Port("status", "`{stamp, id, action, state: moving | reached | holding | stalled | failed, "
+                                    "position, opening, holding, effort, max_effort, reason}` of the newest "
+                                    "command: `holding` the fingers closed on an object (stopped short of "
+                                    "their target), `stalled` stopped short while opening, `reason` why it "
+                                    "failed or stalled", (f"{CKM}GripperStatus",),
+                          ("stamp", "id", "action", "state", "position", "opening", "holding", "effort",
+                           "max_effort", "reason")),),
+            measures=(Port("holding", "1 while the newest command holds an object, else 0"),),
             goals=_ID_GOALS,
         ),
         Interface(

@@ -265,7 +265,7 @@ def test_poses_out_of_reach_or_out_of_the_joint_limits_fail_when_asked(tmp_path:
 @pytest.mark.parametrize(
     ("text", "error"),
     [
-        ("arm:\n  ready: 0.2 0 0.3\n", ":2: arm pose 'ready' needs x y z pitch"),
+        ("arm:\n  ready: 0.2 0\n", ":2: arm pose 'ready' needs x y z [pitch]"),
         ("gripper:\n  open: 2\n", ":2: gripper pose 'open': opening share 2.0 is not in [0, 1]"),
         ("arm:\n  a: 0 0 0 0\n  a: 0 0 0 0\n", ":3: arm pose 'a' is defined twice"),
         ("  ready: 0 0 0 0\n", ":1: an indented line must follow"),
@@ -281,9 +281,9 @@ def test_a_bad_pose_file_is_named_with_its_line(text: str, error: str) -> None:
 
 
 def test_bad_params_and_files_are_reported(tmp_path: Path) -> None:
-    with pytest.raises(ParamError, match="'joints' must name 4 arm joints"):
+    with pytest.raises(ParamError, match="'joints' must name 3 or 4 arm joints"):
         arm_plugin(joints="a b c")
-    with pytest.raises(ParamError, match="'maxVelocity' needs one or five positive numbers"):
+    with pytest.raises(ParamError, match="'maxVelocity' needs one or 5 positive numbers"):
         arm_plugin(maxVelocity="1 2")
     missing = _pose_file(tmp_path, "arm:\n  a: 0.2 0 0.35 1.57\n")
     missing.poses_path = tmp_path / "none.yml"
