@@ -60,6 +60,9 @@ class SearchArea(Behavior):
         P("along", "long", "The lanes' direction: the Area's longer side, or the map's x or y axis.",
           choices=("long", "x", "y")),
         P("dwell", 0.0, "How long the robot watches at each waypoint it reached.", unit="s", min=0.0),
+        P("confirm", 0.3, "A sighting placed with the robot's pose (not on the map already) counts once a "
+                          "newer pose estimate places it again within this distance: one placed with a pose "
+                          "the robot has turned away from since is not taken (0: at once).", unit="m", min=0.0),
         P("waypointTimeout", 0.0, "A waypoint not reached in this time is skipped (0: the navigation decides).",
           unit="s", min=0.0),
     )
@@ -102,6 +105,7 @@ class SearchArea(Behavior):
         self.goal: str | None = None
         self.reached_at: float | None = None
         self.found: dict[str, Any] | None = None
+        self.candidate: tuple[Any, tuple[float, float, float]] | None = None  # (pose message, map place)
         self._advance()
 
     def _advance(self) -> None:
@@ -128,10 +132,13 @@ class SearchArea(Behavior):
         item = best_sighting(perception(self), self.params["label"], self.params["minReliability"])
         if item is None:
             return None
-        robot = robot_pose(self.service("nav").output("pose"))
+        estimate = self.service("nav").output("pose")
+        robot = robot_pose(estimate)
         where = on_map(item, robot, self.mount)
         if where is None:
             return None  # relative to the robot, whose pose is not known yet
+        if item.get("frame") != "map" and self.params["confirm"] > 0 and not self._confirmed(estimate, where):
+            return None
         self.found = map_sighting(item, where, robot, self.context.now())
         if self.goal is not None:
             self.service("nav").configure({"goal": ""}, ())  # the empty goal cancels the sweep's
@@ -143,6 +150,16 @@ class SearchArea(Behavior):
         return BehaviorStatus(progress=1.0, done=True,
                               detail=f"{self.found['label']} at ({where[0]:.2f}, {where[1]:.2f})")
 
+    def _confirmed(self, estimate: Any, where: tuple[float, float, float]) -> bool:
+        """Whether a newer pose estimate than the candidate's places the sighting within ``confirm`` of it."""
+        if self.candidate is not None and self.candidate[0] is not estimate:
+            gap = ((where[0] - self.candidate[1][0]) ** 2 + (where[1] - self.candidate[1][1]) ** 2) ** 0.5
+            if gap <= self.params["confirm"]:
+                return True
+        if self.candidate is None or self.candidate[0] is not estimate:
+            self.candidate = (estimate, where)
+        return False
+
     def step(self) -> BehaviorStatus:
         """Watch for the object; follow the current waypoint's status; move on when it is reached or skipped."""
         if self.found is not None:
@@ -151,12 +168,7 @@ class SearchArea(Behavior):
         if seen is not None:
             return seen
         if self.goal is None:
-            reasons = "; ".join(f"{s['waypoint']}: {s['reason']}" for s in self.skipped)
-            wanted = self.params["label"] or "an object"
-            return BehaviorStatus(progress=1.0, failed=True,
-                                  detail=f"area {self.params['area']} covered ({len(self.waypoints)} waypoints, "
-                                         f"{len(self.skipped)} skipped) without seeing {wanted}"
-                                         + (f"; skipped {reasons}" if reasons else ""))
+            return self._covered()
         now = self.context.now()
         status = self.service("nav").output("status")
         ours = status is not self.before and isinstance(status, Mapping) and status.get("goal") == self.goal
@@ -170,8 +182,19 @@ class SearchArea(Behavior):
                 self._advance()
         elif self.params["waypointTimeout"] > 0 and now - self.sent_at > self.params["waypointTimeout"]:
             self._skip(f"not reached in {self.params['waypointTimeout']:g} s")
+        if self.goal is None:
+            return self._covered()
         return BehaviorStatus(progress=self._progress(),
                               detail=f"waypoint {self.next} of {len(self.waypoints)}")
+
+    def _covered(self) -> BehaviorStatus:
+        """Failed: every waypoint visited or skipped (the reasons in the detail), the object not seen."""
+        reasons = "; ".join(f"{s['waypoint']}: {s['reason']}" for s in self.skipped)
+        wanted = self.params["label"] or "an object"
+        return BehaviorStatus(progress=1.0, failed=True,
+                              detail=f"area {self.params['area']} covered ({len(self.waypoints)} waypoints, "
+                                     f"{len(self.skipped)} skipped) without seeing {wanted}"
+                                     + (f"; skipped {reasons}" if reasons else ""))
 
     def stop(self) -> None:
         """Left mid-sweep (timeout, preemption): cancel the waypoint, so the robot does not drive on."""
