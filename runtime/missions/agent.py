@@ -112,6 +112,10 @@ class LiveFactory:
 
         return read
 
+    def _topic_count(self, topic: str) -> Callable[[], int]:
+        subscription = self._inputs[topic]  # made by _topic_reader
+        return lambda: subscription.received
+
     def _publisher(self, topic: str) -> Callable[[Any], None]:
         if topic not in self._publishers:
             self._publishers[topic] = self.transport.publisher(TopicQoS(topic, "ckm/behavior-output"))
@@ -125,11 +129,14 @@ class LiveFactory:
             raise KeyError(f"state {path}: no behavior {behavior!r}")
         services = {u.alias: h for u in record.uses if (h := self._handle(u.service)) is not None}
         inputs: dict[str, Callable[[], Any]] = {}
+        heard: dict[str, Callable[[], int]] = {}
         for port in record.inputs:
             if port.signal is not None:
                 inputs[port.name] = functools.partial(self.signals.data, port.signal)
+                heard[port.name] = functools.partial(self.signals.count, port.signal)
             elif port.topic is not None:
                 inputs[port.name] = self._topic_reader(port.topic)
+                heard[port.name] = self._topic_count(port.topic)
         outputs: dict[str, Callable[[Any], None]] = {}
         for out in record.outputs:
             if out.signal is not None:  # the payload of the plan signal this state emits
@@ -141,7 +148,7 @@ class LiveFactory:
         ]
         context = BehaviorContext(
             services=services, inputs=inputs, outputs=outputs, now=now,
-            demand=functools.partial(self._demand, read),
+            demand=functools.partial(self._demand, read), heard=heard, environment=self.system.environment,
         )  # fmt: skip
         cls = self.registry.resolve("behavior", record.kind, record)
         instance: Behavior = cls(record, context)

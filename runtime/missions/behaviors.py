@@ -17,6 +17,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol
 
+from ckmconf.model import System
+from ckmconf.model.environment import Environment
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from ckmconf.model.missions import Require
 
@@ -71,6 +73,11 @@ class BehaviorContext:
     demand: Callable[[bool], None] = lambda wanted: None
     """Told True when the state is entered and False when it is left: the agent then asks for the
     topics the behavior reads, so lazy sensors and services work for it only meanwhile (D245)."""
+    heard: Mapping[str, Callable[[], int]] = field(default_factory=dict)
+    """By input name: how many values it has received so far (a count that only grows), so a behavior
+    can tell a value heard after its state was entered from one left from before (D268)."""
+    environment: Environment | None = None
+    """The system's ``<Environment>`` (§6.1): its Areas and Objects, for behaviors that plan on the map."""
 
     def log(self, message: str, **detail: Any) -> None:
         """Keep a note for the mission log (written as a ``log`` record of the state, §7.5)."""
@@ -86,6 +93,13 @@ class Behavior(abc.ABC):
     """The behavior interface (§5.1, ``<Behavior kind>``). ``PARAMS`` maps accepted Params to defaults."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = {}
+
+    @classmethod
+    def problems(cls, record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+        """What is wrong with ``record`` beyond its single Params (a Param naming no input, no Area of
+        the map, two Params that exclude each other), as (the element to place it at, the message):
+        ``verify`` reports each at its ``FILE:LINE:COL`` before anything starts (D268). None by default."""
+        return []
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         self.record = record
@@ -126,6 +140,11 @@ class Behavior(abc.ABC):
         """Newest value of ``<Input name>`` (a topic or a plan signal's payload), None before the first."""
         source = self.context.inputs.get(name)
         return None if source is None else source()
+
+    def heard(self, name: str) -> int | None:
+        """How many values ``<Input name>`` has received so far; None when the host cannot tell."""
+        count = self.context.heard.get(name)
+        return None if count is None else count()
 
     def write(self, name: str, value: Any) -> None:
         """Publish ``value`` on ``<Output name>``; KeyError naming the behavior if it declares no such output."""

@@ -30,6 +30,8 @@ class Signals:
     values: dict[str, Any] = field(default_factory=dict)
     payloads: dict[str, Any] = field(default_factory=dict)
     """Outgoing: what this agent's behaviors supplied for the signals it will emit."""
+    arrivals: dict[str, int] = field(default_factory=dict)
+    """How many times each signal was latched (what a behavior's ``heard`` counts, D268)."""
 
     def received(self, name: str) -> bool:
         """True once plan signal ``name`` arrived (the ``signal('name')`` condition, §5.3)."""
@@ -38,6 +40,11 @@ class Signals:
     def set(self, name: str, value: Any) -> None:
         """Latch the envelope ``value`` of incoming signal ``name``."""
         self.values[name] = value
+        self.arrivals[name] = self.arrivals.get(name, 0) + 1
+
+    def count(self, name: str) -> int:
+        """How many times signal ``name`` was latched so far (0 before it arrived)."""
+        return self.arrivals.get(name, 0)
 
     def supply(self, name: str, value: Any) -> None:
         """A behavior's ``<Output signal=name>``: the payload of the next emission of ``name``."""

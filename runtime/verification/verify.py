@@ -47,6 +47,7 @@ from ckmconf.model import (
     Function,
     HWChannel,
     Node,
+    Param,
     Plugin,
     Profile,
     Sensor,
@@ -337,6 +338,9 @@ class _Verifier(InterfaceChecks, MessageChecks):
         self._behavior_uses(behavior, cls)
         ports = ports_of(cls)
         owner = f"behavior {behavior.name!r} ({behavior.kind})"
+        problems = getattr(cls, "problems", None)  # what the kind finds wrong beyond single Params (D268)
+        for element, message in problems(behavior, self.system) if callable(problems) else ():
+            self.report.error(element, f"{owner}: {message}", "value" if isinstance(element, Param) else None)
         for port in behavior.outputs:
             value = ports.output(port.name)
             for carried, where, attr in self._port_types(port.topic, port.signal):

@@ -192,6 +192,7 @@ def test_the_examples_readme_has_a_line_for_every_example() -> None:
 PLAN_RUNS = [
     ("mission_nested.xml", "fetch", "robot", "delivered"),
     ("split_system.xml", "delivery", "robot", "delivered"),
+    ("plan_signal_payload.xml", "report-and-fetch", "fetcher", "fetched"),
 ]
 
 

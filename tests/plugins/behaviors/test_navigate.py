@@ -18,8 +18,8 @@ from ckmconf.model.missions import BehaviorInput, Uses
 from plugins.behaviors.navigate import NavigateTo
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext
-from runtime.resources.api import Bounds
 from tests.memory_service import MemoryService
+from tests.plugins.behaviors.closed_loop import BenchNavigation
 from tests.plugins.navigation.loop import ROOM, Bench
 
 
@@ -102,29 +102,6 @@ def test_a_goal_given_twice_nowhere_or_from_no_input_is_refused(params: dict[str
     with pytest.raises(ParamError, match="behavior 'GO' \\(navigate-to\\)") as caught:
         NavigateTo(record(names, **params), context)
     assert message in str(caught.value)
-
-
-class BenchNavigation:
-    """The bench's Navigation plugin as a behavior sees a navigation service (configure, outputs)."""
-
-    def __init__(self, bench: Bench) -> None:
-        self.bench, self.ref = bench, "Navigation.AMCL"
-        self.plugin = bench.services["nav"].plugin
-
-    def configure(self, parameters: dict[str, Any], requirements: tuple[Bounds, ...]) -> None:
-        self.plugin.apply_service_parameters(parameters)  # type: ignore[attr-defined]
-
-    def output(self, name: str) -> Any:
-        return self.bench.latest({"status": "/nav/status", "pose": "/nav/pose"}[name])
-
-    def measures(self) -> dict[str, float]:
-        return {}
-
-    def samples(self, measure: str) -> list[float]:
-        return []
-
-    def running(self) -> bool:
-        return True
 
 
 def test_in_the_closed_loop_navigate_to_an_object_ends_at_its_standoff(tmp_path: Path) -> None:

@@ -100,6 +100,26 @@ TURTLEBOT = {"robotRadius": 0.18, "robotHeight": 0.45, "laserPose": "0.10 0 0", 
 """The Turtlebot's footprint and laser mount, as configs/usecase/resources.xml gives them to the navigation."""
 
 
+@dataclass(frozen=True)
+class RobotModel:
+    """A differential-drive model of plugins/sim/models/: its wheels, laser link and navigation Params."""
+
+    urdf: str
+    left: str
+    right: str
+    wheel_radius: float
+    wheel_base: float
+    laser_link: str
+    footprint: Mapping[str, object]
+
+
+TURTLEBOT_MODEL = RobotModel("turtlebot", "wheel_left_joint", "wheel_right_joint", WHEEL_RADIUS, 0.230,
+                             "hokuyo_link", TURTLEBOT)
+ROVER_MODEL = RobotModel("rover", "left_wheel_joint", "right_wheel_joint", 0.08, 0.40, "laser_link",
+                         {"robotRadius": 0.35, "robotHeight": 0.5, "laserPose": "0.25 0 0", "laserHeight": 0.25})
+"""rover.urdf: a wider base (0.6 × 0.45 m, half diagonal 0.37), larger wheels, its laser 0.25 m ahead."""
+
+
 def plugin(kind: str, cls: type[ProcessingPlugin], file: Path | None = None, /, **params: object) -> Any:
     """A service plugin built from a ``<Plugin>`` record (declared in ``file``, for relative Params)."""
     loc = None if file is None else ckmconf.Loc(str(file), 1, 1, "/Plugin")
@@ -127,20 +147,23 @@ class Bench:
     def __init__(
         self, environment: Path, start: tuple[float, float, float], *, nav: Mapping[str, object] | None = None,
         seed: int = 0, odom_bias: float = 0.01, lidar_noise: float = 0.01, speed: float = 0.3,
+        model: RobotModel = TURTLEBOT_MODEL,
     ) -> None:
         env: Environment | None = ckmconf.load(environment).environment
         assert env is not None
+        self.model = model
         self.world = World(env, seed=seed, time_step=STEP)
-        self.robot = Robot(self.world, "turtlebot", self.world.load_robot("turtlebot", "turtlebot", start))
+        self.robot = Robot(self.world, model.urdf, self.world.load_robot(model.urdf, model.urdf, start))
         self.world.step(24)
-        self.base = DiffDriveBase(self.robot)
-        self.lidar = Lidar(self.robot, "hokuyo_link", noise=lidar_noise, seed=seed)
+        self.base = DiffDriveBase(self.robot, left=model.left, right=model.right, wheel_radius=model.wheel_radius,
+                                  wheel_base=model.wheel_base)
+        self.lidar = Lidar(self.robot, model.laser_link, noise=lidar_noise, seed=seed)
         channel = HWChannel(name="hokuyo", direction="in", kind="stream", backend="sim", units="m", min=0.0,
                             max=5.6, size=self.lidar.beams)
         self.shape = shaper(LIDAR, "LaserScan", channel, _laser_types(), _no_ros)
         inputs = [("left_speed", "measure"), ("right_speed", "measure")]
         self.odometer = DiffDriveOdometry(record("diff-drive-odometry", 0.02, inputs, ["/kobuki/wheel_odom"],
-                                                 wheelBase=0.230))
+                                                 wheelBase=model.wheel_base))
         self.odom_bias = odom_bias
         self.topics: dict[str, tuple[int, float, Any]] = {}
         self.seq = 0
@@ -154,7 +177,7 @@ class Bench:
             ),
         }
         if nav is not None:
-            params = {"environment": environment.name, **TURTLEBOT, **nav}
+            params = {"environment": environment.name, **model.footprint, **nav}
             navigation = plugin("amcl-navigation", AmclNavigation, environment, **params)
             navigation.setup()
             self.services["nav"] = Service(
@@ -181,8 +204,9 @@ class Bench:
         return self.robot.planar_pose()
 
     def _wheels(self) -> None:
-        left = self.robot.joint_state(self.base.left)[1] * WHEEL_RADIUS * (1.0 + self.odom_bias)
-        right = self.robot.joint_state(self.base.right)[1] * WHEEL_RADIUS
+        radius = self.model.wheel_radius
+        left = self.robot.joint_state(self.base.left)[1] * radius * (1.0 + self.odom_bias)
+        right = self.robot.joint_state(self.base.right)[1] * radius
         (message,) = self.odometer.step_outputs({"measure[0]": left, "measure[1]": right}, 0.02)
         self.publish("/kobuki/wheel_odom", message)
         command = self.topics.get("/kobuki/cmd_vel")
