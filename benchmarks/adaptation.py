@@ -5,7 +5,7 @@ recognition (acquisition → resize → ORB → matching, VGA/QVGA/QQVGA profile
 clients, each on a replicated copy of the service (``share=False``: every client costs its own
 processing below the shared acquisition). The clients connect and disconnect over the service
 API (CKMultiPeer on loopback) following ``schedule`` (Fig. 7.8), one phase every ``phase`` s.
-The camera is a 30 Hz synthetic stream of the lab objects (``plugins.processing.scenes``).
+The camera is a 30 Hz synthetic stream of the lab objects (``ckm_lab.scenes``).
 
 Bounds. The policies of ``configs/usecase/resources.xml`` are the thesis' (Table 7.3 read on the
 thesis' robot); this machine differs, so they are scaled by a calibration measured first: one
@@ -71,7 +71,7 @@ def rgb_resource() -> SmartResource:
 
 def camera(count: int = 24) -> list[np.ndarray[Any, Any]]:
     """A loop of VGA frames showing one to three lab objects."""
-    from plugins.processing.scenes import USECASE_MODEL, load_catalog, render_rgb_scene
+    from ckm_lab.scenes import USECASE_MODEL, load_catalog, render_rgb_scene
 
     names = [o.name for o in load_catalog(str(USECASE_MODEL)).objects]
     rng = random.Random(72)

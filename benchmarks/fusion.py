@@ -34,10 +34,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from ckm_lab.shapes import XTION
 
 from benchmarks.fusion_report import describe, plot_approach, plot_reliability, summarise
 from benchmarks.fusion_scene import LINK, Lab, Target, View
-from plugins.processing.cameras import XTION
 from plugins.processing.mounts import model_path, read_mount
 
 __all__ = ["describe", "run"]

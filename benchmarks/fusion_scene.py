@@ -216,6 +216,7 @@ class Lab:
             f"{width} {height}",
             "mounts": f"{given['mounts']}; pantilt: nao {NAO_LINK}",
             "bases": f"pantilt: {pose[0]} {pose[1]} {pose[2]}",
+            "headJoints": "HeadYaw HeadPitch",
         }
         self._set_fusion(given, loc)
 

@@ -17,7 +17,7 @@ Per plan (decision D163):
   ``states_from``): the mean and median of its time per run (its visits summed), the mean share of
   its agent's mission time (``contribution``), the mean of its time-weighted average performance
   (eq. 5.1, runs where it had samples), how many runs visited it, and every run's time (the plot);
-- **thesis**: each Table 7.9 row (:mod:`runtime.missions.report_thesis`) next to the mean time of
+- **thesis**: each Table 7.9 row (:mod:`ckm_lab.table_7_9`) next to the mean time of
   the states it stands for;
 - **realtime factor**: recorded mission seconds / wall seconds of the ``ckm-run`` processes.
 - **mission realtime factor**: recorded mission seconds / wall seconds from the first agent's start
@@ -32,8 +32,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ckm_lab.table_7_9 import TABLE_7_9
+
 from runtime.missions.report import Report
-from runtime.missions.report_thesis import TABLE_7_9, compare
+from runtime.missions.report_references import compare
 
 Z95 = 1.959964
 
@@ -66,8 +68,8 @@ def thesis_figures(report: Report) -> dict[str, float]:
     """One run's time (s) per Table 7.9 row, from the states each row stands for."""
     out: dict[str, float] = {}
     for agent in report.agents:
-        for comparison in compare(agent):
-            out[comparison.thesis.state] = out.get(comparison.thesis.state, 0.0) + sum(comparison.times)
+        for comparison in compare(TABLE_7_9, agent):
+            out[comparison.reference.state] = out.get(comparison.reference.state, 0.0) + sum(comparison.times)
     return out
 
 
@@ -106,7 +108,7 @@ def summarise(plan: str, results: Sequence[dict[str, Any]]) -> dict[str, Any]:
             }
         )
     thesis = []
-    for row in TABLE_7_9:
+    for row in TABLE_7_9.rows:
         ours = [r["thesis"][row.state] for r in basis if row.state in r.get("thesis", {})]
         if ours:
             thesis.append(

@@ -21,14 +21,16 @@ if [ ! -x .venv/bin/python ]; then
 fi
 # the checkout's path is in the stamp: an editable install made from another checkout (a worktree sharing
 # this .venv) points there, and its console scripts at that checkout's interpreter path
-stamp=$( (cat pyproject.toml constraints.txt examples/ckm-example-plugins/pyproject.toml; pwd -P) | sha256sum | cut -c1-16)
+stamp=$( (cat pyproject.toml constraints.txt examples/ckm-example-plugins/pyproject.toml examples/ckm-lab/pyproject.toml; pwd -P) | sha256sum | cut -c1-16)
 if [ "$(cat .venv/.ckm-installed 2>/dev/null || true)" != "$stamp" ]; then
     .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
     .venv/bin/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e ".[dev]"
     .venv/bin/python -m pip install -q -c constraints.txt -e examples/ckm-example-plugins
+    # the thesis lab (D272): the toolkit runs without it; its tests, benchmarks and mission scripts use it
+    .venv/bin/python -m pip install -q -c constraints.txt -e examples/ckm-lab
     echo "$stamp" > .venv/.ckm-installed
 fi
 # Byte-compile the project's own modules (an editable install leaves them as source): every process of a
 # run imports them, and where PYTHONDONTWRITEBYTECODE is set each would compile them again at its start
 # (1.2 s of a compact lock-step run's 7.9 s start-up; D242). Up-to-date files are skipped.
-.venv/bin/python -m compileall -q -j 0 ckmconf runtime plugins editor benchmarks tests examples/ckm-example-plugins >/dev/null
+.venv/bin/python -m compileall -q -j 0 ckmconf runtime plugins editor benchmarks tests examples/ckm-example-plugins examples/ckm-lab >/dev/null

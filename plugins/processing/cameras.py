@@ -5,8 +5,7 @@ and fusion plugins take theirs from the configuration (``fx`` and ``calibrationW
 ``calibrationHeight`` are required; ``fy``, ``cx``, ``cy`` default to square pixels and the
 image's centre, :meth:`Camera.pinhole`): the frames that reach them (arrays after the acquisition
 and resize plugins, Image/DepthImage messages) carry no intrinsics, and no lab's camera is a
-default. ``XTION`` is the thesis lab's Asus Xtion: the camera the synthetic scene renderer and
-the shape model's training draw with (``shapes.py``, ``shape_training.py``), never a plugin's default.
+default (D261).
 """
 
 from __future__ import annotations
@@ -78,6 +77,3 @@ def camera_of(params: Mapping[str, Any], owner: str) -> Camera:
         fy=params["fy"], cx=params["cx"], cy=params["cy"],
     )
 
-
-XTION = Camera(525.0, 525.0, 319.5, 239.5, 640, 480)
-"""The thesis lab's Asus Xtion at VGA (640 × 480): what the synthetic renderer draws with; no plugin's default."""

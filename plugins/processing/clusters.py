@@ -2,7 +2,7 @@
 
 What ``plugin.depth-acquisition`` and ``plugin.euclidean-clustering`` (``depth.py``) and
 ``plugin.tabletop-clustering`` (``tabletop.py``) run, and what the classifier's training
-(``shape_training.py``) runs on rendered scenes, so the model is learned from the very pipeline.
+(``ckm_lab.shape_training``) runs on rendered scenes, so the model is learned from the very pipeline.
 Frames: the camera optical frame, x right, y down, z forward (metres).
 """
 

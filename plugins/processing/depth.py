@@ -2,7 +2,7 @@
 
 The thesis' "Depth recognition" computes the point clusters of the perceived point cloud and
 classifies their shape by "a K-neighbors search into a previously trained KD-tree", thresholded
-to accept a match. The use case's profiles chain, per resolution::
+to accept a match. A profile chains, per resolution (the lab's, for example)::
 
     depth-acquisition → image-resize (nearest) → euclidean-clustering → kdtree-shape-classifier
 
@@ -13,18 +13,15 @@ to accept a match. The use case's profiles chain, per resolution::
   (``shapes.describe``) → k-NN vote in a KD-tree of labelled descriptors →
   ``{"objects": [{"name", "reliability", "x", "y", "z", "points"}], "reliability": r}``.
 
-This module holds the plugins; the algorithms they run are in ``clusters.py`` and the model's
-training in ``shape_training.py`` (both re-exported here). The trained model
-``configs/usecase/models/lab_objects_shapes.pcd`` is generated from rendered synthetic scenes run
-through this very pipeline; regenerate it with::
-
-    .venv/bin/python -m plugins.processing.depth configs/usecase/models/lab_objects_shapes.pcd
+This module holds the plugins; the algorithms they run are in ``clusters.py`` (re-exported here).
+The trained model is a PCD file of labelled descriptors (``pcd.py``) that the system names in
+Param ``model``; the lab's, for example, is generated from rendered scenes run through this very
+pipeline by its own package (``ckm_lab.shape_training``, D272).
 """
 
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -48,15 +45,12 @@ from plugins.processing.clusters import (
 )
 from plugins.processing.descriptor import describe
 from plugins.processing.pcd import PcdError, ShapeModel, read_pcd
-from plugins.processing.shape_training import SHAPE_LABELS, TRAINING_PROFILES, generate_model, write_model
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.manifest import ANY, ARRAY, MAPPING, REQUIRED, P, Params, Ports
 
 __all__ = [
     "ENCODINGS",
-    "SHAPE_LABELS",
-    "TRAINING_PROFILES",
     "Cluster",
     "Depth",
     "DepthAcquisition",
@@ -68,10 +62,8 @@ __all__ = [
     "backproject",
     "euclidean_clusters",
     "find_support_plane",
-    "generate_model",
     "segment",
     "to_metres",
-    "write_model",
 ]
 
 ENCODINGS: dict[str, np.dtype[Any]] = {"16UC1": np.dtype("<u2"), "mono16": np.dtype("<u2"), "32FC1": np.dtype("<f4")}
@@ -83,7 +75,7 @@ class ModelError(ValueError):
 
 def _decode(message: Mapping[str, Any], owner: str) -> npt.NDArray[Any]:
     """The image in a sensor_msgs/Image-like dict (``width height encoding data``, optional ``step is_bigendian``),
-    or in a ``DepthImage`` (configs/usecase/network.xml: ``width height`` and ``data`` an array of the
+    or in a ``DepthImage`` (for example configs/usecase/network.xml: ``width height`` and ``data`` an array of the
     ``width × height`` raw depths, row-major, as a simulated or real sensor publishes it)."""
     data = message.get("data")
     if "encoding" not in message and isinstance(data, np.ndarray):
@@ -135,8 +127,8 @@ default to the ideal pinhole's (:meth:`~plugins.processing.cameras.Camera.pinhol
 class DepthAcquisition(ProcessingPlugin):
     """``plugin.depth-acquisition``: a depth frame as float32 metres (NaN where the sensor saw nothing).
 
-    Accepts an (H, W) array — unsigned raw units scaled by ``scale`` (0.001: the Xtion's mm), float
-    already in metres — or an Image-like dict with encoding ``16UC1``/``mono16`` or ``32FC1``.
+    Accepts an (H, W) array — unsigned raw units scaled by ``scale`` (0.001: millimetres, as OpenNI depth
+    cameras give), float already in metres — or an Image-like dict with encoding ``16UC1``/``mono16`` or ``32FC1``.
     ``topic`` only documents where frames come from (the service's Input). Bad frames raise
     ValueError naming the plugin and the problem.
     """
@@ -307,6 +299,3 @@ class KdTreeShapeClassifier(ProcessingPlugin):
         known = [o["reliability"] for o in objects if o["name"] != "unknown"]
         return {"objects": objects, "reliability": float(np.mean(known)) if known else 0.0}
 
-
-if __name__ == "__main__":
-    write_model(sys.argv[1] if len(sys.argv) > 1 else "configs/usecase/models/lab_objects_shapes.pcd")

@@ -50,7 +50,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, Entries, P, Params, Parsed, Ports
+from runtime.verification.manifest import MAPPING, REQUIRED, Entries, P, Params, Parsed, Ports
 
 from .cameras import Camera, camera_of
 from .fusion_model import Observation, fused_object, number, reinforce, share_at_bound
@@ -141,7 +141,7 @@ class FeatureFusion(ProcessingPlugin):
                                            "observations", "observer")),
         "reliability", "unplaced")}
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("inputs", "rgb: line; depth: point; pantilt: line", "Inputs and their feature kind.", entries=KIND),
+        P("inputs", REQUIRED, "Inputs and their feature kind.", type=str, entries=KIND),
         P("poses", "", "Sensor frames in the common frame (default identity).", entries=POSE),
         P("cameras", "", "Intrinsics of line inputs (one without an entry takes fx fy cx cy).", entries=CAMERA),
         P("fx", None, "Focal length x of line inputs without a 'cameras' entry (then required).", type=float,
@@ -166,7 +166,8 @@ class FeatureFusion(ProcessingPlugin):
         P("bases", "", "Fixed map poses of mounted inputs' robots (others follow poseInput).", entries=BASE),
         P("poseInput", "pose", "The input carrying the moving robot's PoseEstimate in the map."),
         P("headInput", "head", "The input carrying the head angles {pan, tilt}."),
-        P("headJoints", "HeadYaw HeadPitch", "The URDF joints the head input's pan and tilt drive."),
+        P("headJoints", "", "The URDF joints the head input's pan and tilt drive (required when a mount moves "
+          "joints)."),
     )
 
     def __init__(self, record: Plugin) -> None:

@@ -1,13 +1,13 @@
 """Live sensor poses of the GlobalRecog.Fusion service: observations placed in the MAP frame (§6.3.1).
 
-The Turtlebot moves, so its Xtion's RGB and depth observations are placed with the robot's
-current pose estimate (the service's ``pose`` input, a PoseEstimate ``{"pose": {"x", "y",
-"yaw"}, …}`` fed by ``/nav/pose``) composed with the camera's mount in the robot's URDF. The Nao
-stands still at a known map pose (Param ``bases``) but turns its head: its camera's pose
-composes that base pose with the mount at the head angles last reported (the ``head`` input,
-``{"pan", "tilt"}`` fed by ``/nao/head_state``, driving the URDF joints named in
-``headJoints``). An observation whose sensor pose is not known yet (no pose estimate, no head
-state) cannot be placed: it is left out and counted (the service's ``unplaced`` measure).
+A robot that moves has its cameras' observations placed with its current pose estimate (the
+service's ``pose`` input, a PoseEstimate ``{"pose": {"x", "y", "yaw"}, …}``) composed with the
+camera's mount in the robot's URDF. A robot standing still at a known map pose (Param ``bases``)
+may turn its head: its camera's pose composes that base pose with the mount at the head angles
+last reported (the ``head`` input, ``{"pan", "tilt"}``, driving the URDF joints named in
+``headJoints``). The lab's Turtlebot and Nao are one of each, for example. An observation whose
+sensor pose is not known yet (no pose estimate, no head state) cannot be placed: it is left out
+and counted (the service's ``unplaced`` measure).
 
 Params (owned by ``plugin.feature-fusion``, declared here: :data:`MOUNT`, :data:`BASE`, read by
 ``read_params``): ``mounts`` (``"input: MODEL LINK; …"``, MODEL a shipped robot model name or a
@@ -50,15 +50,19 @@ class Placement:
         if self.pose_input == self.head_input:
             raise ParamError(f"{owner}: parameters 'poseInput' and 'headInput' name the same input")
         joints = params["headJoints"].split()
-        if len(joints) != 2:
+        if joints and len(joints) != 2:
             raise ParamError(f"{owner}: parameter 'headJoints' needs the pan and the tilt joint names, got {joints}")
-        self.head_joints = (joints[0], joints[1])
+        self.head_joints = (joints[0], joints[1]) if joints else None
         self.mounts: dict[str, Mount] = {}
         for name, (model, link) in params["mounts"].items():
             try:
                 self.mounts[name] = read_mount(model_path(model, base), link)
             except ValueError as exc:
                 raise ParamError(f"{owner}: parameter 'mounts' for {name!r}: {exc}") from None
+            if self.mounts[name].joints and self.head_joints is None:
+                moved = " ".join(self.mounts[name].joints)
+                raise ParamError(f"{owner}: the mount of input {name!r} moves joints {moved}: parameter 'headJoints' "
+                                 "must name the joints the head input's pan and tilt drive")
         self.bases: dict[str, Pose] = {}
         for name, values in params["bases"].items():
             if name not in self.mounts:
@@ -101,6 +105,8 @@ class Placement:
         pan, tilt = (number(message.get(k), bad, f"field {k!r}") for k in ("pan", "tilt"))
         if not (abs(pan) <= 2 * math.pi and abs(tilt) <= 2 * math.pi):
             raise bad("fields 'pan'/'tilt'", f"= {pan}, {tilt} are not angles in radians")
+        if self.head_joints is None:  # no mount moves a joint: the angles place nothing
+            return {}
         return {self.head_joints[0]: pan, self.head_joints[1]: tilt}
 
     def sensor_pose(self, source: str) -> Pose | None:
@@ -116,6 +122,6 @@ class Placement:
             if missing:
                 raise ValueError(
                     f"{self.owner}: input {source!r}'s mount moves joint {missing[0]!r}, which parameter "
-                    f"'headJoints' ({' '.join(self.head_joints)}) does not name"
+                    f"'headJoints' ({' '.join(self.head_joints or ())}) does not name"
                 )
         return compose(base, mount.pose(self.angles))

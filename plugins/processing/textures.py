@@ -1,6 +1,6 @@
 """Procedural object textures and the ORB model file of the RGB recognition service (thesis §7.4.1).
 
-The lab objects of Fig. 7.5 are told apart by their printed patterns. No photograph is committed:
+Objects are told apart by their printed patterns (the lab objects of Fig. 7.5, for example). No photograph is committed:
 each object's texture is drawn from a seed (its base pattern and colours as in the environment's
 ``<Texture>``, plus seeded shapes and text, like a printed label), so the model file stays small
 text and the synthetic scenes (``scenes.py``) show exactly the textures the model learnt.
@@ -12,6 +12,7 @@ those starting with ``#``); ``#`` after a blank starts a comment. Anything else 
 naming ``FILE:LINE``. ``build_model`` turns it into the descriptors the matcher searches. Top-level
 ``views`` names a file of keypoints learnt from rendered views (``views.py``, D175); an object's
 ``wrap: true`` says its print repeats side by side (round a cylinder), which the matcher unwraps.
+Top-level ``words`` lists the words printed in small type (default :data:`WORDS`).
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ Image = npt.NDArray[Any]
 Points = npt.NDArray[np.float32]
 
 PATTERNS = ("plain", "stripes", "dots", "checker", "label")
-_WORDS = ("CKM", "LAB", "ORB", "BOX", "TEA", "MIX", "RGB", "NAO", "KOBUKI", "XTION", "SPT", "TCM", "FUSION")
+WORDS = ("CKM", "ORB", "RGB", "SPT", "TCM", "BOX", "TEA", "MIX", "MAP", "ROS", "QOS", "HFSM", "FUSION")
+"""The words a texture's small print draws from when its model file lists none (``words``)."""
 _FONTS = (cv2.FONT_HERSHEY_SIMPLEX, cv2.FONT_HERSHEY_DUPLEX, cv2.FONT_HERSHEY_TRIPLEX, cv2.FONT_HERSHEY_COMPLEX)
 
 
@@ -51,6 +53,8 @@ class TextureSpec:
     wrap: bool = False
     """The print repeats side by side (a label around a can): a view may show the end of one copy
     and the start of the next, which the matcher unwraps (D175)."""
+    words: tuple[str, ...] = WORDS
+    """The words its small print draws from (the model file's ``words``)."""
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,8 @@ class ModelSpec:
     """Texture sizes (shares of width × height) the keypoints are extracted at."""
     views: str = ""
     """File of keypoints learnt from rendered views (``views.py``, D175), relative to the model file."""
+    words: tuple[str, ...] = WORDS
+    """The words the textures' small print draws from."""
 
 
 def rgb(color: str) -> tuple[int, int, int]:
@@ -154,7 +160,7 @@ def render_texture(spec: TextureSpec) -> Image:
             _shape(image, rng, size)
     for size, count in ((scale / 90, 2), (scale / 200, 3)):
         for _ in range(count):
-            word = str(rng.choice(_WORDS)) + str(int(rng.integers(0, 100)))
+            word = str(rng.choice(spec.words)) + str(int(rng.integers(0, 100)))
             origin = (int(rng.integers(0, w // 2)), int(rng.integers(h // 8, h)))
             font = _FONTS[int(rng.integers(0, len(_FONTS)))]
             cv2.putText(image, word, origin, font, size, _colour(rng), max(1, round(size * 2)), cv2.LINE_AA)
@@ -168,6 +174,13 @@ def render_texture(spec: TextureSpec) -> Image:
 
 def _floats(text: str) -> tuple[float, ...]:
     return tuple(float(v) for v in text.split())
+
+
+def _words(text: str) -> tuple[str, ...]:
+    words = tuple(text.split())
+    if not words:
+        raise ValueError(text)
+    return words
 
 
 def boolean(text: str) -> bool:
@@ -184,6 +197,7 @@ _TOP: Mapping[str, tuple[str, Callable[[str], Any]]] = {
     "levels": ("levels", int),
     "scales": ("scales", _floats),
     "views": ("views", str),
+    "words": ("words", _words),
 }
 _ITEM: Mapping[str, tuple[str, Callable[[str], Any]]] = {
     "name": ("name", str),
@@ -220,7 +234,8 @@ def _store(into: dict[str, Any], key: str, raw: str, keys: Mapping[str, tuple[st
     try:
         into[field] = kind(raw)
     except ValueError:
-        name = "list of numbers" if kind is _floats else getattr(kind, "__name__", "value")
+        names: dict[object, str] = {_floats: "list of numbers", _words: "list of words"}
+        name = names.get(kind) or getattr(kind, "__name__", "value")
         raise ValueError(f"{key} = {raw!r} is not a {name}") from None
 
 
@@ -257,7 +272,7 @@ def parse_model(text: str, path: str = "<memory>") -> ModelSpec:
             raise ValueError(f"{path}:{number}: {exc}") from None
     if top.pop("version", 1) != 1:
         raise ValueError(f"{path}: unsupported model version (this release reads 1)")
-    objects = tuple(_texture(fields, path) for fields in items)
+    objects = tuple(_texture({"words": top.get("words", WORDS), **fields}, path) for fields in items)
     if not objects:
         raise ValueError(f"{path}: no objects")
     names = [o.name for o in objects]

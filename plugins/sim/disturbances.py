@@ -211,7 +211,8 @@ class DisturbedPlan(WorldPlan):
     @classmethod
     def around(cls, plan: WorldPlan, scenario: Scenario, text: str) -> DisturbedPlan:
         """``plan`` with the scenario parsed from ``text`` (read from ``scenario.source``)."""
-        return cls(plan.world, plan.seed, plan.textures, dict(plan.bodies), scenario.source, text)
+        return cls(plan.world, plan.seed, plan.textures, dict(plan.bodies), set(plan.cameras),
+                   scenario_source=scenario.source, scenario_text=text)
 
     def build(self) -> SimWorld:
         """The plan's world, every robot loaded, then the scenario installed (its boxes parked)."""

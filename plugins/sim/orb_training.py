@@ -1,9 +1,9 @@
 """Learn the RGB recognition's ORB keypoints from rendered views of the skinned objects (thesis §7.4.1, D175).
 
-The flat texture images alone leave the simulated robots short of matches: at 0.6–0.7 m the
-Xtion and the Nao's head camera see a 7 cm cylinder 40–90 pixels wide, its print curved, shaded
-and resampled by TinyRenderer, and ORB describes most of its corners differently from the sharp
-flat print. As a real system is trained on a turntable, this module renders each textured object
+The flat texture images alone leave the simulated robots short of matches: at 0.6–0.7 m a VGA
+camera of about 580 px focal length sees a 7 cm cylinder 40–90 pixels wide, its print curved,
+shaded and resampled by TinyRenderer, and ORB describes most of its corners differently from the
+sharp flat print. As a real system is trained on a turntable, this module renders each textured object
 of the environment on its own (the others moved away; the workbench stays as background) from
 all round it, at several distances and heights, runs ORB as the service does, keeps the keypoints
 that fall on the object's side, places each in the print through the skin's texture mapping
@@ -14,7 +14,9 @@ close descriptor) is not stored twice.
 Reproducible: the views are a fixed grid (``DISTANCES`` × ``AZIMUTHS`` × ``HEIGHTS``), the
 renderer deterministic. Run after changing the textures, the skins or the environment::
 
-    nice -n 19 .venv/bin/python -m plugins.sim.orb_training
+    nice -n 19 .venv/bin/python -m plugins.sim.orb_training --model M.yml --system S.xml --focal F
+
+(the lab's own command, with its files and camera, is ``python -m ckm_lab.orb_views``).
 """
 
 from __future__ import annotations
@@ -39,16 +41,13 @@ from plugins.processing.views import write_views
 from .skins import texture_point
 from .world import World
 
-USECASE = Path(__file__).resolve().parents[2] / "configs" / "usecase"
 DISTANCES = (0.5, 0.8, 1.2)
-"""Camera distances (m) to the object's axis: at the Xtion's focal, and halved (``SCALES``), they
-span the sizes the Xtion (VGA) and the Nao's camera (VGA, QVGA) see the workbench objects at."""
+"""Camera distances (m) to the object's axis: at the given focal, and halved (``SCALES``), they span
+the sizes VGA and QVGA cameras see objects on a workbench at."""
 AZIMUTHS = 12
 """Views round the object (every 30°, from 15°: none from exactly where a mission robot stands)."""
 HEIGHTS = (0.05, 0.3)
 """Camera elevation above the object's centre, as a share of the distance (level to ~17° down)."""
-FOCAL = 577.3
-"""The Xtion's focal length at 640 columns (resources.xml ``cameras``), pixels."""
 WINDOW = 320
 """Side of the square render (pixels) around the object: the focal as at VGA, only the part that matters."""
 FEATURES = 100
@@ -119,9 +118,9 @@ class Learner:
         return self._points[keep], self._descriptors[keep]
 
 
-def _render(world: World, eye: Sequence[float], target: Sequence[float]) -> tuple[Any, Any, Any, Any]:
-    """Grey image, segmentation, and each pixel's map point (H×W×3) of one view from ``eye``."""
-    fov = math.degrees(2 * math.atan(WINDOW / 2 / FOCAL))
+def _render(world: World, eye: Sequence[float], target: Sequence[float], focal: float) -> tuple[Any, Any, Any, Any]:
+    """Grey image, segmentation, and each pixel's map point (H×W×3) of one view from ``eye`` (``focal``: pixels)."""
+    fov = math.degrees(2 * math.atan(WINDOW / 2 / focal))
     near, far = 0.05, 5.0
     view = p.computeViewMatrix(list(eye), list(target), [0, 0, 1])
     projection = p.computeProjectionMatrixFOV(fov, 1.0, near, far)
@@ -158,8 +157,9 @@ def _placed(found: Sequence[Any], described: npt.NDArray[np.uint8], points: Any,
     return np.array(at, np.float32).reshape(-1, 2), np.array(kept, np.uint8).reshape(-1, 32)
 
 
-def learn(environment: Environment, model: str | Path, log: bool = False) -> dict[str, Learner]:
-    """Each model object's keypoints learnt from the view grid (objects of ``environment`` only)."""
+def learn(environment: Environment, model: str | Path, focal: float, log: bool = False) -> dict[str, Learner]:
+    """Each model object's keypoints learnt from the view grid (objects of ``environment`` only), seen
+    by a camera of ``focal`` pixels at 640 columns (the recognising camera's)."""
     spec = read_model(model)
     orb = cv2.ORB.create(nfeatures=FEATURES)
     learners: dict[str, Learner] = {}
@@ -185,7 +185,7 @@ def learn(environment: Environment, model: str | Path, log: bool = False) -> dic
                         angle = 2 * math.pi * (k + 0.5) / AZIMUTHS
                         eye = (centre[0] + distance * math.cos(angle), centre[1] + distance * math.sin(angle),
                                centre[2] + rise * distance)
-                        grey, mask, points, _ = _render(world, eye, centre)
+                        grey, mask, points, _ = _render(world, eye, centre, focal)
                         inside = cv2.erode((mask == body).astype(np.uint8), np.ones((5, 5), np.uint8))
                         for scale in SCALES:  # the render as is, and as a resized profile shows it
                             size = round(WINDOW * scale)
@@ -203,11 +203,17 @@ def learn(environment: Environment, model: str | Path, log: bool = False) -> dic
     return learners
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Learn the views of the model file's objects and write its ``views`` file."""
+WRITTEN_BY = "nice -n 19 .venv/bin/python -m plugins.sim.orb_training"
+
+
+def main(argv: Sequence[str] | None = None, written_by: str = WRITTEN_BY) -> int:
+    """Learn the views of the model file's objects and write its ``views`` file (``written_by``: the
+    command its header names)."""
     parser = argparse.ArgumentParser(prog="python -m plugins.sim.orb_training", description=__doc__.split("\n")[0])
-    parser.add_argument("--model", default=str(USECASE / "models" / "lab_objects_orb.yml"), help="the model file")
-    parser.add_argument("--system", default=str(USECASE / "lab.xml"), help="the system whose environment to render")
+    parser.add_argument("--model", required=True, help="the model file")
+    parser.add_argument("--system", required=True, help="the system whose environment to render")
+    parser.add_argument("--focal", type=float, required=True,
+                        help="focal length (pixels at 640 columns) of the camera that recognises the objects")
     args = parser.parse_args(argv)
     spec = read_model(args.model)
     if not spec.views:
@@ -215,12 +221,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     system = ckmconf.load(args.system, strict=False).system
     if system is None or system.environment is None:
         parser.error(f"{args.system} has no environment")
-    learners = learn(system.environment, args.model, log=True)
+    learners = learn(system.environment, args.model, args.focal, log=True)
     header = [
         f"ORB keypoints learnt from rendered views of {Path(args.model).name}'s objects (D175).",
-        "Written by: nice -n 19 .venv/bin/python -m plugins.sim.orb_training (do not edit by hand).",
+        f"Written by: {written_by} (do not edit by hand).",
         f"Views: distances {' '.join(map(str, DISTANCES))} m x {AZIMUTHS} azimuths x heights "
-        f"{' '.join(map(str, HEIGHTS))} (share of the distance); {WINDOW} px square at focal {FOCAL} px.",
+        f"{' '.join(map(str, HEIGHTS))} (share of the distance); {WINDOW} px square at focal {args.focal} px.",
         "Format: object x y descriptor (texture pixels; 32 bytes in hex).",
     ]
     rows = [(name, float(x), float(y), bytes(d)) for name, learner in learners.items()

@@ -24,6 +24,7 @@ class WorldPlan:
     seed: int
     textures: str
     bodies: dict[str, tuple[str, str]] = field(default_factory=dict)  # name → (model, pose)
+    cameras: set[str] = field(default_factory=set)  # the bodies carrying an rgb or depth sensor
 
     @classmethod
     def of(cls, nodes: list[Node]) -> WorldPlan | None:
@@ -54,6 +55,8 @@ class WorldPlan:
             spec = backend.spec().values
             model, pose = plan.bodies.get(spec["body"], ("", ""))
             plan.bodies[spec["body"]] = (model or spec["model"], pose or spec["pose"])
+            if backend.values["sensor"] in ("rgb", "depth"):  # one render gives a body's colour and depth
+                plan.cameras.add(spec["body"])
         return plan
 
     def build(self) -> SimWorld:

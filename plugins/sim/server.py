@@ -12,7 +12,8 @@ turn (it waits on all connections at once and serves one request of each ready o
 the physics state is never touched concurrently; a thread of its own only accepts connections
 (the HMAC handshake). Camera reads are rendered by a render worker process on a mirror of the
 world (:mod:`plugins.sim.render`, D103) while this thread goes on serving; ``--render-workers N``
-sets how many (default 2), 0 renders them here. Before each read or write the world advances, in its fixed steps, to the
+sets how many (default: one per robot with a camera, at most one per core), 0 renders them here.
+Before each read or write the world advances, in its fixed steps, to the
 server's clock (real time, ``time.monotonic``; started by the first request), as D88 does in
 process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`Spec`) → ``handle``;
 ``read``/``write``/``close`` (``handle``; ``value`` to write, ``"reply": false`` for a silent write,
@@ -61,7 +62,6 @@ from .serving import LARGE, Client, Flight
 
 LOG = logging.getLogger("ckm.sim.server")
 HOST = "127.0.0.1"
-RENDER_WORKERS = 2  # the use case's two camera partitions rendered in parallel before the server
 MAX_REQUEST = 1 << 20  # bytes: a request is a small JSON object; anything larger is malformed
 
 
@@ -278,6 +278,12 @@ class WorldServer(RenderDispatch):
 # ---------------------------------------------------------------------- the process
 
 
+def render_workers(plan: WorldPlan) -> int:
+    """The default number of render workers: the robots whose cameras may ask for frames at once
+    (each robot's colour and depth share one render), bounded by the cores that can render them."""
+    return min(len(plan.cameras), os.cpu_count() or 1)
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m plugins.sim.server``: build the world of a configuration and serve its channels (D100)."""
     parser = argparse.ArgumentParser(prog="python -m plugins.sim.server", description=__doc__.split("\n")[0])
@@ -286,8 +292,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ready", type=Path, help="write the address here (JSON) once listening")
     parser.add_argument("--parent", type=int, help="stop when this process is no longer the parent")
     parser.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: any free one)")
-    parser.add_argument("--render-workers", type=int, default=RENDER_WORKERS,
-                        help=f"render worker processes (default {RENDER_WORKERS}; 0: render in the physics thread)")
+    parser.add_argument("--render-workers", type=int, default=None,
+                        help="render worker processes (default: one per robot with a camera, at most one per core; "
+                        "0: render in the physics thread)")
     parser.add_argument("--scenario", default=os.environ.get(ENV_SCENARIO) or None,
                         help=f"disturb the world as this scenario file says (default: ${ENV_SCENARIO})")
     args = parser.parse_args(argv)
@@ -320,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
     started = time.perf_counter()
-    workers = [RenderWorker(plan) for _ in range(max(0, args.render_workers))]  # build their mirrors meanwhile
+    count = render_workers(plan) if args.render_workers is None else max(0, args.render_workers)
+    workers = [RenderWorker(plan) for _ in range(count)]  # build their mirrors meanwhile
     try:
         sim = plan.build()
     except ScenarioError as error:  # a name the world does not have: said before anyone connects

@@ -1,6 +1,6 @@
 """Bridge between the recognition textures (:mod:`plugins.processing.textures`) and pybullet.
 
-An object listed in the RGB recognition's model file (``lab_objects_orb.yml``) is painted with
+An object listed in the RGB recognition's model file (the sim channel's Param ``textures``) is painted with
 exactly the texture that model learnt (same pattern, colours and seed); another textured object
 gets one drawn from its environment ``<Texture>`` and a seed derived from the texture's name.
 Images are written as PNG files at run time into a cache directory (never committed), named by
@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 
 from ckmconf.model import Environment
-from plugins.processing.textures import ModelSpec, TextureSpec, render_texture
+from plugins.processing.textures import WORDS, ModelSpec, TextureSpec, render_texture
 
 CACHE_ENV = "CKM_SIM_TEXTURES"
 """Environment variable naming the texture cache directory (default: a folder in the temp dir)."""
@@ -55,6 +55,7 @@ def texture_spec(environment: Environment, object_name: str, catalog: ModelSpec 
         color=texture.color,
         secondary=texture.secondary or "#FFFFFF",
         seed=zlib.crc32(texture.name.encode()),
+        words=WORDS if catalog is None else catalog.words,  # the catalogue's print, as its own objects'
     )
 
 

@@ -3,8 +3,9 @@
 The page holds, with every picture embedded (base64 PNG, camera frames JPEG) and the CSS inline (no other file, no
 network): the header (system, plan, agents and how each ended, mission time, run date, the
 off-line validation verdict when ``RUN_DIR/validation.json`` holds ``ckm-mission validate --json``'s
-object), Table 7.9 per agent (:func:`.report.build_report`) next to the thesis' values
-(:mod:`.report_thesis`), the Fig. 7.23 progress plots (:func:`.report.write_plots`), the Fig. 7.16
+object), Table 7.9 per agent (:func:`.report.build_report`) next to the rows of the reference
+tables installed packages register (:mod:`.report_references`), the Fig. 7.23 progress plots
+(:func:`.report.write_plots`), the Fig. 7.16
 map (:mod:`.report_figures`, the configuration's ``<Environment>`` with the trajectories and
 zoom-map areas of the run's bag, :mod:`.report_bag`), the Fig. 7.19 recognition reliability, each
 agent's camera frames at the moments of Fig. 7.22 and 7.24 (entering and ending each state of its
@@ -33,8 +34,8 @@ from .recording import Run, RunError, read_run
 from .report import AgentReport, Report, build_report, write_plots
 from .report_bag import BagData, Moment, ReportTopics, find_bags, read_bags
 from .report_problems import Problems, collect
+from .report_references import ReferenceTable, compare, installed_tables
 from .report_snapshots import snapshots_section
-from .report_thesis import TABLE_SOURCE, compare
 from .report_topics import key_states, recognising_states, topics_of
 from .report_views import map_section, note, png_tag, reliability_section
 from .report_world import world_rows
@@ -198,8 +199,33 @@ def _joined(values: list[float] | tuple[float, ...], fmt: str) -> str:
     return "+".join(format(v, fmt) for v in values) or "-"
 
 
+def _reference(table: ReferenceTable, agent: AgentReport) -> str:
+    """``table``'s rows that stand for states of ``agent``, next to the run's figures ("" if none do)."""
+    matched = compare(table, agent)
+    if not matched:
+        return ""
+    cells = [
+        [
+            escape(c.reference.state),
+            escape(", ".join(c.rows)),
+            _joined(c.reference.times, ".3f"),
+            _joined(c.times, ".3f"),
+            _joined([100 * x for x in c.reference.contributions], ".1f"),
+            _joined([100 * x for x in c.contributions], ".1f"),
+            f"{c.reference.performance:.2f}",
+            "-" if c.performance is None else f"{c.performance:.2f}",
+        ]
+        for c in matched
+    ]
+    header = ["Reference state", "Our states", "Time ref. (s)", "Time run (s)", "Contrib. ref. (%)"]
+    header += ["Contrib. run (%)", "Perf. ref.", "Perf. run"]
+    return f"<p>Next to {escape(table.source)}:</p>" + _table(header, cells, f"reference agent-{escape(agent.agent)}")
+
+
 def _table_7_9(report: Report) -> str:
-    """Table 7.9 per agent (the columns of :func:`.report.format_table`), then the thesis' values."""
+    """Table 7.9 per agent (the columns of :func:`.report.format_table`), then each installed
+    reference table's rows that stand for its states (:mod:`.report_references`)."""
+    tables, problems = installed_tables()
     out = []
     for agent in report.agents:
         rows = [
@@ -217,24 +243,9 @@ def _table_7_9(report: Report) -> str:
         for service, measures in agent.qualities.items():
             values = ", ".join(f"{escape(m)} {v:.3g}" for m, v in measures.items())
             out.append(f"<p>Quality of {escape(service)}: {values}</p>")
-        matched = compare(agent)
-        if matched:
-            cells = [
-                [
-                    escape(c.thesis.state),
-                    escape(", ".join(c.rows)),
-                    _joined(c.thesis.times, ".3f"),
-                    _joined(c.times, ".3f"),
-                    _joined([100 * x for x in c.thesis.contributions], ".1f"),
-                    _joined([100 * x for x in c.contributions], ".1f"),
-                    f"{c.thesis.performance:.2f}",
-                    "-" if c.performance is None else f"{c.performance:.2f}",
-                ]
-                for c in matched
-            ]
-            header = ["Thesis state", "Our states", "Time thesis (s)", "Time run (s)", "Contrib. thesis (%)"]
-            header += ["Contrib. run (%)", "Perf. thesis", "Perf. run"]
-            out.append(f"<p>Next to {TABLE_SOURCE}:</p>" + _table(header, cells, f"thesis agent-{escape(agent.agent)}"))
+        for table in tables:
+            out.append(_reference(table, agent))
+    out.extend(note(problem) for problem in problems)
     return "".join(out)
 
 

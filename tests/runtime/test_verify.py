@@ -217,8 +217,9 @@ def test_plan_examples_run_to_their_success_final(
 def test_the_behavior_services_example_recognizes_what_its_spot_behavior_looks_for() -> None:
     """behavior_services.xml's RGB service, on its real plugins and synthetic frames (no camera runs
     under ckm-run yet, issue J), publishes objects in which SPOT's spot-objects finds its target."""
+    from ckm_lab.scenes import render_rgb_scene
+
     from plugins.behaviors.messages import find_target
-    from plugins.processing.scenes import render_rgb_scene
     from runtime.network import TopicQoS, open_transport
     from runtime.resources import codec
     from runtime.resources.resource import SmartResourceRuntime

@@ -16,7 +16,7 @@ def _rows() -> dict[str, str]:
     """Each table row's first-column kinds (`a`, `b`) → the row's Uses cell."""
     rows: dict[str, str] = {}
     for line in PAGE.read_text(encoding="utf-8").splitlines():
-        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line.strip().strip("|"))]" inside a cell|" inside a cell
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line.strip().strip("|"))]  # an escaped bar stays in its cell
         if len(cells) < 2 or not cells[0].startswith("`"):
             continue
         for kind in re.findall(r"`([a-z-]+)`", cells[0]):

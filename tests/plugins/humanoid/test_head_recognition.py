@@ -13,9 +13,9 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
+from ckm_lab.scenes import USECASE_MODEL
 
 from ckmconf.loader import load
-from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import read_model
 from plugins.sim.robots import Robot
 from plugins.sim.skins import dress

@@ -14,23 +14,10 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
-
-from ckmconf.errors import ConfigError, Loc
-from ckmconf.model import Param
-from ckmconf.model.resources import Plugin, SmartResource
-from plugins.processing.cameras import XTION
-from plugins.processing.depth import (
-    DepthAcquisition,
-    EuclideanClustering,
-    KdTreeShapeClassifier,
-    ModelError,
-    backproject,
-    find_support_plane,
-    generate_model,
-)
-from plugins.processing.image import resize
-from plugins.processing.shapes import (
+from ckm_lab.shape_training import generate_model
+from ckm_lab.shapes import (
     LAB_SCENE,
+    XTION,
     PcdError,
     Shape,
     describe,
@@ -38,6 +25,19 @@ from plugins.processing.shapes import (
     read_pcd,
     render_depth_scene,
 )
+
+from ckmconf.errors import ConfigError, Loc
+from ckmconf.model import Param
+from ckmconf.model.resources import Plugin, SmartResource
+from plugins.processing.depth import (
+    DepthAcquisition,
+    EuclideanClustering,
+    KdTreeShapeClassifier,
+    ModelError,
+    backproject,
+    find_support_plane,
+)
+from plugins.processing.image import resize
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, Topology
 from tests.conftest import CONFIGS

@@ -13,6 +13,7 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
+from ckm_lab.shapes import render_depth_scene
 
 from ckmconf.errors import Loc
 from ckmconf.model import Param
@@ -20,7 +21,6 @@ from ckmconf.model.resources import Plugin
 from plugins.processing.depth import DepthAcquisition, EuclideanClustering, KdTreeShapeClassifier
 from plugins.processing.fusion import FeatureFusion, reinforce, share_at_bound
 from plugins.processing.geometry import IDENTITY, Point, Pose, Ray, distance, estimate
-from plugins.processing.shapes import render_depth_scene
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context
 from tests.conftest import CONFIGS
@@ -29,12 +29,14 @@ CTX = Context(frame=0, stamp=0.0, resource="GlobalRecog")
 LOC = Loc(str(CONFIGS / "usecase" / "resources.xml"), 1, 1, "/Part/SmartResource/Plugin")
 CATALOG = "cylinder_red_stripes: cylinder red_stripes; cylinder_blue_dots: cylinder blue_dots; box_cereal: box"
 OWNER = "plugin 'f' (feature-fusion)"
+LAB_INPUTS = "rgb: line; depth: point; pantilt: line"
+"""The lab's three recognition inputs (resources.xml GlobalRecog.Fusion)."""
 LAB_CAMERA = {"fx": 525, "calibrationWidth": 640, "calibrationHeight": 480}
 """The line inputs' default camera these tests project with (the lab's Xtion: fy, cx, cy the pinhole's)."""
 
 
 def fusion(params: Mapping[str, object] | None = None, *, loc: Loc | None = None) -> FeatureFusion:
-    given = {"objects": CATALOG, **LAB_CAMERA, **(params or {})}
+    given = {"inputs": LAB_INPUTS, "objects": CATALOG, **LAB_CAMERA, **(params or {})}
     record = Plugin(
         name="f", kind="feature-fusion", params=tuple(Param(name=k, value=str(v)) for k, v in given.items())
     )
@@ -529,3 +531,10 @@ def test_real_depth_results_fuse_with_rgb_results_of_the_same_scene() -> None:
         assert math.dist(position(obj), truth[true]) < 0.05  # the visible surface's centroid, a few cm in front
     assert objects["box"]["sources"] == ["depth"] and objects["box"]["texture"] is None
     assert out["reliability"] > found["reliability"]
+
+
+def test_the_fusion_names_its_inputs_itself() -> None:
+    """D272: no lab default; a fusion without ``inputs`` is refused at its Plugin and says what it needs."""
+    record = Plugin(name="f", kind="feature-fusion", params=(Param(name="objects", value=CATALOG),))
+    with pytest.raises(ParamError, match="inputs"):
+        FeatureFusion(record)

@@ -33,6 +33,7 @@ MOUNTED = {
     "inputs": "rgb: line; depth: point; pantilt: line",
     "mounts": f"rgb: turtlebot {LINK}; depth: turtlebot camera_depth_optical_frame; pantilt: nao {NAO_LINK}",
     "bases": "pantilt: 8.75 5.55 2.3",
+    "headJoints": "HeadYaw HeadPitch",
     "objects": "cylinder_green_checker: cylinder green_checker",
 }
 NAO = (8.75, 5.55, 2.3)
@@ -206,6 +207,10 @@ def test_unmounted_inputs_keep_the_sensor_frame() -> None:
         ({"headInput": "pose"}, "parameters 'poseInput' and 'headInput' name the same input"),
         ({"headJoints": "HeadYaw"}, "parameter 'headJoints' needs the pan and the tilt joint names"),
         (
+            {"mounts": "pantilt: nao CameraTop_optical_frame"},
+            "the mount of input 'pantilt' moves joints HeadYaw HeadPitch: parameter 'headJoints' must name the joints",
+        ),
+        (
             {"mounts": "depth: turtlebot camera_depth_optical_frame", "poses": "depth: 0 0 0 0 0 0"},
             "input 'depth' has both a static 'poses' entry and a 'mounts' entry",
         ),
@@ -268,6 +273,7 @@ def test_the_use_case_resources_still_load_the_fusion() -> None:
             Param(name="environment", value="environment.xml"),
             Param(name="mounts", value="rgb: turtlebot camera_rgb_optical_frame; pantilt: nao CameraTop_optical_frame"),
             Param(name="bases", value="pantilt: 5.5 5.2 0"),
+            Param(name="headJoints", value="HeadYaw HeadPitch"),
             Param(
                 name="cameras", value="rgb: 577.3 577.3 319.5 239.5 640 480; pantilt: 723.3 723.3 319.5 239.5 640 480"
             ),

@@ -17,14 +17,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from ckm_lab.shapes import XTION, render_depth_scene
 
 import ckmconf
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
-from plugins.processing.cameras import XTION, Camera
+from plugins.processing.cameras import Camera
 from plugins.processing.depth import DepthAcquisition, EuclideanClustering
 from plugins.processing.fusion import FeatureFusion
-from plugins.processing.shapes import render_depth_scene
 from runtime.kernel.interfaces import ParamError
 from runtime.registry import Registry
 from runtime.resources.spt import Context

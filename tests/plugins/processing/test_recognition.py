@@ -12,6 +12,7 @@ import cv2
 import msgpack
 import numpy as np
 import pytest
+from ckm_lab.scenes import USECASE_MODEL, render_rgb_scene
 
 from ckmconf.errors import ConfigError, Loc
 from ckmconf.loader import load
@@ -19,7 +20,6 @@ from ckmconf.model import Param
 from ckmconf.model.resources import Plugin, SmartResource
 from plugins.processing import textures
 from plugins.processing.recognition import CameraAcquisition, KeypointMatching, Keypoints, OrbKeypoints
-from plugins.processing.scenes import USECASE_MODEL, render_rgb_scene
 from plugins.processing.textures import parse_model, read_model
 from runtime.resources.spt import Context, ProcessingPlugin, Topology
 from tests.conftest import CONFIGS

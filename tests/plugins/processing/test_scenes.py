@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from ckm_lab.scenes import BACKGROUNDS, USECASE_MODEL, background, render_rgb_scene
 
-from plugins.processing.scenes import BACKGROUNDS, USECASE_MODEL, background, render_rgb_scene
 from plugins.processing.textures import TextureSpec, read_model, render_texture
 
 OBJECTS = [o.name for o in read_model(USECASE_MODEL).objects]

@@ -10,10 +10,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from ckm_lab.scenes import USECASE_MODEL
 
 from plugins.processing import textures
 from plugins.processing.recognition import OrbKeypoints
-from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import read_model
 from plugins.processing.views import read_views, write_views
 from tests.plugins.processing.test_recognition import CTX, matcher, plugin

@@ -193,6 +193,8 @@ def test_a_render_mirror_built_from_the_same_plan_sees_the_added_crate() -> None
     assert plan is not None
     text = (SCENARIOS / "blocked-path.scenario").read_text()
     disturbed = DisturbedPlan.around(plan, parse(text, "blocked-path.scenario"), text)
+    assert disturbed.cameras == plan.cameras == {"turtlebot", "nao"}  # one render worker per camera robot
+    assert disturbed.scenario_source == "blocked-path.scenario" and disturbed.scenario_text == text
     server = disturbed.build()
     mirror_plan = pickle.loads(pickle.dumps(disturbed))  # what the spawned render worker receives
     assert mirror_plan.installed is None

@@ -11,8 +11,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from ckm_lab.scenes import USECASE_MODEL
 
-from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import build_model, read_model
 from plugins.processing.views import read_views
 from plugins.sim import orb_training
@@ -29,7 +29,7 @@ def test_views_learnt_on_a_small_grid_agree_with_the_flat_prints(
     model = tmp_path / "m.yml"
     text = USECASE_MODEL.read_text(encoding="utf-8")
     model.write_text(text.replace("views: lab_objects_orb_views.txt", "views: v.txt"), encoding="utf-8")
-    args = ["--model", str(model), "--system", str(CONFIGS / "usecase" / "lab.xml")]
+    args = ["--model", str(model), "--system", str(CONFIGS / "usecase" / "lab.xml"), "--focal", "577.3"]
     assert orb_training.main(args) == 0
     first = (tmp_path / "v.txt").read_bytes()
     assert orb_training.main(args) == 0

@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.scenes import USECASE_MODEL
 
 from ckmconf.loader import load
-from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import read_model
 from plugins.sim.arm import ARM_JOINTS, POSES
 from plugins.sim.plan import WorldPlan

@@ -12,11 +12,11 @@ import cv2
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.scenes import USECASE_MODEL
 
 from ckmconf.loader import load
 from ckmconf.model import Environment
 from ckmconf.model.environment import Circle, Geometry25D, Rectangle
-from plugins.processing.scenes import USECASE_MODEL
 from plugins.processing.textures import read_model, render_texture
 from plugins.sim.skins import skin_mesh, texture_point
 from plugins.sim.world import World

@@ -210,7 +210,7 @@ def test_controllers_can_be_added_and_removed_at_run_time(
 def test_a_node_runs_the_smart_resources_it_hosts(
     nodes: Callable[[System, str], NodeRuntime], transport: Transport
 ) -> None:
-    from plugins.processing.scenes import render_rgb_scene
+    from ckm_lab.scenes import render_rgb_scene
 
     runtime = nodes(example("smart_resource_tcm.xml"), "camera-node")
     assert set(runtime.resources) == {"RGBD"}

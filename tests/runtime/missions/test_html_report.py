@@ -256,14 +256,14 @@ def test_the_page_holds_table_7_9_figures_snapshots_and_problems(
         ]  # fmt: skip
         assert rows[1:] == expected
     assert ["ObjectInteraction/APPR", "30.000", "19.9", "0.95"] in page.table("agent-turtlebot")
-    # the thesis' values next to ours where the states match (Table 7.9, p. 132)
-    thesis = {row[0]: row for row in page.table("thesis agent-turtlebot")[1:]}
+    # the thesis' values (the lab package's reference table) next to ours where the states match
+    thesis = {row[0]: row for row in page.table("reference agent-turtlebot")[1:]}
     assert thesis["NAVIGATION"][2:4] == ["56.676+52.856", "38.000+35.000"]
     assert (
         thesis["APPR-PICK"][3] == "50.000"
         and thesis["APPR-PICK"][1] == "ObjectInteraction/APPR, ObjectInteraction/PICK"
     )
-    nao = {row[0]: row for row in page.table("thesis agent-nao")[1:]}
+    nao = {row[0]: row for row in page.table("reference agent-nao")[1:]}
     assert nao["SPOT_FIX"][2:4] == ["75.327", "25.000"]
     # header: outcomes judged against the missions' success finals (configuration from stats.json)
     agents = {row[0]: row for row in page.table("agents")[1:]}

@@ -1,4 +1,4 @@
-"""The pieces of the HTML run report: payload shapes read from bags, frames, problems, thesis rows."""
+"""The pieces of the HTML run report: payload shapes read from bags, frames, problems, reference rows."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ckm_lab.table_7_9 import TABLE_7_9
 from matplotlib.image import imread
 
 from ckmconf.model.environment import ZoomMap
@@ -16,7 +17,7 @@ from runtime.missions.report import AgentReport, StateRow
 from runtime.missions.report_bag import find_bags, image_pixels, pose_xy, pose_yaw, sightings
 from runtime.missions.report_figures import image_png
 from runtime.missions.report_problems import collect
-from runtime.missions.report_thesis import TABLE_7_9, compare
+from runtime.missions.report_references import ReferenceRow, ReferenceTable, compare, installed_tables
 from runtime.missions.report_views import replay_zoom
 
 
@@ -89,14 +90,32 @@ def test_task_failures_and_misses_count_from_the_statistics(tmp_path: Path) -> N
 
 
 def test_thesis_rows_match_our_states_per_visit() -> None:
-    assert [r.state for r in TABLE_7_9] == ["NAVIGATION", "SPOT", "APPR-PICK", "PLACE-BACK", "SPOT_TRACK", "SPOT_FIX"]
+    expected = ["NAVIGATION", "SPOT", "APPR-PICK", "PLACE-BACK", "SPOT_TRACK", "SPOT_FIX"]
+    assert [r.state for r in TABLE_7_9.rows] == expected
     rows = [StateRow("a", f"M/{label}", label.rsplit("/", 1)[-1], [t], [t / 100], p) for label, t, p in (
         ("Navigation/NAV", 10.0, 1.0), ("Navigation/WAIT", 30.0, 0.5), ("ObjectPlace/NAV", 20.0, None))]  # fmt: skip
-    (navigation,) = compare(AgentReport("a", "M", None, 100.0, "ok", rows))
+    (navigation,) = compare(TABLE_7_9, AgentReport("a", "M", None, 100.0, "ok", rows))
     assert navigation.times == (40.0, 20.0) and navigation.contributions == (0.4, 0.2)
     assert navigation.performance == pytest.approx((10 * 1.0 + 30 * 0.5) / 40)
-    (going,) = compare(AgentReport("a", "M", None, 100.0, None, rows[:2]))
+    (going,) = compare(TABLE_7_9, AgentReport("a", "M", None, 100.0, None, rows[:2]))
     assert going.times == (40.0,)  # the return visit never made is left out, not shown as 0 s
+
+
+def test_a_reference_table_about_another_system_shows_nothing_for_the_lab() -> None:
+    """A published row stands only for the states its patterns name: a depot's table matches none of
+    the lab's rows, and the depot's own states are compared with it."""
+    depot = ReferenceTable("depot release 1", (ReferenceRow("DRIVE", (12.0,), (0.5,), 0.9, (("Delivery/GO*",),)),))
+    lab = [StateRow("a", "M/Navigation/NAV", "NAV", [10.0], [0.1], 1.0)]
+    assert compare(depot, AgentReport("a", "M", None, 100.0, "ok", lab)) == []
+    own = [StateRow("a", "Depot/Delivery/GO_PALLET", "GO_PALLET", [8.0], [0.4], 0.8)]
+    (drive,) = compare(depot, AgentReport("a", "Delivery", None, 20.0, "ok", own))
+    assert drive.times == (8.0,) and drive.rows == ("Delivery/GO_PALLET",) and drive.performance == 0.8
+
+
+def test_the_lab_package_registers_table_7_9_as_a_reference_table() -> None:
+    tables, problems = installed_tables()
+    assert problems == []
+    assert TABLE_7_9 in tables and TABLE_7_9.source == "thesis Table 7.9 (§7.5.2, p. 132)"
 
 
 def test_zoom_map_areas_are_replayed_with_the_border_and_timeout_triggers() -> None:

@@ -85,7 +85,7 @@ def test_the_example_service_publishes_its_combined_measure(
     resource: SmartResource, pair: tuple[Transport, Transport]
 ) -> None:
     """The example's own plugins (acquisition, resize, ORB recognition) on synthetic VGA frames."""
-    from plugins.processing.scenes import USECASE_MODEL, load_catalog, render_rgb_scene
+    from ckm_lab.scenes import USECASE_MODEL, load_catalog, render_rgb_scene
 
     names = [o.name for o in load_catalog(str(USECASE_MODEL)).objects]
     rng = random.Random(3)

@@ -1,7 +1,7 @@
 """Synthetic RGB camera frames of the lab objects, with ground truth, for tests and benchmarks.
 
 Stands in for the Xtion's RGB stream of §7.4.1: the objects' textures (the same ones the ORB
-model learns, ``textures.py``) are pasted with scale, rotation and perspective jitter on a
+model learns, :mod:`plugins.processing.textures`) are pasted with scale, rotation and perspective jitter on a
 cluttered, slightly out-of-focus background, then lit with a random gain and sensor noise.
 Textures, backgrounds and noise fields are rendered once and cached, so a VGA frame costs a few
 milliseconds: fast enough to feed a 30 Hz camera from the benchmark process itself.
@@ -19,10 +19,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from .textures import Image, ModelSpec, read_model, render_texture
+from plugins.processing.textures import Image, ModelSpec, read_model, render_texture
 
-USECASE_MODEL = Path(__file__).resolve().parents[2] / "configs" / "usecase" / "models" / "lab_objects_orb.yml"
-"""The use case's model file (RGBDCamera's match_* plugins): the default texture catalogue."""
+from . import MODELS
+
+USECASE_MODEL = MODELS / "lab_objects_orb.yml"
+"""The lab's model file (RGBDCamera's match_* plugins): the default texture catalogue."""
 
 BACKGROUNDS = 8
 """Distinct clutter backgrounds per resolution; a scene uses ``seed % BACKGROUNDS`` by default."""

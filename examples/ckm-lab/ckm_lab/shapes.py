@@ -3,9 +3,10 @@
 - ``render_depth_scene`` ray-casts a floor and a few lab objects (boxes, cylinders, spheres) into
   a uint16 depth image in millimetres, as an Asus Xtion would deliver it, with the axial noise
   model of Nguyen, Izadi and Lovell (2012): σ(z) = 1.2 mm + 1.9 mm·(z − 0.4 m)².
-- The cluster descriptor (``describe``, ``DESCRIPTOR_FIELDS``) lives in ``descriptor.py``, the
-  model's PCD files (``read_pcd``, ``format_pcd``) in ``pcd.py`` and the camera in ``cameras.py``;
-  they are imported here too, where the depth tests and plugins have always found them.
+- ``XTION`` is the lab's Asus Xtion at VGA, the camera the renderer and the shape model's training
+  draw with. The cluster descriptor (``describe``, ``DESCRIPTOR_FIELDS``), the model's PCD files
+  (``read_pcd``, ``format_pcd``) and ``Camera`` are the general ones of :mod:`plugins.processing`,
+  imported here too, where the depth tests have always found them.
 
 Frames: the camera optical frame has x right, y down, z forward (metres); the world frame of the
 renderer has X right, Y forward, Z up, with the camera at (0, 0, ``Camera.elevation``) pitched down
@@ -22,15 +23,16 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from .cameras import XTION, Camera
-from .descriptor import DESCRIPTOR_FIELDS, AnyFloats, FloatArray, Plane, describe
-from .pcd import MAX_PCD_BYTES, PCD_KEYS, PcdError, ShapeModel, format_pcd, read_pcd
+from plugins.processing.cameras import Camera
+from plugins.processing.descriptor import DESCRIPTOR_FIELDS, AnyFloats, FloatArray, Plane, describe
+from plugins.processing.pcd import MAX_PCD_BYTES, PCD_KEYS, PcdError, ShapeModel, format_pcd, read_pcd
 
 __all__ = [
     "DESCRIPTOR_FIELDS",
     "LAB_SCENE",
     "MAX_PCD_BYTES",
     "PCD_KEYS",
+    "XTION",
     "Camera",
     "PcdError",
     "Plane",
@@ -46,6 +48,9 @@ __all__ = [
 ]
 
 ShapeKind = Literal["box", "cylinder", "sphere"]
+
+XTION = Camera(525.0, 525.0, 319.5, 239.5, 640, 480)
+"""The thesis lab's Asus Xtion at VGA (640 × 480): what the synthetic renderer draws with; no plugin's default."""
 
 
 @dataclass(frozen=True)
