@@ -67,7 +67,7 @@ def _goal_id(message: Mapping[str, Any], owner: str, where: str) -> int:
 class BaseDisplacement(ProcessingPlugin):
     """``plugin.base-displacement``: path following, relative moves and odometry of the Kobuki base."""
 
-    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PORTS = Ports(inputs={"path": MAPPING, "move_goal": MAPPING, "wheel_odom": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "base-drive"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("speed", 0.3, "Top linear speed (Table 7.1 Speed); the service Parameter 'speed' overrides it.",
