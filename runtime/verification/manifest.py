@@ -386,7 +386,8 @@ def file_problem(entry: P, param: Param) -> str:
         return ""
     path = pathlib.Path(os.path.abspath(param.loc.file)).parent / param.value
     if not path.is_file():
-        return f"no such file {path}"
+        shown = os.path.relpath(path)
+        return f"no such file {path if shown.startswith('..') else shown}"
     if entry.file != ENVIRONMENT_FILE:
         return ""
     try:
