@@ -46,7 +46,8 @@ class NavigateTo(Behavior):
     USES = Uses(Use("nav", "navigation", "given the goal; its status ends the state, its pose places a "
                                          "received position"))
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("goal", "", "The goal: 'x y yaw' on the map, an Area's name or an Object's name (empty: from 'input')."),
+        P("goal", "", "The goal: 'x y yaw' on the map, an Area's name or an Object's name (empty: from 'input').",
+          place=True),
         P("input", "", "Take the goal from this <Input> when it has a value (a goal string or a map position)."),
         P("standoff", 0.0, "Stop this far short of a position received on the input, facing it.", unit="m",
           min=0.0),

@@ -43,7 +43,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.resources import codec
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
+from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, REQUIRED, P, Params, Ports
 
 from .map_model import MapModel, MapObject
 from .perception import ingest_fused
@@ -72,7 +72,7 @@ class EnvironmentMap(ProcessingPlugin):
     PROVIDES = "map-sharing"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
-          "configuration file.", type=str),
+          "configuration file.", type=str, file=ENVIRONMENT_FILE),
         P("areas", "", "Areas of the Environment this map holds, separated by spaces or commas (empty: all of it)."),
         P("robot", "", "Source name of this map's own updates (empty: the Smart Resource's name)."),
         P("gate", 0.3, "A recognised shape updates the nearest map object of that tag within this distance.",

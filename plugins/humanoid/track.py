@@ -43,7 +43,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, REQUIRED, Entries, P, Params, Ports, fixed_numbers
+from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, REQUIRED, Entries, P, Params, Ports, fixed_numbers
 
 from .head import HeadModel, map_frame, on_plane
 
@@ -84,7 +84,8 @@ class PanTiltTrack(ProcessingPlugin):
         P("target", "", "Name or shape of the object to track (empty: the most reliable)."),
         P("targetTexture", "", "Texture of the object to track."),
         P("minReliability", 0.0, "Objects less reliable than this are ignored.", min=0.0, max=1.0),
-        P("environment", "", "Environment XML file (relative to the configuration file) giving the objects' heights."),
+        P("environment", "", "Environment XML file (relative to the configuration file) giving the objects' heights.",
+          file=ENVIRONMENT_FILE),
         P("heights", "", "Object centre heights (win over the environment's).", unit="m",
           entries=Entries("z", numbers=True)),
         P("planeHeight", 0.0, "Height of the plane met by the ray of an object of unknown height.", unit="m"),

@@ -18,7 +18,7 @@ import ckmconf
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, NUMBERS, REQUIRED, P, Params, Ports
+from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, NUMBERS, REQUIRED, P, Params, Ports
 
 from .mcl import AmclFilter, MclSettings
 from .raster import GridMap
@@ -60,7 +60,7 @@ class Localization(ProcessingPlugin):
         ),
         P("particles", 2500, "Number of particles (MCL: the maximum with KLD sampling).", min=10),
         P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
-          "configuration file.", type=str),
+          "configuration file.", type=str, file=ENVIRONMENT_FILE),
         P("resolution", 0.05, "Grid cell size of the map.", unit="m", above=0.0),
         P("fov", 2 * np.pi, "Laser field of view, beams spread evenly over it.", unit="rad", above=0.0),
         P("max_range", 8.0, "Laser maximum range: beams at it hit nothing.", unit="m", above=0.0),

@@ -47,7 +47,7 @@ from plugins.localization.estimate import Estimate
 from plugins.localization.raster import GridMap
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports, fixed_numbers
+from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, REQUIRED, P, Params, Ports, fixed_numbers
 
 from .course import NavigationCourse
 from .frames import (
@@ -82,7 +82,7 @@ def uncertainty(estimate: Estimate) -> float:
 class AmclNavigation(NavigationCourse, ProcessingPlugin):
     """``plugin.amcl-navigation``: localization, planning and the path of the Navigation.AMCL service."""
 
-    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PORTS = Ports(inputs={"scan": MAPPING, "odom": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "navigation"  # docs/interfaces.md
     WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {  # beyond the interface's pose and status
         "path": ("id", "goal", "frame", "points", "yaw", "speed"),
@@ -92,7 +92,7 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
     }
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
-          "configuration file.", type=str),
+          "configuration file.", type=str, file=ENVIRONMENT_FILE),
         P("filter", "reliability", "Algorithm 3 ('reliability') or the AMCL-like baseline ('mcl').", choices=FILTERS),
         P("particles", 2000, "Number of particles.", min=10),
         P("beams", 60, "Beams of each scan used by the filter, evenly spread.", min=3),

@@ -68,7 +68,7 @@ def _goal_id(message: Mapping[str, Any], owner: str, where: str) -> int:
 class BaseDisplacement(ProcessingPlugin):
     """``plugin.base-displacement``: path following, relative moves and odometry of the Kobuki base."""
 
-    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PORTS = Ports(inputs={"path": MAPPING, "move_goal": MAPPING, "wheel_odom": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "base-drive"  # docs/interfaces.md
     WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"wheel_cmd": ("linear", "angular")}  # beyond its ports
     PARAMS: ClassVar[Mapping[str, Any]] = Params(

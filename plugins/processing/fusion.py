@@ -50,7 +50,7 @@ from ckmconf.model.resources import Plugin
 from plugins.environment_file import environment_of
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import MAPPING, REQUIRED, Entries, P, Params, Parsed, Ports
+from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, REQUIRED, Entries, P, Params, Parsed, Ports
 
 from .cameras import Camera, camera_of
 from .fusion_model import Observation, fused_object, number, reinforce, share_at_bound
@@ -160,7 +160,8 @@ class FeatureFusion(ProcessingPlugin):
         P("minReliability", 0.0, "Observations below this reliability (r_th of eq. 6.31) are ignored."),
         P("minRange", 0.3, "Nearest feature along a ray.", unit="m"),
         P("objects", "", "Known objects (win over the environment's).", entries=OBJECT),
-        P("environment", "", "Environment XML file, relative to the configuration file, read in setup()."),
+        P("environment", "", "Environment XML file, relative to the configuration file, read in setup().",
+          file=ENVIRONMENT_FILE),
         P("maxSensors", 8, "Most observations fused into one object (Table 7.1 Max_sensors).", min=1),
         P("mounts", "", "Inputs on a robot (URDF, sensor link): the frame is the map.", entries=MOUNT),
         P("bases", "", "Fixed map poses of mounted inputs' robots (others follow poseInput).", entries=BASE),

@@ -10,6 +10,7 @@ that use them are in :mod:`.verify`.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Iterable
 from typing import Any
 
@@ -21,7 +22,7 @@ from ckmconf.rostypes import is_ros_type
 from ckmconf.source import Limits, SourceFile, read_source
 
 from ..registry import NOUNS, Registry, RegistryError
-from .manifest import param_problems
+from .manifest import param_problems, params_of
 from .types import describe, fits
 
 
@@ -73,6 +74,28 @@ class Checker:
                 self.report.error(record, problem.message)
             else:
                 self.report.error(problem.param, problem.message, problem.attr, problem.offset)
+        declared = params_of(cls).specs
+        for param in params:
+            entry = declared.get(param.name)
+            if entry is not None and entry.place:
+                unknown = self.place_problem(param.value)
+                if unknown:
+                    self.report.error(param, f"{owner}: parameter {param.name!r}: {unknown}", "value")
+
+    def place_problem(self, value: str) -> str:
+        """Why ``value`` is no place of the system's map: neither a pose ``"x y yaw"`` nor an Area or
+        Object of its ``<Environment>`` ("" when it is one, is empty, or the system has no map)."""
+        environment = self.system.environment
+        words = value.replace(",", " ").split()
+        if environment is None or not words or _is_pose(words):
+            return ""
+        names = [a.name for a in environment.areas] + [o.name for o in environment.objects]
+        if value.strip() in names:
+            return ""
+        close = difflib.get_close_matches(value.strip(), names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else f" (it has: {', '.join(names) or 'none'})"
+        return (f"{value!r} is neither a pose 'x y yaw' nor an Area or Object of the map "
+                f"{environment.name!r}{hint}")
 
     def _checked(
         self, record: Record, category: str, kind: str, params: Iterable[Param], attr: str = "kind"
@@ -121,3 +144,11 @@ class Checker:
             return
         if carried is not None and not fits(value, carried, self.types):
             self.report.error(record, sentence.format(describe(value, size)) + f" of type {carried}", attr)
+
+
+def _is_pose(words: list[str]) -> bool:
+    try:
+        [float(w) for w in words]
+    except ValueError:
+        return False
+    return True

@@ -25,10 +25,14 @@ before manifests): each entry then reads as an undocumented optional parameter o
 from __future__ import annotations
 
 import math
+import os
+import pathlib
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ckmconf import ConfigError, ConfigErrors, read_document
+from ckmconf.errors import MEMORY_FILE
 from ckmconf.model import Param, params_dict
 
 from .entries import Entries, ParamError, Parsed
@@ -44,6 +48,11 @@ ARRAY = "array"
 """An n-dimensional numeric array (an image, a depth frame): travels only as ``bytes`` (the codec's encoding)."""
 ANY = "any"
 """Not declared: any value (nothing to check)."""
+
+FILE = "file"
+"""``P(file=FILE)``: the value names a file, relative to the configuration file, that must exist."""
+ENVIRONMENT_FILE = "environment"
+"""``P(file=ENVIRONMENT_FILE)``: the value names a configuration file holding an ``<Environment>``."""
 
 ParamType = type[bool] | type[int] | type[float] | type[str]
 _TYPE_NAMES: dict[type, str] = {bool: "bool", int: "int", float: "float", str: "string"}
@@ -72,7 +81,11 @@ class P:
     ``min``/``max`` bound the value inclusively, ``above``/``below`` strictly; ``choices`` lists
     the accepted values. The type is the default's unless ``type`` is given. ``entries`` declares a
     per-name string value (``"name: v1 v2; …"``, :class:`~runtime.verification.entries.Entries`):
-    the kind then receives it parsed, ``{name: (values…)}``.
+    the kind then receives it parsed, ``{name: (values…)}``. ``file`` marks a path relative to the
+    configuration file the ``<Param>`` is in, which must exist: :data:`FILE` any file,
+    :data:`ENVIRONMENT_FILE` one that holds an ``<Environment>`` (an empty value: none given).
+    ``place`` marks a place on the map: a pose ``"x y yaw"`` or the name of an Area or Object of the
+    system's ``<Environment>`` (checked when the system has one; an empty value: none given).
     """
 
     name: str
@@ -86,6 +99,8 @@ class P:
     below: float | None = None
     choices: tuple[Any, ...] = ()
     entries: Entries | None = None
+    file: str = ""
+    place: bool = False
 
     def __post_init__(self) -> None:
         if self.type is None:
@@ -343,6 +358,11 @@ def param_problems(cls: type, params: Sequence[Param], owner: str) -> list[Param
             values[param.name] = entry.convert(param.value)
         except ParamError as exc:
             problems.append(ParamProblem(param, f"{owner}: {exc}", "value", exc.offset))
+            continue
+        missing = file_problem(entry, param)
+        if missing:
+            problems.append(ParamProblem(param, f"{owner}: parameter {param.name!r} = {param.value!r}: {missing}",
+                                         "value"))
     for name, entry in declared.specs.items():
         if entry.required and name not in given:
             problems.append(ParamProblem(None, f"{owner} needs parameter {name!r} ({entry.doc or entry.type_name})"))
@@ -360,9 +380,31 @@ def param_problems(cls: type, params: Sequence[Param], owner: str) -> list[Param
     return problems
 
 
+def file_problem(entry: P, param: Param) -> str:
+    """Why the file ``param`` names cannot serve ``entry`` ("" when it can, or names none, or the Param
+    was built in code): it is resolved as the kinds resolve it, next to the Param's own file."""
+    if not entry.file or not param.value or param.loc is None or param.loc.file == MEMORY_FILE:
+        return ""
+    path = pathlib.Path(os.path.abspath(param.loc.file)).parent / param.value
+    if not path.is_file():
+        shown = os.path.relpath(path)
+        return f"no such file {path if shown.startswith('..') else shown}"
+    if entry.file != ENVIRONMENT_FILE:
+        return ""
+    try:
+        document = read_document(path)
+    except ConfigError as exc:
+        return f"cannot read it: {exc}"
+    except ConfigErrors as exc:
+        return f"cannot read it: {exc.errors[0]}"
+    return "" if document.environment is not None else f"{param.value} holds no <Environment>"
+
+
 __all__ = [
     "ANY",
     "ARRAY",
+    "ENVIRONMENT_FILE",
+    "FILE",
     "MAPPING",
     "NUMBER",
     "NUMBERS",
@@ -376,6 +418,7 @@ __all__ = [
     "Ports",
     "as_params",
     "defaulted",
+    "file_problem",
     "param_problems",
     "params_of",
     "ports_of",

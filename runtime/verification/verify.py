@@ -319,6 +319,14 @@ class _Verifier(InterfaceChecks, MessageChecks):
         ports = ports_of(cls)
         inputs = {i.name: i for s in services for i in s.inputs}  # the runtime keys the stream's inputs by name
         for name, source in inputs.items():
+            if "*" not in ports.inputs and name not in ports.inputs:  # a kind naming its Inputs reads no other
+                self.report.error(
+                    source,
+                    f"acquisition plugin {plugin.name!r} ({plugin.kind}) of resource {resource.name!r} reads no "
+                    f"Input {name!r} (it reads: {', '.join(ports.inputs)})",
+                    "name",
+                )
+                continue
             accepted = ports.input("*") if len(inputs) == 1 else ports.input(name)
             carried = self._topic_type(source.topic, node)
             if carried != "bytes":
