@@ -36,7 +36,8 @@ from tests.plugins.navigation.test_displacement import Unicycle, base, move
 
 def fusion_result() -> dict[str, Any]:
     """What feature-fusion writes for a texture seen by a camera and a shape by a depth sensor, one object."""
-    params = {"objects": "red_can: cylinder red_stripes", "fx": 525, "calibrationWidth": 640, "calibrationHeight": 480}
+    params = {"inputs": "rgb: line; depth: point", "objects": "red_can: cylinder red_stripes", "fx": 525,
+              "calibrationWidth": 640, "calibrationHeight": 480}
     fusion = FeatureFusion(Plugin(name="f", kind="feature-fusion",
                                   params=tuple(Param(name=k, value=str(v)) for k, v in params.items())))
     x, y, z = 0.1, 0.05, 1.2
@@ -45,7 +46,7 @@ def fusion_result() -> dict[str, Any]:
     point = {"name": "cylinder", "reliability": 0.8, "x": x, "y": y, "z": z - 0.03, "points": 400}
     out = fusion.process({"rgb": {"objects": [line], "reliability": 0.65, "keypoints": 500, "width": 640,
                                   "height": 480},
-                          "depth": {"objects": [point], "reliability": 0.8}, "pantilt": None}, Context(0, 0.0))
+                          "depth": {"objects": [point], "reliability": 0.8}}, Context(0, 0.0))
     assert len(out["objects"]) == 1, out
     return out
 
