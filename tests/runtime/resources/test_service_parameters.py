@@ -26,6 +26,7 @@ SYSTEM = f"""<?xml version="1.0" encoding="UTF-8"?>
   <Node name="pc" kind="service"/>
   <SmartResource name="GlobalRecog" node="pc">
     <Plugin name="fusion" kind="feature-fusion">
+      <Param name="inputs" value="rgb: line; depth: point; pantilt: line"/>
       <Param name="poses" value="{POSE}"/>
       <Param name="objects" value="cylinder_red_stripes: cylinder red_stripes"/>
       <Param name="fx" value="525"/>
