@@ -120,6 +120,9 @@ MISTAKES = (  # file, text, replaced by, the line it is refused at, what ckm-val
     ("services.xml", '<Input name="odom" topic="/base/odom"/>', '<Input name="odometry" topic="/base/odom"/>', 72,
      "reads no Input 'odometry' (it reads: scan, odom)"),
     ("mission.xml", 'as="nav">', 'as="navigation">', 15, "its kind reads a navigation service as 'nav'"),
+    ("robot.xml", '      <Param name="ticksPerRev" value="2048"/>\n', "", 16,
+     "a wheel encoder (counter in, joint) needs Param 'ticksPerRev'"),
+    ("services.xml", '      <Param name="fov" value="3.4907"/>\n', "", 23, "needs parameter 'fov'"),
 )
 
 

@@ -11,7 +11,7 @@ The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, 
 ``altimeter``, ``pose``) or by ``joint``/``joints``, and the channel's kind and direction:
 
 ======================  ===========================================================================
-counter in, joint       wheel encoder speed, ticks/s (``ticksPerRev``), plus ``noise`` (s.d.)
+counter in, joint       wheel encoder speed, ticks/s (``ticksPerRev``, required), plus ``noise`` (s.d.)
 pwm out, joint          duty × ``maxVelocity`` (``mode`` velocity) or × max effort (``mode`` effort)
 analog/bus in, joint    joint position (``mode`` velocity/effort: those), raw = value / scale + offset
 bus in, joints          a tuple of the named joints' positions, each as above
@@ -77,7 +77,8 @@ _SPEC = Params(
     P("sensor", "", "Sensor device.", choices=SENSORS),
     P("mode", "position", "Joint quantity.", choices=("position", "velocity", "effort")),
     P("maxVelocity", 10.0, "Joint speed at duty 1 (pwm, velocity mode).", unit="rad/s", above=0.0),
-    P("ticksPerRev", 2578.33, "Encoder ticks per wheel turn.", above=0.0),
+    P("ticksPerRev", None, "Encoder ticks per wheel turn (required by a wheel encoder: counter in, joint).",
+      type=float, above=0.0),
     P("scale", 1.0, "Joint units per raw unit.", unit="rad"),
     P("offset", 0.0, "Raw value at joint zero."),
     P("initial", "", "Raw value an out channel's joint(s) stand at when the robot is spawned (position mode)."),
@@ -109,54 +110,74 @@ class SimBackend(Backend):
     PARAMS = _SPEC
     PORTS = Ports(outputs={"*": NUMBERS})
 
-    def __init__(self, channel: HWChannel, *, scope: PlantScope | None = None) -> None:
-        super().__init__(channel)
-        self.owner = f"sim channel {channel.name!r}"
-        self.values = read_params(channel.params, _SPEC, owner=self.owner)
-        v = self.values
+    @classmethod
+    def problems(cls, channel: HWChannel, system: System | None = None) -> list[tuple[Any, str]]:
+        """What is wrong across the channel's Params (each alone is checked by its manifest entry), as
+        ``(the Param or the channel, message)``: ``verify`` reports each at its ``FILE:LINE:COL`` before
+        anything starts, and the backend refuses the first."""
+        try:
+            v = read_params(channel.params, _SPEC, owner=f"sim channel {channel.name!r}")
+        except ParamError:
+            return []  # the manifest check reports the Param itself
+        named = {p.name: p for p in channel.params}
+        found: list[tuple[Any, str]] = []
+
+        def problem(param: str | None, message: str) -> None:
+            found.append((named.get(param, channel) if param else channel, message))
+
         if not v["body"]:
-            raise ParamError(f"{self.owner}: Param 'body' (the robot) is required")
+            problem(None, "Param 'body' (the robot) is required")
         if not (v["sensor"] or v["joint"] or v["joints"]):
-            raise ParamError(f"{self.owner}: give Param 'sensor' or 'joint'/'joints' to choose the device")
+            problem(None, "give Param 'sensor' or 'joint'/'joints' to choose the device")
         if channel.direction == "out" and not v["joint"]:
-            raise ParamError(f"{self.owner}: an out channel drives a joint: give Param 'joint'")
+            problem(None, "an out channel drives a joint: give Param 'joint'")
         if v["latency"] and v["sensor"] not in ("rgb", "depth"):
-            raise ParamError(f"{self.owner}: Param 'latency' is a camera's (sensor rgb or depth), not "
-                             f"{v['sensor'] or 'a joint'}'s")
-        self.latency = float(v["latency"])
+            problem("latency", f"Param 'latency' is a camera's (sensor rgb or depth), not {v['sensor'] or 'a joint'}'s")
         if v["grasp"] and (channel.direction != "out" or v["mode"] != "position" or not v["mirror"]):
-            raise ParamError(f"{self.owner}: Param 'grasp' makes a gripper: only for an out channel in mode "
-                             "'position' whose 'joint' and 'mirror' are its two fingers")
+            problem("grasp", "Param 'grasp' makes a gripper: only for an out channel in mode 'position' whose "
+                             "'joint' and 'mirror' are its two fingers")
         if v["initial"]:
             if channel.direction != "out" or v["mode"] != "position":
-                raise ParamError(f"{self.owner}: Param 'initial' places a joint: only for an out channel in mode "
-                                 "'position'")
+                problem("initial", "Param 'initial' places a joint: only for an out channel in mode 'position'")
             try:
-                v["initial"] = float(v["initial"])
+                float(v["initial"])
             except ValueError:
-                raise ParamError(f"{self.owner}: Param 'initial' is {v['initial']!r}, not a number") from None
-        here = Path(channel.loc.file) if channel.loc and channel.loc.file != "<memory>" else None
-        self.base_dir = here.parent if here else Path.cwd()
-        own = str(here.resolve()) if here else ""
-        self.world_file = str((self.base_dir / v["world"]).resolve()) if v["world"] else own
-        self._check_size()
-        self.scope = scope if scope is not None else scope_for(channel)
-        self.sim: SimWorld | None = None
-        self._device: ChannelDevice | None = None
-        self.device: Any = None  # in-process: the simulated device itself (a Camera, a Lidar, joints…)
-        self.remote: RemoteDevice | None = None  # client mode: the device in the world server
-        self.last = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
-
-    def _check_size(self) -> None:
-        v, size, sensor = self.values, self.channel.size, self.values["sensor"]
+                problem("initial", f"Param 'initial' is {v['initial']!r}, not a number")
+        if channel.kind == "counter" and channel.direction == "in" and v["joint"] and v["ticksPerRev"] is None:
+            problem(None, "a wheel encoder (counter in, joint) needs Param 'ticksPerRev', its encoder's ticks per "
+                          "wheel turn (no default: it is the encoder's own)")
+        sensor = v["sensor"]
         expected = {
             "rgb": v["width"] * v["height"] * 3, "depth": v["width"] * v["height"], "imu": 6,
             "contact": 1, "altimeter": 1, "pose": 3,
         }.get(sensor)
         if v["joints"]:
             expected = len(v["joints"].split())
-        if expected is not None and size != expected:
-            raise ParamError(f"{self.owner}: size is {size}, its {sensor or 'joints'} device gives {expected} values")
+        if expected is not None and channel.size != expected:
+            problem(None, f"size is {channel.size}, its {sensor or 'joints'} device gives {expected} values")
+        return found
+
+    def __init__(self, channel: HWChannel, *, scope: PlantScope | None = None) -> None:
+        super().__init__(channel)
+        self.owner = f"sim channel {channel.name!r}"
+        self.values = read_params(channel.params, _SPEC, owner=self.owner)
+        v = self.values
+        problems = self.problems(channel)
+        if problems:
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
+        self.latency = float(v["latency"])
+        if v["initial"]:
+            v["initial"] = float(v["initial"])
+        here = Path(channel.loc.file) if channel.loc and channel.loc.file != "<memory>" else None
+        self.base_dir = here.parent if here else Path.cwd()
+        own = str(here.resolve()) if here else ""
+        self.world_file = str((self.base_dir / v["world"]).resolve()) if v["world"] else own
+        self.scope = scope if scope is not None else scope_for(channel)
+        self.sim: SimWorld | None = None
+        self._device: ChannelDevice | None = None
+        self.device: Any = None  # in-process: the simulated device itself (a Camera, a Lidar, joints…)
+        self.remote: RemoteDevice | None = None  # client mode: the device in the world server
+        self.last = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
 
     def _path(self, text: str) -> str:
         return str((self.base_dir / text).resolve()) if text else ""

@@ -1,17 +1,17 @@
 """``plugin.laser-scan``: the Laser Sensor's Scan service (thesis §7.1, Table 7.1: Scan_time, Resolution).
 
-Input: the raw sweep the lidar sensor publishes on ``hokuyo_raw`` — a ``LaserScan`` whose only
-filled fields are ``stamp`` and ``ranges`` (one value per step, the shape runtime/kernel/vectors.py
-gives a vector read; decision D99). The sweep's geometry is the plugin's Params (the URG-04LX:
-683 steps over ``fov`` = 240°, ``rangeMin``–``rangeMax`` = 0.02–5.6 m) unless the raw message
-carries a non-zero ``angle_increment`` of its own.
+Input: the raw sweep the lidar's sensor publishes — a ``LaserScan`` whose only filled fields may be
+``stamp`` and ``ranges`` (one value per step, the shape runtime/kernel/vectors.py gives a vector
+read; decision D99). The sweep's geometry is the scanner's own and so the plugin's required Params
+(``fov``, ``rangeMax``; the lab's Hokuyo URG-04LX has 683 steps over 240° and 0.02–5.6 m), unless
+the raw message carries a non-zero ``angle_increment`` of its own.
 
-Output: a ``LaserScan`` (configs/usecase/network.xml) with every field filled, as ROS's urg_node
-publishes it. The service Parameter ``resolution`` (rad, Table 7.1 "Resolution") decimates the
-sweep: every k-th step with k = round(resolution / native step), so 0.00614 keeps every step and
-0.0614 every tenth. Invalid readings follow REP 117: no return (a reading at or beyond
-``rangeMax``) is +inf, too close (below ``rangeMin``) is -inf, an unusable value (NaN, negative)
-is NaN — consumers keep only finite ranges within [range_min, range_max).
+Output: a ``sensor_msgs/LaserScan`` with every field filled, as ROS's urg_node publishes it. The
+Param ``resolution`` or the service Parameter of that name (rad, Table 7.1 "Resolution") decimates
+the sweep: every k-th step with k = round(resolution / native step), so the native step keeps every
+step and ten times it every tenth; without either, every step is kept. Invalid readings follow
+REP 117: no return (a reading at or beyond ``rangeMax``) is +inf, too close (below ``rangeMin``) is
+-inf, an unusable value (NaN, negative) is NaN — consumers keep only finite ranges within [range_min, range_max).
 
 ``scan_time`` (s) is the time between the last two sweeps, measured on their stamps (the
 ``scanTime`` Param until two have arrived): the Table 7.1 quality measure, which a lagging
@@ -31,7 +31,7 @@ import numpy.typing as npt
 from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 MAX_STEPS = 100_000
 """Most steps a sweep may hold (a URG-04LX has 683, a UTM-30LX 1081)."""
@@ -49,13 +49,15 @@ class LaserScanService(ProcessingPlugin):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "laser-scan"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("fov", 4.1888, "Field of view of the raw sweep, steps spread evenly from -fov/2 to +fov/2.",
-          unit="rad", above=0.0, max=2 * math.pi),
-        P("rangeMin", 0.02, "Shortest valid range.", unit="m", min=0.0),
-        P("rangeMax", 5.6, "Longest valid range: a reading at it is no return.", unit="m", above=0.0),
+        P("fov", REQUIRED, "Field of view of the raw sweep, steps spread evenly from -fov/2 to +fov/2 "
+          "(the scanner's data sheet).", type=float, unit="rad", above=0.0, max=2 * math.pi),
+        P("rangeMin", 0.0, "Shortest valid range (the scanner's data sheet).", unit="m", min=0.0),
+        P("rangeMax", REQUIRED, "Longest valid range: a reading at it is no return (the scanner's data sheet).",
+          type=float, unit="m", above=0.0),
         P("scanTime", 0.1, "Duration of one sweep, until measured from the stamps.", unit="s", above=0.0),
-        P("resolution", 0.00614, "Angular step of the output (Table 7.1 Resolution); the service "
-          "Parameter 'resolution' overrides it.", unit="rad", above=0.0),
+        P("resolution", None, "Angular step of the output (Table 7.1 Resolution; default: the sweep's own "
+          "step, every step kept); the service Parameter 'resolution' overrides it.", type=float, unit="rad",
+          above=0.0),
     )
 
     def __init__(self, record: Plugin) -> None:
@@ -65,7 +67,9 @@ class LaserScanService(ProcessingPlugin):
             raise ParamError(
                 f"{self.owner}: parameter 'rangeMax' = {p['rangeMax']} must exceed 'rangeMin' = {p['rangeMin']}"
             )
-        self.resolution: float = self._resolution(p["resolution"], "parameter 'resolution'")
+        self.resolution: float | None = (
+            None if p["resolution"] is None else self._resolution(p["resolution"], "parameter 'resolution'")
+        )
         self._last_stamp: float | None = None
         self.scan_time: float = p["scanTime"]
 
@@ -117,7 +121,7 @@ class LaserScanService(ProcessingPlugin):
         if self._last_stamp is not None and 0 < stamp - self._last_stamp < 10 * self.params["scanTime"]:
             self.scan_time = stamp - self._last_stamp  # a gap (sensor restart) is not a sweep time
         self._last_stamp = stamp
-        every = max(1, round(self.resolution / native))
+        every = 1 if self.resolution is None else max(1, round(self.resolution / native))
         kept = ranges[::every]
         lo, hi = self.params["rangeMin"], self.params["rangeMax"]
         out = kept.copy()

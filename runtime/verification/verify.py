@@ -111,6 +111,10 @@ class _Verifier(InterfaceChecks, MessageChecks):
         cls = self._checked(channel, "hardware", channel.backend, channel.params, "backend")
         if cls is None:
             return None, None
+        problems = getattr(cls, "problems", None)  # what the backend finds wrong across the channel's Params
+        for element, message in problems(channel, self.system) if callable(problems) else ():
+            self.report.error(element, f"hardware {channel.backend!r} channel {channel.name!r}: {message}",
+                              "value" if isinstance(element, Param) else None)
         ports = ports_of(cls)
         if ports.sizes and channel.size not in ports.sizes:
             sizes = ", ".join(map(str, ports.sizes))

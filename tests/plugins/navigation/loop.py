@@ -159,7 +159,7 @@ class Bench:
                                   wheel_base=model.wheel_base)
         self.lidar = Lidar(self.robot, model.laser_link, noise=lidar_noise, seed=seed)
         channel = HWChannel(name="hokuyo", direction="in", kind="stream", backend="sim", units="m", min=0.0,
-                            max=5.6, size=self.lidar.beams)
+                            max=self.lidar.range_max, size=self.lidar.beams)
         self.shape = shaper(LIDAR, "LaserScan", channel, _laser_types(), _no_ros)
         inputs = [("left_speed", "measure"), ("right_speed", "measure")]
         self.odometer = DiffDriveOdometry(record("diff-drive-odometry", 0.02, inputs, ["/kobuki/wheel_odom"],
@@ -168,7 +168,8 @@ class Bench:
         self.topics: dict[str, tuple[int, float, Any]] = {}
         self.seq = 0
         self.services: dict[str, Service] = {
-            "scan": Service(plugin("laser-scan", LaserScanService), {"raw": "hokuyo_raw"}, {"scan": "/scan"}, 0.1),
+            "scan": Service(plugin("laser-scan", LaserScanService, fov=self.lidar.fov, rangeMin=self.lidar.range_min,
+                                   rangeMax=self.lidar.range_max), {"raw": "hokuyo_raw"}, {"scan": "/scan"}, 0.1),
             "base": Service(
                 plugin("base-displacement", BaseDisplacement, speed=speed),
                 {"path": "/base/path", "move_goal": "/base/move_goal", "wheel_odom": "/kobuki/wheel_odom"},

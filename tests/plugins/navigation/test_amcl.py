@@ -39,7 +39,7 @@ def scan(world: GridMap, truth: Pose, mount: Pose = LASER) -> dict[str, Any]:
     """The LaserScan the laser-scan service makes of the sweep from ``truth`` (the laser at ``mount``)."""
     laser = compose(truth, mount)
     ranges = cast(world, np.array([laser]), ANGLES, 5.6)[0]
-    service: LaserScanService = plugin("laser-scan", LaserScanService)
+    service: LaserScanService = plugin("laser-scan", LaserScanService, fov=4.1888, rangeMin=0.02, rangeMax=5.6)
     return service.process({"stamp": 1.0, "ranges": ranges.astype(np.float32)}, Context(0, 1.0))
 
 

@@ -34,8 +34,12 @@ def sweep() -> np.ndarray:
     return np.linspace(0.5, 4.0, STEPS)
 
 
+HOKUYO = {"fov": 4.1888, "rangeMin": 0.02, "rangeMax": 5.6}
+"""The lab's URG-04LX data sheet (the kind has no default geometry: a scanner's is its own)."""
+
+
 def service(**params: object) -> LaserScanService:
-    made: LaserScanService = plugin("laser-scan", LaserScanService, **params)
+    made: LaserScanService = plugin("laser-scan", LaserScanService, **{**HOKUYO, **params})
     return made
 
 
@@ -112,7 +116,7 @@ def test_a_bad_resolution_parameter_is_refused(value: object) -> None:
     laser = service()
     with pytest.raises(ValueError, match="service parameter 'resolution'"):
         laser.apply_service_parameters({"resolution": value})
-    assert laser.resolution == 0.00614
+    assert laser.resolution is None  # still the sweep's own step
 
 
 def test_bad_params_are_refused_at_construction() -> None:
@@ -120,3 +124,21 @@ def test_bad_params_are_refused_at_construction() -> None:
         service(rangeMax=0.01)
     with pytest.raises(ParamError, match="fov"):
         service(fov=7.0)
+
+
+def test_the_scanner_geometry_has_no_default() -> None:
+    """Issue M: a scanner's field of view and range are its data sheet's, never the lab Hokuyo's."""
+    for missing in ("fov", "rangeMax"):
+        given = {k: v for k, v in HOKUYO.items() if k != missing}
+        with pytest.raises(ParamError, match=f"needs parameter '{missing}'"):
+            plugin("laser-scan", LaserScanService, **given)
+
+
+def test_another_scanner_keeps_every_step_at_its_own_geometry() -> None:
+    """A 270° scanner of 1081 steps and 30 m (not the lab's): every step, its own increment and range."""
+    laser = plugin("laser-scan", LaserScanService, fov=4.7124, rangeMax=30.0)
+    ranges = np.linspace(0.5, 29.0, 1081)
+    scan = laser.process(raw(ranges), Context(0, 1.0))
+    assert scan["ranges"].size == 1081 and scan["range_max"] == 30.0 and scan["range_min"] == 0.0
+    assert scan["angle_increment"] == pytest.approx(4.7124 / 1080)
+    assert np.isfinite(scan["ranges"]).all()

@@ -37,7 +37,9 @@ SYSTEM = f"""<?xml version="1.0" encoding="UTF-8"?>
   <Topic name="/nav/pose" type="bytes"/><Topic name="/nav/status" type="bytes"/>
   <Node name="pc" kind="service"/>
   <SmartResource name="LaserSensor" node="pc">
-    <Plugin name="scan" kind="laser-scan"/>
+    <Plugin name="scan" kind="laser-scan">
+      <Param name="fov" value="4.1888"/><Param name="rangeMin" value="0.02"/><Param name="rangeMax" value="5.6"/>
+    </Plugin>
     <Profile name="RUN" output="scan"><Use plugin="scan"/></Profile>
     <Service name="Scan" rate="0.05" performance="scan_time">
       <Input name="raw" topic="hokuyo_raw"/>

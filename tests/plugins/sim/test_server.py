@@ -64,6 +64,7 @@ CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
     <HWChannel name="left_encoder" direction="in" kind="counter" backend="sim">
       <Param name="body" value="rover"/>
       <Param name="joint" value="left_wheel_joint"/>
+      <Param name="ticksPerRev" value="1024"/>
     </HWChannel>
     <HWChannel name="laser" direction="in" kind="stream" backend="sim" min="0" max="5" size="91">
       <Param name="body" value="rover"/>
