@@ -2,7 +2,7 @@
 success path of Fig. 7.12, §5.2 leaves failure handling to the mission designer).
 
 When the gripper's holding measure (RoboticArm.MoveIt, D169) drops while the Turtlebot drives
-home, the ObjectPlace mission runs the ObjectRecovery sub-mission (configs/usecase/missions.xml):
+home, the lab's ObjectPlace mission runs its ObjectRecovery sub-mission:
 
 - ``stop-nav`` (HALT): cancels the Navigation goal (the ``nav`` service's ``goal`` Parameter set
   empty by its ``<Configure>``) and sends the base a move of zero length, which preempts the path

@@ -1,8 +1,8 @@
 """``plugin.naoqi-bridge``: the Nao.NaoQi service (thesis §7.1, Table 7.2, Fig. 7.7).
 
 The thesis wraps the NaoQi calls as ROS topics so the Nao's camera and head reach the RMPA network.
-This SPT service plugin does that on the nao node's raw topics (configs/usecase/resources.xml
-``Nao.NaoQi``), with the inputs ``{input name: newest value or None}``:
+This SPT service plugin does that on the Nao node's raw topics (the lab's ``Nao.NaoQi`` service),
+with the inputs ``{input name: newest value or None}``:
 
 - ``camera`` (Image, ``camera_raw``): the top camera frame as the simulated (or real) sensor
   publishes it, ``{"stamp", "width", "height", "encoding", "data": bytes}`` (D99);

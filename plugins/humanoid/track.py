@@ -1,6 +1,6 @@
 """``plugin.pan-tilt-track``: the PanTiltCamera.Track service (thesis Table 7.2, §7.3.2, Table 7.7 OBJ_TRACK).
 
-Inputs (``{input name: newest value or None}``, configs/usecase/resources.xml ``PanTiltCamera.Track``):
+Inputs (``{input name: newest value or None}``; the lab's ``PanTiltCamera.Track`` service is one):
 
 - ``objects``: the PanTiltCamera.Recog result, ``{"objects": [{"name", "x", "y", "reliability",
   …}], "width", "height"}``, ``x``/``y`` the object's centre in the image as shares (0..1) of its

@@ -2,7 +2,7 @@
 
 The thesis drives the Turtlebot arm through MoveIt! to *predefined positions* in two motion
 groups, ``arm`` and ``gripper``. This SPT service plugin plays that role on its two inputs
-(``{input name: newest value or None}``, configs/usecase/resources.xml ``RoboticArm.MoveIt``):
+(``{input name: newest value or None}``; the lab's ``RoboticArm.MoveIt`` service is one):
 
 - ``goal`` (ArmGoal, ``/arm/goal``): ``{"id": int, "group": "arm" | "gripper", "pose": name,
   "speed": optional share in (0, 1]}``, or an arm goal by Cartesian target instead of a pose name,

@@ -1,6 +1,6 @@
 """The predefined positions of Fig. 7.20 (thesis §7.4.2) and their inverse kinematics on the arm's URDF.
 
-The pose file (``configs/usecase/models/arm_poses.yml``, a small YAML subset read here: no PyYAML)
+The pose file (the Param ``poses``, a small YAML subset read here: no PyYAML)
 names each arm pose by an end-effector target in the robot base frame — the tool point's
 ``x y z`` (m) and the tool's ``pitch`` from the vertical (rad: π/2 points the gripper forward,
 π straight down; optional on an arm that cannot set it, see below) — and each gripper pose by a

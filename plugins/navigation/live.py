@@ -1,7 +1,7 @@
 """What the Navigation service publishes for the live view and the recording (issue K.5; §6.1.3,
 §6.2.1 Algorithm 3, Fig. 7.16).
 
-- :func:`particle_cloud`: a ``ParticleCloud`` message (configs/usecase/network.xml) of at most
+- :func:`particle_cloud`: a ``ParticleCloud`` message (its MessageType declared by the system) of at most
   ``size`` of the filter's particles, evenly strided through its set (no random draw: the filter's
   generator, whose state a delegated copy carries on, is left alone), as parallel arrays ``x``,
   ``y``, ``yaw`` and ``weight`` (a ROS-friendly shape: each a ``float64[]`` in the recording) with

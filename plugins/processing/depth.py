@@ -75,7 +75,7 @@ class ModelError(ValueError):
 
 def _decode(message: Mapping[str, Any], owner: str) -> npt.NDArray[Any]:
     """The image in a sensor_msgs/Image-like dict (``width height encoding data``, optional ``step is_bigendian``),
-    or in a ``DepthImage`` (for example configs/usecase/network.xml: ``width height`` and ``data`` an array of the
+    or in a ``DepthImage``-like dict (``width height`` and ``data`` an array of the
     ``width × height`` raw depths, row-major, as a simulated or real sensor publishes it)."""
     data = message.get("data")
     if "encoding" not in message and isinstance(data, np.ndarray):

@@ -1,6 +1,6 @@
 """PCD files of the depth classifier's model (thesis §7.4.1): labelled shape descriptors as ASCII PCD v0.7.
 
-``format_pcd`` writes a ``ShapeModel`` (the committed configs/usecase/models/lab_objects_shapes.pcd),
+``format_pcd`` writes a ``ShapeModel`` (the file the classifier's Param ``model`` names),
 ``read_pcd`` reads one back for ``plugin.kdtree-shape-classifier``; a malformed file is a
 ``PcdError`` naming its file and line.
 """
