@@ -3,7 +3,7 @@
 What the simulated or real services implement:
 
 - ``/nav/status`` (Navigation.AMCL ``status``): ``{"goal": str, "state": "planning" | "active" |
-  "arrived" | "failed", "path_length": m, "remaining": m}``.
+  "arrived" | "failed" | "cancelled", "path_length": m, "remaining": m, "reason": str}``.
 - ``/base/move_goal`` (a behavior's ``move``): ``{"id": int, "frame": "robot", "x": m, "y": m,
   "yaw": rad}``; ``/base/move_status`` (MobileBase.Displacement ``move_status``): ``{"id": int,
   "state": "moving" | "done" | "failed", "remaining": m, "total": m}``.

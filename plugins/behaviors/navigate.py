@@ -110,7 +110,7 @@ class NavigateTo(Behavior):
         state = _state(status)
         if state == "arrived":
             return BehaviorStatus(progress=1.0, done=True)
-        if state == "failed":
+        if state in ("failed", "cancelled"):
             return BehaviorStatus(progress=_share_done(status), failed=True,
                                   detail=_failure(status, f"navigation to {self.goal} failed"))
         return BehaviorStatus(progress=_share_done(status))

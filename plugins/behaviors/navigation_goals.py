@@ -85,7 +85,7 @@ class SetNavGoal(Behavior):
         state = _state(status) if isinstance(status, Mapping) and status.get("goal") == self.goal else None
         if state in ("active", "arrived"):
             return BehaviorStatus(progress=1.0, done=True)
-        if state == "failed":
+        if state in ("failed", "cancelled"):
             return BehaviorStatus(progress=0.5, failed=True, detail=_failure(status, "no path to the goal"))
         return BehaviorStatus(progress=0.5)
 
@@ -127,7 +127,7 @@ class WaitGoal(Behavior):
         state = _state(status)
         if state == "arrived":
             return BehaviorStatus(progress=1.0, done=True)
-        if state == "failed":
+        if state in ("failed", "cancelled"):
             return BehaviorStatus(progress=_share_done(status), failed=True,
                                   detail=_failure(status, "navigation failed"))
         return BehaviorStatus(progress=_share_done(status))

@@ -173,7 +173,7 @@ class SearchArea(Behavior):
         status = self.service("nav").output("status")
         ours = status is not self.before and isinstance(status, Mapping) and status.get("goal") == self.goal
         state = _state(status) if ours else None
-        if state == "failed":
+        if state in ("failed", "cancelled"):
             self._skip(str(status.get("reason") or "the navigation failed"))
         elif state == "arrived":
             self.reached_at = now if self.reached_at is None else self.reached_at

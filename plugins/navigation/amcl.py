@@ -223,15 +223,23 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             raise ValueError(f"{self.owner}: service parameter 'goal' = {text!r} must be an Area name or 'x y yaw'")
         if self.env is None:
             self.setup()
-        self.goal = self._place(text, "service parameter 'goal'", objects=True) if text.strip() else None
+        cancelled = not text.strip()
+        # only a goal still being worked on is cancelled; one that ended keeps its result
+        running = self.goal is not None and self.phase in ("planning", "active")
+        previous = self.goal_text if running else ""
+        self.goal = None if cancelled else self._place(text, "service parameter 'goal'", objects=True)
         named = text.strip()
         self.goal_object = named if (named in self.model.objects and named not in self.model.areas
                                      and parse_pose(text) is None) else None
         self.object_placed = False
         self.routes.aim_at(self.goal_object)
-        self.goal_text = text
         self._pending_goal = None
-        self.phase, self.reason, self.plan, self.target = "planning", "", None, None
+        self.plan, self.target = None, None
+        if cancelled:  # the cancelled goal's result, as an action's CANCELED: a behavior following it ends
+            self.goal_text, self.phase = previous, "cancelled" if running else "idle"
+            self.reason = "cancelled: the goal was set empty" if running else ""
+        else:
+            self.goal_text, self.phase, self.reason = text, "planning", ""
         self.routes.reset()
         self.unlocalized_since, self.settling, self.at_goal, self.turning = None, False, False, False
 
@@ -326,6 +334,9 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
             if self.path_id:  # a cancelled goal: keep the base stopped
                 result["path"] = {"id": self.path_id, "goal": "", "frame": "odom", "points": [], "yaw": None,
                                   "speed": float(self.params["speed"])}
+            if self.phase == "cancelled" and self.goal_text:
+                result["status"] = {"goal": self.goal_text, "state": "cancelled", "path_length": 0.0,
+                                    "remaining": 0.0, "reason": self.reason}
             return result
         localized = estimate is not None and uncertainty(estimate) <= self.params["maxUncertainty"]
         if self.phase in ("planning", "active"):

@@ -126,15 +126,18 @@ STANDARD: dict[str, Interface] = {
                              "on the map (m, rad); geometry_msgs/PoseWithCovarianceStamped carries all but the "
                              "`dispersion` (the service's own quality measure), ckm_interfaces/PoseEstimate all",
                      (POSE, f"{CKM}PoseEstimate"), _ESTIMATE),
-                Port("status", "`{goal, state: planning | active | arrived | failed, path_length, remaining "
-                               "(m), reason}` of the newest goal; `reason` says why it failed",
+                Port("status", "`{goal, state: planning | active | arrived | failed | cancelled, path_length, "
+                               "remaining (m), reason}` of the newest goal; `reason` says why it failed or "
+                               "was cancelled",
                      (f"{CKM}NavigationStatus",), ("goal", "state", "path_length", "remaining", "reason")),
             ),
             parameters=(Port("goal", "the goal on the map: `\"x y yaw\"` (m, m, rad), an Area's name, or an "
                                      "Object's name (the pose short of it, facing it); empty: none (the base "
                                      "stands). A Parameter, not a topic: no message type"),),
             goals="The status echoes the goal it reports (`goal`), so a status of an earlier goal is never read as "
-                  "this one's; setting a goal preempts the older one, an empty goal cancels it.",
+                  "this one's; setting a goal preempts the older one, an empty goal cancels it (a goal still "
+                  "planned or driven to then reports `cancelled`, as an action's result; one that ended keeps "
+                  "its result).",
         ),
         Interface(
             "arm-motion",

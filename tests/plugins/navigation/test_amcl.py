@@ -90,9 +90,13 @@ def test_without_a_goal_only_the_pose_is_published_and_a_cancelled_goal_stops_th
     assert set(result) == {"pose", "dispersion", "particles"}  # the room has no <ZoomMap>: no zoom
     nav.apply_service_parameters({"goal": "Target"})
     assert frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)["path"]["points"]
-    nav.apply_service_parameters({"goal": ""})  # cancelled: the base is told to stop, no status
+    nav.apply_service_parameters({"goal": ""})  # cancelled: the base is told to stop
     result = frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)
-    assert result["path"]["points"] == [] and "status" not in result
+    assert result["path"]["points"] == []
+    assert result["status"] == {"goal": "Target", "state": "cancelled", "path_length": 0.0, "remaining": 0.0,
+                                "reason": "cancelled: the goal was set empty"}  # the goal's result
+    nav.apply_service_parameters({"goal": ""})  # nothing left to cancel: no status replaces that result
+    assert "status" not in frames(nav, grid(file), (1.0, 1.8, 0.0), (0.0, 0.0, 0.0), 1)
     pose = result["pose"]
     assert math.hypot(pose["pose"]["x"] - 1.0, pose["pose"]["y"] - 1.8) < 0.1
     assert len(pose["covariance"]) == 9 and pose["dispersion"] == result["dispersion"] > 0
