@@ -1,7 +1,7 @@
 """``behavior.spot`` and ``behavior.track`` (issue M, point 3; D270): the object chosen by its label and
 reliability, held ``holdTime`` seconds, written on every output (on the map when it can be placed);
 ``spot`` in the closed loop on the Turtlebot and the rover, ``track`` over the real pan-tilt-track kind
-on the Nao's head and on the station arm's turret."""
+on the Nao's head and on the station arm's turret, as are the lab's ``track-object`` and ``fix-object``."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import pytest
 from ckmconf.model import Param
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from ckmconf.model.missions import BehaviorOutput, Uses
+from plugins.behaviors.perception import FixObject, TrackObject
 from plugins.behaviors.spot_track import Spot, Track
 from plugins.humanoid.track import PanTiltTrack
 from runtime.kernel.interfaces import ParamError
@@ -164,3 +165,51 @@ def test_in_the_closed_loop_spot_places_the_parcel_on_the_map(tmp_path: Path, mo
         assert found["frame"] == "map" and math.dist((found["x"], found["y"]), (1.9, 2.1)) < 0.15
     finally:
         bench.close()
+
+
+@pytest.mark.parametrize("head", ["nao", "station_arm"])
+def test_track_object_then_fix_object_over_the_pan_tilt_kind_on_two_heads(head: str) -> None:
+    """The lab's OBJ_TRACK and OBJ_FIX kinds on the Nao's head and on the station's turret: done once
+    the head follows the target, then its map position (the tracker's) once the recognition held."""
+    tracker = plugin(PanTiltTrack, "pan-tilt-track", pose="1.0 1.0 0.5", planeHeight=0.0) if head == "nao" \
+        else station()
+    tracker.setup()
+    try:
+        seen = {"objects": [{"name": "parcel", "x": 0.6, "y": 0.55, "reliability": 0.8}], "reliability": 0.8,
+                "width": 640, "height": 480}
+        service = PanTiltService(tracker, seen, 0.0 if head == "nao" else 2.0)
+        recog = MemoryService("Camera.Recog")
+        recog.outputs["objects"] = seen
+        clock, written = [0.0], list[Any]()
+        follow = made(TrackObject, {"recog": recog, "track": service}, clock, written, target="parcel")
+        service.process()
+        assert follow.step().done  # seen, and the head turning towards it
+        fix = made(FixObject, {"recog": recog, "track": service}, clock, written, target="parcel", holdTime="0.5")
+        for frame in range(1, 20):
+            clock[0] = 0.1 * frame
+            service.process()
+            if fix.step().done:
+                break
+        (position,) = written
+        target = service.output("target")
+        assert position["frame"] == "map" and position["label"] == "parcel"
+        assert (position["x"], position["y"]) == pytest.approx((target["x"], target["y"]))
+        assert 0.6 <= clock[0] <= 0.8  # from the first reliable frame (0.1 s), half a second held
+    finally:
+        tracker.stop()
+
+
+def test_fix_object_waits_while_the_recognition_is_below_its_reliability() -> None:
+    recog = MemoryService("Camera.Recog")
+    recog.outputs["objects"] = {"objects": [{"name": "parcel", "x": 0.1, "y": 0.0, "reliability": 0.5}]}
+    clock, written = [0.0], list[Any]()
+    fix = made(FixObject, {"recog": recog}, clock, written, target="parcel", holdTime="0.2")
+    for frame in range(30):
+        clock[0] = 0.1 * frame
+        assert not fix.step().done
+    assert written == []
+    recog.outputs["objects"]["objects"][0]["reliability"] = 0.9
+    clock[0] += 0.1
+    fix.step()
+    clock[0] += 0.3
+    assert fix.step().done and written[0]["label"] == "parcel" and written[0]["frame"] == "camera"
