@@ -19,7 +19,9 @@ import pytest
 
 from benchmarks.fusion import base_for
 from benchmarks.fusion_scene import LINK, NAO_FOV, NAO_LINK, Lab
+from ckmconf.model.resources import Plugin
 from plugins.processing.mounts import model_path, read_mount
+from plugins.processing.recognizer import OrbRecognition
 from runtime.resources.spt import Context
 from tests.conftest import CONFIGS
 
@@ -205,3 +207,43 @@ def test_the_lsh_index_does_not_depend_on_what_the_process_did_before(lab: Lab) 
         again.setup()
         results.append(again.process(value, Context(0, 0.0, "RGBDCamera"))["objects"])
     assert results[0] == results[1] and results[0]
+
+
+def _one_step(pipeline: list[Any]) -> OrbRecognition:
+    """``orb-recognition`` configured with the Params of a pipeline's orb-keypoints and keypoint-matching."""
+    keypoints, matching = pipeline[2].record, pipeline[3].record
+    record = Plugin(name="recognition", kind="orb-recognition", loc=matching.loc,
+                    params=tuple(keypoints.params) + tuple(matching.params))
+    made = OrbRecognition(record)
+    made.setup()
+    return made
+
+
+@pytest.mark.parametrize("robot", ["turtlebot", "nao"])
+def test_the_one_step_orb_recognition_finds_what_the_split_pipeline_finds_on_both_robots(labs: dict[str, Lab],
+                                                                                        robot: str) -> None:
+    """``orb-recognition`` (keypoints and matching in one plugin) on the Turtlebot's Xtion frame and the
+    Nao's top camera frame: the objects of the two-step pipeline, the red cylinder where it projects."""
+    lab = labs["QVGA"]
+    context = Context(frame=0, stamp=0.0, resource=robot)
+    if robot == "turtlebot":
+        lab.place(*GOAL)
+        image: Any = lab.render()[0]
+        pipeline, camera, width, fov = lab.rgb, lab.camera_pose(), lab.size[0], lab.camera.fov
+    else:
+        pan, tilt = _aim(lab, RED)
+        lab.look(pan, tilt)
+        image = lab.nao_camera.render(*lab.nao_size).rgb
+        pipeline, camera, width, fov = lab.nao_pipeline, _nao_camera(lab), lab.nao_size[0], NAO_FOV
+    recognition = _one_step(pipeline)
+    try:
+        value: Any = image
+        for step in pipeline[:2]:  # acquisition and resizing
+            value = step.process(value, context)
+        split = pipeline[3].process(pipeline[2].process(value, context), context)
+        one = recognition.process(value, context)
+    finally:
+        recognition.stop()
+    assert [(o["name"], o["inliers"]) for o in one["objects"]] == [(o["name"], o["inliers"]) for o in split["objects"]]
+    assert RED in {o["name"] for o in one["objects"]}, one
+    assert not (wrong := _misplaced(lab, one, camera, width, fov)), wrong
