@@ -2,7 +2,7 @@
 
 Thesis §6.1.1 (objects with a time mark and a reliability), §6.1.2 (the global map), §4.3 (a
 service: Inputs, Outputs, Params). The map is configurable through the plugin's Params: which
-``environment`` file (empty: the use-case lab) and which of its ``areas`` this map holds (empty:
+``environment`` file (required) and which of its ``areas`` this map holds (empty:
 the whole map; otherwise only the objects lying in those Areas are loaded, accepted and shared).
 
 Inputs (any names; each message says what it is):

@@ -19,7 +19,9 @@ import pytest
 
 from benchmarks.fusion import base_for
 from benchmarks.fusion_scene import LINK, NAO_FOV, NAO_LINK, Lab
+from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
+from plugins.environment.map_service import EnvironmentMap
 from plugins.processing.mounts import model_path, read_mount
 from plugins.processing.recognizer import OrbRecognition
 from runtime.resources.spt import Context
@@ -247,3 +249,27 @@ def test_the_one_step_orb_recognition_finds_what_the_split_pipeline_finds_on_bot
     assert [(o["name"], o["inliers"]) for o in one["objects"]] == [(o["name"], o["inliers"]) for o in split["objects"]]
     assert RED in {o["name"] for o in one["objects"]}, one
     assert not (wrong := _misplaced(lab, one, camera, width, fov)), wrong
+
+
+def test_the_map_service_takes_in_what_the_turtlebot_s_real_fused_recognition_saw(lab: Lab) -> None:
+    """``environment-map`` fed the fusion's map-frame result of one render at NAV's goal: the objects seen
+    are confirmed in the map with the recognition's time mark and reliability, the others left as declared."""
+    view = lab.observe(GOAL)
+    seen = {o["name"] for o in view.fused["objects"]}
+    assert RED in seen, view.fused
+    record = Plugin(name="map", kind="environment-map", loc=lab.rgb[3].record.loc,
+                    params=(Param(name="environment", value="environment.xml"),))
+    service = EnvironmentMap(record)
+    service.setup()
+    assert service.model is not None
+    before = {o.name: (o.stamp, o.reliability) for o in service.model.objects.values()}
+    later = max(stamp for stamp, _ in before.values()) + 60.0  # the recognition runs after the map was made
+    update = service.process({"recog": view.fused}, Context(frame=0, stamp=later, resource="map"))
+    changed = {o.name for o in service.model.objects.values() if (o.stamp, o.reliability) != before[o.name]}
+    assert RED in changed and update["applied"] == len(changed) > 0, (changed, update)
+    red = service.model.get(RED)
+    fused_red = next(o for o in view.fused["objects"] if o["name"] == RED)
+    assert red.stamp == later and red.reliability == pytest.approx(fused_red["reliability"])
+    assert math.dist((red.x, red.y), lab.targets[RED].centre[:2]) < 0.05
+    assert {"cylinder_green_checker", "box_cereal"}.isdisjoint(changed)  # out of this view
+    assert {o["name"] for o in update["objects"]} >= changed  # the update other robots' maps take
