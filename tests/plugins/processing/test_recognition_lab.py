@@ -254,7 +254,7 @@ def test_the_one_step_orb_recognition_finds_what_the_split_pipeline_finds_on_bot
 def test_the_map_service_takes_in_what_the_turtlebot_s_real_fused_recognition_saw(lab: Lab) -> None:
     """``environment-map`` fed the fusion's map-frame result of one render at NAV's goal: the objects seen
     are confirmed in the map with the recognition's time mark and reliability, the others left as declared."""
-    view = lab.observe(GOAL)
+    view = lab.observe((GOAL[0], GOAL[1], GOAL[2]))
     seen = {o["name"] for o in view.fused["objects"]}
     assert RED in seen, view.fused
     record = Plugin(name="map", kind="environment-map", loc=lab.rgb[3].record.loc,
