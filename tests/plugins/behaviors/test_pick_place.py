@@ -1,10 +1,12 @@
 """``behavior.pick-object`` / ``behavior.place-object`` (issue M, point 3): their goals by fresh id over
 ``arm-motion`` + ``gripper``, a refusal's reason in the detail, a stale status never advancing a step,
 and in the pybullet closed loop on two robot models (the Turtlebot's arm and the station arm) a real
-pick and place through the real arm-poses and parallel-gripper services."""
+pick and place through the real arm-poses and parallel-gripper services; the lab's ``pick`` and ``place``
+(named-pose sequences) on the same two arms."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Iterator, Mapping
@@ -16,6 +18,7 @@ import pytest
 from ckmconf.model import Param
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from ckmconf.model.missions import BehaviorOutput, Uses
+from plugins.behaviors.manipulation import ArmSequence
 from plugins.behaviors.pick_place import PickObject, PlaceObject
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
@@ -208,3 +211,49 @@ def test_pick_then_place_on_two_robot_models(cell: tuple[ManipulatorLoop, int, d
     back = p.getBasePositionAndOrientation(body, physicsClientId=loop.world.client)[0]
     assert math.dist(back, resting) < 0.03  # set down where it was picked, standing
     assert run(loop, "place-object", place).detail == "the gripper holds nothing to place"
+
+
+ARM_SEQUENCES = {  # model: (the named-pose sequence, where its last pose puts the tool point, base frame)
+    "turtlebot": ("arm:ready arm:carry arm:pre_grasp", (0.22, 0.0, 0.36)),
+    "station_arm": ("arm:inspect arm:home", (0.35, 0.0, 1.35)),
+}
+
+
+@pytest.mark.parametrize("model", [TURTLEBOT, STATION], ids=lambda m: m.name)
+def test_the_lab_s_pick_and_place_kinds_run_a_named_pose_sequence_on_two_arms(model: Model) -> None:
+    """``pick`` and ``place`` (the lab's arm sequences over arm-motion) on each arm's own named poses:
+    the tool ends at the last pose; a pose the arm does not know fails with the arm's reason."""
+    sequence, tool = ARM_SEQUENCES[model.name]
+    pose = (2.0, 2.0, 0.4) if model is TURTLEBOT else (1.0, 1.0, 0.0)
+    for loop in _loop(model, pose):
+        services = {"arm": LoopService(loop, "arm_result")}
+        for kind in ("pick", "place"):
+            record = BehaviorRecord(name=kind.upper(), kind=kind, timeout=60.0,
+                                    params=(Param(name="sequence", value=sequence),),
+                                    uses=(Uses(service="Arm.Motion", as_="arm"),),
+                                    outputs=(BehaviorOutput(name="arm_goal", topic="/arm/goal"),))
+
+            def publish(value: Any) -> None:
+                loop.arm_goal = value
+
+            context = BehaviorContext(services=services, inputs={}, outputs={"arm_goal": publish},
+                                      now=lambda: loop.world.time)
+            made = ArmSequence(record, context)
+            made.start()
+            status = made.step()
+            while not (status.done or status.failed) and loop.world.time < 120.0:
+                loop.run(0.05)
+                status = made.step()
+            assert status.done, (kind, status)
+            assert loop.tool_in_base() == pytest.approx(tool, abs=0.02), kind
+        wrong = ArmSequence(dataclasses.replace(record, params=(Param(name="sequence", value="arm:wave"),)),
+                            context)
+        wrong.start()
+        status = wrong.step()
+        for _ in range(40):
+            if status.failed:
+                break
+            loop.run(0.05)
+            status = wrong.step()
+        assert status.failed and status.detail.startswith("arm:wave: "), status
+        assert "wave" in status.detail[len("arm:wave: "):], status.detail
