@@ -6,7 +6,6 @@ pick and place through the real arm-poses and parallel-gripper services; the lab
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from collections.abc import Iterator, Mapping
@@ -219,6 +218,26 @@ ARM_SEQUENCES = {  # model: (the named-pose sequence, where its last pose puts t
 }
 
 
+def arm_sequence(loop: ManipulatorLoop, kind: str, sequence: str) -> BehaviorStatus:
+    """The lab's ``kind`` (pick or place) with ``sequence``, stepped with the loop until it ends."""
+    record = BehaviorRecord(name=kind.upper(), kind=kind, timeout=60.0,
+                            params=(Param(name="sequence", value=sequence),), uses=(Uses(service="Arm.Motion", as_="arm"),),
+                            outputs=(BehaviorOutput(name="arm_goal", topic="/arm/goal"),))
+
+    def publish(value: Any) -> None:
+        loop.arm_goal = value
+
+    context = BehaviorContext(services={"arm": LoopService(loop, "arm_result")}, inputs={},
+                              outputs={"arm_goal": publish}, now=lambda: loop.world.time)
+    made = ArmSequence(record, context)
+    made.start()
+    status, end = made.step(), loop.world.time + 30.0
+    while not (status.done or status.failed) and loop.world.time < end:
+        loop.run(0.05)
+        status = made.step()
+    return status
+
+
 @pytest.mark.parametrize("model", [TURTLEBOT, STATION], ids=lambda m: m.name)
 def test_the_lab_s_pick_and_place_kinds_run_a_named_pose_sequence_on_two_arms(model: Model) -> None:
     """``pick`` and ``place`` (the lab's arm sequences over arm-motion) on each arm's own named poses:
@@ -226,34 +245,10 @@ def test_the_lab_s_pick_and_place_kinds_run_a_named_pose_sequence_on_two_arms(mo
     sequence, tool = ARM_SEQUENCES[model.name]
     pose = (2.0, 2.0, 0.4) if model is TURTLEBOT else (1.0, 1.0, 0.0)
     for loop in _loop(model, pose):
-        services = {"arm": LoopService(loop, "arm_result")}
         for kind in ("pick", "place"):
-            record = BehaviorRecord(name=kind.upper(), kind=kind, timeout=60.0,
-                                    params=(Param(name="sequence", value=sequence),),
-                                    uses=(Uses(service="Arm.Motion", as_="arm"),),
-                                    outputs=(BehaviorOutput(name="arm_goal", topic="/arm/goal"),))
-
-            def publish(value: Any) -> None:
-                loop.arm_goal = value
-
-            context = BehaviorContext(services=services, inputs={}, outputs={"arm_goal": publish},
-                                      now=lambda: loop.world.time)
-            made = ArmSequence(record, context)
-            made.start()
-            status = made.step()
-            while not (status.done or status.failed) and loop.world.time < 120.0:
-                loop.run(0.05)
-                status = made.step()
+            status = arm_sequence(loop, kind, sequence)
             assert status.done, (kind, status)
             assert loop.tool_in_base() == pytest.approx(tool, abs=0.02), kind
-        wrong = ArmSequence(dataclasses.replace(record, params=(Param(name="sequence", value="arm:wave"),)),
-                            context)
-        wrong.start()
-        status = wrong.step()
-        for _ in range(40):
-            if status.failed:
-                break
-            loop.run(0.05)
-            status = wrong.step()
+        status = arm_sequence(loop, "pick", "arm:wave")
         assert status.failed and status.detail.startswith("arm:wave: "), status
         assert "wave" in status.detail[len("arm:wave: "):], status.detail
