@@ -221,7 +221,8 @@ ARM_SEQUENCES = {  # model: (the named-pose sequence, where its last pose puts t
 def arm_sequence(loop: ManipulatorLoop, kind: str, sequence: str) -> BehaviorStatus:
     """The lab's ``kind`` (pick or place) with ``sequence``, stepped with the loop until it ends."""
     record = BehaviorRecord(name=kind.upper(), kind=kind, timeout=60.0,
-                            params=(Param(name="sequence", value=sequence),), uses=(Uses(service="Arm.Motion", as_="arm"),),
+                            params=(Param(name="sequence", value=sequence),),
+                            uses=(Uses(service="Arm.Motion", as_="arm"),),
                             outputs=(BehaviorOutput(name="arm_goal", topic="/arm/goal"),))
 
     def publish(value: Any) -> None:
