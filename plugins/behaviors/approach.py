@@ -1,5 +1,7 @@
 """APPR (Table 7.7): the approach to the spotted object, with its re-aim after a long drive (D207).
 
+Over ``base-drive`` and, optionally, ``arm-motion``: a robot without an arm (or one that need not raise
+it) drives to the standoff alone.
 """
 
 from __future__ import annotations
@@ -8,11 +10,13 @@ import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ckmconf.model import System
+from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.missions.behaviors import BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
-from .messages import _Goals, _share_done, _state, find_target, in_robot_frame, observer_pose, robot_pose
+from .messages import _failed, _Goals, _share_done, _state, find_target, in_robot_frame, observer_pose, robot_pose
 
 
 class Approach(_Goals):
@@ -38,11 +42,12 @@ class Approach(_Goals):
     (Move2D ``yaw_tolerance``): the floor grasp's fingers clear the object by 1 cm a side (D252)."""
 
     USES = Uses(Use("base", "base-drive", "drives the moves towards the target"),
-                Use("arm", "arm-motion", "raises the arm to armPose before the last leg"))
+                Use("arm", "arm-motion", "raises the arm to armPose before the drive (none: the base alone)",
+                    optional=True))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("standoff", 0.2, "Distance kept from the target.", unit="m"),
-        P("armPose", "pre_grasp", "Predefined arm pose reached on the way."),
+        P("armPose", "", "Named arm pose reached before the drive (required with an arm service)."),
         P("reaim", 0.0, "Stop this far short of the standoff to look again (0: never).", unit="m", min=0.0),
         P("reaimAbove", 0.0, "Only on drives longer than this.", unit="m", min=0.0),
         P("settle", 2.5, "Standing still this long before a sighting counts (camera, recognition, fusion).",
@@ -54,6 +59,16 @@ class Approach(_Goals):
         P("aimAtCentre", False, "Aim a fresh sighting at its 3D source's point, not the fused estimate."),
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+
+    @classmethod
+    def problems(cls, record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+        """An arm service without the pose to raise it to."""
+        arm = next((u for u in record.uses if u.alias == "arm"), None)
+        pose = next((p for p in record.params if p.name == "armPose"), None)
+        if arm is not None and (pose is None or not pose.value.strip()):
+            return [(arm, "an approach with an arm needs the pose to raise it to: <Param name=\"armPose\" "
+                          "value=\"…\"/> (a named pose of its arm-motion service)")]
+        return []
 
     FACED = 0.01
     """rad: a target this near straight ahead needs no turn first."""
@@ -71,7 +86,8 @@ class Approach(_Goals):
         self.label = ""
         self.stopped = 0.0  # when the last move that is not the last leg ended
         self.settled: Any = None  # the fused message when the settling ended: a sighting must be newer
-        self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]})
+        with_arm = "arm" in self.context.services
+        self.arm_id = self._send("arm_goal", {"group": "arm", "pose": self.params["armPose"]}) if with_arm else None
 
     def _relative(self, target: Any) -> tuple[float, float] | None:
         """The target in the robot frame: with the pose it was placed with, else the ``pose`` input."""
@@ -171,7 +187,7 @@ class Approach(_Goals):
 
     def step(self) -> BehaviorStatus:
         """Raise the arm, then drive to ``standoff`` from the target; done when both are reached."""
-        arm_state = _state(self.service("arm").output("status"), self.arm_id)
+        arm_state = "reached" if self.arm_id is None else _state(self.service("arm").output("status"), self.arm_id)
         if self.phase == "arm":
             if arm_state != "reached":  # the arm up first: it must not sweep the table
                 if arm_state == "failed":
@@ -189,7 +205,8 @@ class Approach(_Goals):
             move_state = None
         share = _share_done(move) if move_state else 0.0
         if "failed" in (move_state, arm_state):
-            return BehaviorStatus(progress=self._progress(arm_state, share), failed=True)
+            what = _failed("the move failed", move) if move_state == "failed" else "the arm failed"
+            return BehaviorStatus(progress=self._progress(arm_state, share), failed=True, detail=what)
         done = move_state == "done" and arm_state == "reached" and self.final
         return BehaviorStatus(progress=1.0 if done else self._progress(arm_state, share), done=done)
 

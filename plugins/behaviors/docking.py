@@ -19,7 +19,7 @@ from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
-from .messages import _Goals, _share_done, _state, robot_pose
+from .messages import _failed, _Goals, _share_done, _state, robot_pose
 
 
 def _map_pose(text: str, owner: str) -> tuple[float, float, float]:
@@ -65,4 +65,5 @@ class Dock(_Goals):
         status = self.service("base").output("move_status")
         state = _state(status, self.move_id)
         return BehaviorStatus(progress=1.0 if state == "done" else _share_done(status) if state else 0.0,
-                              done=state == "done", failed=state == "failed")  # fmt: skip
+                              done=state == "done", failed=state == "failed",
+                              detail=_failed("the docking move failed", status) if state == "failed" else "")

@@ -16,7 +16,7 @@ from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
-from .messages import _Goals, _share_done, _state
+from .messages import _failed, _Goals, _share_done, _state
 
 
 class ArmSequence(_Goals):
@@ -101,4 +101,5 @@ class BackOff(_Goals):
         status = self.service("base").output("move_status")
         state = _state(status, self.move_id)
         return BehaviorStatus(progress=1.0 if state == "done" else _share_done(status) if state else 0.0,
-                              done=state == "done", failed=state == "failed")  # fmt: skip
+                              done=state == "done", failed=state == "failed",
+                              detail=_failed("the backwards move failed", status) if state == "failed" else "")

@@ -6,7 +6,7 @@ What the simulated or real services implement:
   "arrived" | "failed" | "cancelled", "path_length": m, "remaining": m, "reason": str}``.
 - ``/base/move_goal`` (a behavior's ``move``): ``{"id": int, "frame": "robot", "x": m, "y": m,
   "yaw": rad}``; ``/base/move_status`` (MobileBase.Displacement ``move_status``): ``{"id": int,
-  "state": "moving" | "done" | "failed", "remaining": m, "total": m}``.
+  "state": "moving" | "done" | "failed", "remaining": m, "total": m, "reason": str}``.
 - ``/arm/goal`` (``arm_goal``): ``{"id": int, "group": "arm" | "gripper", "pose": name}``;
   ``/arm/status`` (RoboticArm.MoveIt ``status``): ``{"id": int, "state": "moving" | "reached" |
   "failed", "pose": name, "active": bool}``.
@@ -46,6 +46,12 @@ def _state(message: Any, goal_id: int | None = None) -> str | None:
         return None
     state = message.get("state")
     return state if isinstance(state, str) else None
+
+
+def _failed(what: str, message: Any) -> str:
+    """``what`` failed, with the status's ``reason`` when it gives one (MoveStatus, NavigationStatus)."""
+    reason = message.get("reason") if isinstance(message, Mapping) else None
+    return f"{what}: {reason}" if isinstance(reason, str) and reason else what
 
 
 def _share_done(message: Any) -> float:

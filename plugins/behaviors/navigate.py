@@ -22,8 +22,7 @@ from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import ANY, P, Params, Ports
 
-from .messages import _share_done, _state, robot_pose
-from .navigation_goals import _failure
+from .messages import _failed, _share_done, _state, robot_pose
 
 
 def _position(value: Any) -> tuple[float, float, float | None] | None:
@@ -112,5 +111,5 @@ class NavigateTo(Behavior):
             return BehaviorStatus(progress=1.0, done=True)
         if state in ("failed", "cancelled"):
             return BehaviorStatus(progress=_share_done(status), failed=True,
-                                  detail=_failure(status, f"navigation to {self.goal} failed"))
+                                  detail=_failed(f"navigation to {self.goal} failed", status))
         return BehaviorStatus(progress=_share_done(status))

@@ -18,7 +18,7 @@ from runtime.missions.behaviors import Behavior, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
-from .messages import _share_done, _state, robot_pose
+from .messages import _failed, _share_done, _state, robot_pose
 
 
 class SetNavGoal(Behavior):
@@ -86,7 +86,7 @@ class SetNavGoal(Behavior):
         if state in ("active", "arrived"):
             return BehaviorStatus(progress=1.0, done=True)
         if state in ("failed", "cancelled"):
-            return BehaviorStatus(progress=0.5, failed=True, detail=_failure(status, "no path to the goal"))
+            return BehaviorStatus(progress=0.5, failed=True, detail=_failed("no path to the goal", status))
         return BehaviorStatus(progress=0.5)
 
 
@@ -94,12 +94,6 @@ def _goal_configured(record: BehaviorRecord, alias: str) -> str | None:
     """The ``goal`` a behavior's ``<Uses as=alias>`` configures (None: it configures none)."""
     uses = next((u for u in record.uses if u.alias == alias), None)
     return next((c.value for c in uses.configure if c.parameter == "goal"), None) if uses else None
-
-
-def _failure(status: Any, what: str) -> str:
-    """``what`` failed, with the reason the status gives (navigation's ``reason``)."""
-    reason = status.get("reason") if isinstance(status, Mapping) else None
-    return f"{what}: {reason}" if isinstance(reason, str) and reason else what
 
 
 class WaitGoal(Behavior):
@@ -129,5 +123,5 @@ class WaitGoal(Behavior):
             return BehaviorStatus(progress=1.0, done=True)
         if state in ("failed", "cancelled"):
             return BehaviorStatus(progress=_share_done(status), failed=True,
-                                  detail=_failure(status, "navigation failed"))
+                                  detail=_failed("navigation failed", status))
         return BehaviorStatus(progress=_share_done(status))

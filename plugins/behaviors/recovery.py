@@ -39,6 +39,7 @@ from runtime.verification.manifest import MAPPING, P, Params, Ports
 
 from .messages import (
     TARGET_PARAMS,
+    _failed,
     _Goals,
     _share_done,
     _state,
@@ -63,9 +64,10 @@ class StopNavigation(_Goals):
 
     def step(self) -> BehaviorStatus:
         """Done once the base has carried out the zero move (it no longer follows the path)."""
-        state = _state(self.service("base").output("move_status"), self.move_id)
+        status = self.service("base").output("move_status")
+        state = _state(status, self.move_id)
         if state == "failed":
-            return BehaviorStatus(progress=0.0, failed=True, detail="the base did not stop")
+            return BehaviorStatus(progress=0.0, failed=True, detail=_failed("the base did not stop", status))
         return BehaviorStatus(progress=1.0 if state == "done" else 0.0, done=state == "done")
 
 
@@ -133,8 +135,8 @@ class SearchObject(_Goals):
                 self.blocked += 1
                 if self.blocked >= p["blockedMoves"]:
                     return BehaviorStatus(progress=done_views / self._total(), failed=True,
-                                          detail=f"the base could not move to the next view ({self.blocked} "
-                                                 "moves failed in a row)")
+                                          detail=_failed(f"the base could not move to the next view "
+                                                         f"({self.blocked} moves failed in a row)", move))
                 self.context.log("the base could not move there; looking from where it stopped", view=done_views)
             elif state != "done":
                 return BehaviorStatus(progress=(done_views + 0.5 * _share_done(move)) / self._total())

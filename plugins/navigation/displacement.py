@@ -103,6 +103,7 @@ class BaseDisplacement(ProcessingPlugin):
         self.move: RelativeMove | None = None
         self.move_id: int | None = None
         self.move_state = "done"
+        self.move_reason = ""  # why the move failed (MoveStatus reason)
         self.move_deadline = 0.0
         self.ended: dict[str, Any] | None = None
         self._seen: dict[str, Any] = {}
@@ -141,7 +142,8 @@ class BaseDisplacement(ProcessingPlugin):
             "last_frame": self.last_frame, "distance": self.distance, "rotation": self.rotation,
             "follower": None if self.follower is None else self.follower.state(), "path_id": self.path_id,
             "dropped": sorted(self.dropped), "move": None if self.move is None else self.move.state(),
-            "move_id": self.move_id, "move_state": self.move_state, "move_deadline": self.move_deadline,
+            "move_id": self.move_id, "move_state": self.move_state, "move_reason": self.move_reason,
+            "move_deadline": self.move_deadline,
             "ended": self.ended, "command": list(self.limiter.last), "seen": dict(self._seen),
         }
 
@@ -160,6 +162,7 @@ class BaseDisplacement(ProcessingPlugin):
             self.move = None if move is None else RelativeMove.from_state(move, self.gains)
             self.path_id, self.dropped = state["path_id"], {int(i) for i in state["dropped"]}
             self.move_id, self.move_state = state["move_id"], str(state["move_state"])
+            self.move_reason = str(state.get("move_reason", ""))
             self.move_deadline, self.ended = float(state["move_deadline"]), state["ended"]
             self.limiter.last = (float(state["command"][0]), float(state["command"][1]))
             self._seen = dict(state["seen"])
@@ -206,7 +209,7 @@ class BaseDisplacement(ProcessingPlugin):
         if self.follower is not None and path_id == self.path_id:
             self.follower.update(points, yaw, speed)
             return
-        self._end_move("failed")  # a new path preempts a relative move
+        self._end_move("failed", f"preempted by path {path_id}")  # a new path preempts a relative move
         self.follower, self.path_id = PathFollower(points, yaw, speed, self.gains), path_id
 
     def _move_goal(self, message: Any, now: float) -> None:
@@ -227,22 +230,23 @@ class BaseDisplacement(ProcessingPlugin):
             gains = replace(gains, yaw_tolerance=tolerance)
         if goal_id == self.move_id:
             return
-        self._end_move("failed")
+        self._end_move("failed", f"preempted by move {goal_id}")
         if self.follower is not None and self.path_id is not None:
             self.dropped.add(self.path_id)  # the move preempts the path, for good
             self.follower = None
-        self.move_id, self.move_state = goal_id, "moving"
+        self.move_id, self.move_state, self.move_reason = goal_id, "moving", ""
         self.distance = self.rotation = 0.0
         if self.pose is None:
-            self.move, self.move_state = None, "failed"  # no odometry: nothing to move on
+            self.move, self.move_state = None, "failed"
+            self.move_reason = "no odometry received yet: no pose to move from"
             return
         self.move = RelativeMove(self.pose, compose(self.pose, local), self.speed, gains)
         turning = 2 * math.pi / self.gains.max_angular
         self.move_deadline = now + self.move.total / (0.5 * self.speed) + turning + 5.0
 
-    def _end_move(self, state: str) -> None:
+    def _end_move(self, state: str, reason: str = "") -> None:
         if self.move_state == "moving":
-            self.move_state = state  # the move is kept for its remaining/total in the status
+            self.move_state, self.move_reason = state, reason  # the move is kept for its remaining/total
             if self.move_id is not None:
                 self.ended = self._status()  # a preempted move's end is published before the new one's
 
@@ -253,6 +257,7 @@ class BaseDisplacement(ProcessingPlugin):
             "state": self.move_state,
             "remaining": 0.0 if self.move_state == "done" or move is None else float(move.remaining),
             "total": 0.0 if move is None else float(move.total),
+            "reason": self.move_reason,
         }
 
     # ------------------------------------------------------------------ frame
@@ -293,7 +298,8 @@ class BaseDisplacement(ProcessingPlugin):
     def _command(self, now: float, dt: float) -> Command:
         stale = self.fresh_at is None or now - self.fresh_at > self.params["staleAfter"]
         if self.move is not None and self.move_state == "moving" and now > self.move_deadline:
-            self._end_move("failed")
+            self._end_move("failed", f"not done by its deadline ({self.move.total:.2f} m at half speed, "
+                                     "a full turn and 5 s)")
         if stale or self.pose is None:
             self.limiter.reset()
             return STOP

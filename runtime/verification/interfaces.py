@@ -108,8 +108,10 @@ STANDARD: dict[str, Interface] = {
                                       "stands; the behaviors' `move` Output is this topic", (f"{CKM}MoveGoal",),
                          ("id", "frame", "x", "y", "yaw")),),
             outputs=(
-                Port("move_status", "`{id, state: moving | done | failed, remaining, total (m)}` of the newest "
-                                    "move", (f"{CKM}MoveStatus",), ("id", "state", "remaining", "total")),
+                Port("move_status", "`{id, state: moving | done | failed, remaining, total (m), reason}` of the "
+                                    "newest move; `reason` says why it failed (preempted, no odometry, its "
+                                    "deadline passed)", (f"{CKM}MoveStatus",),
+                     ("id", "state", "remaining", "total", "reason")),
                 Port("odom", "`{stamp, pose: {x, y, yaw}, twist: {linear, angular}, dispersion}` (m, rad, m/s, "
                              "rad/s; dispersion in m); as nav_msgs/Odometry the pose's covariance holds the "
                              "dispersion d (σx² = σy² = d²/2)", (ODOMETRY,),

@@ -143,10 +143,12 @@ def test_a_new_goal_preempts_the_running_one_and_a_move_preempts_the_path_for_go
     robot, service = Unicycle(), base()
     robot.frame(service, move_goal=move(1, 1.0))
     status = robot.frame(service, move_goal=move(2, 0.2))["move_status"]
-    assert status["id"] == 1 and status["state"] == "failed"  # preempted
-    assert robot.frame(service, move_goal=move(2, 0.2))["move_status"] == pytest.approx(
-        {"id": 2, "state": "moving", "remaining": 0.2, "total": 0.2}, abs=0.02)
-    assert robot.frame(service, path=path([[0.0, 0.0], [2.0, 0.0]], path_id=5))["move_status"]["state"] == "failed"
+    assert (status["id"], status["state"], status["reason"]) == (1, "failed", "preempted by move 2")
+    running = robot.frame(service, move_goal=move(2, 0.2))["move_status"]
+    assert running.pop("reason") == ""
+    assert running == pytest.approx({"id": 2, "state": "moving", "remaining": 0.2, "total": 0.2}, abs=0.02)
+    preempted = robot.frame(service, path=path([[0.0, 0.0], [2.0, 0.0]], path_id=5))["move_status"]
+    assert (preempted["state"], preempted["reason"]) == ("failed", "preempted by path 5")
     assert service.move_state == "failed" and service.path_id == 5
     robot.frame(service, move_goal=move(3, 0.1))  # a move preempts the path...
     for _ in range(40):
@@ -292,3 +294,10 @@ def test_a_path_of_the_robots_own_spot_only_turns_it_to_the_yaw_and_a_short_rest
     for _ in range(40):
         behind.frame(other, path=rest)
     assert abs(behind.yaw) > 1.5  # it turned round to face the 4 cm behind it
+
+
+def test_a_move_before_any_odometry_fails_saying_so() -> None:
+    service = base()
+    result = service.process({"move_goal": move(7, 0.5)}, Context(0, 0.0, "base"))
+    assert result["move_status"] == {"id": 7, "state": "failed", "remaining": 0.0, "total": 0.0,
+                                     "reason": "no odometry received yet: no pose to move from"}
