@@ -161,8 +161,8 @@ def test_the_estimate_of_the_robot_centre_converges_whatever_the_laser_mount(
     errors = _errors(Localization(_record(filter_name, mount, environment)), drive, _standard(drive))
     assert errors[0] > 0.1  # it started off
     settled = errors[20:]  # after the first turn and part of the first leg
-    assert settled.mean() < 0.06, (robot, filter_name, settled.round(3))
-    assert settled.max() < 0.15
+    assert settled.mean() < 0.06, (robot, filter_name, settled.round(3))  # measured: 0.017-0.026 m
+    assert settled.max() < 0.12
 
 
 @pytest.mark.parametrize("filter_name", ["reliability", "mcl"])
@@ -170,9 +170,10 @@ def test_ignoring_the_rover_laser_offset_shows_as_pose_error(filter_name: str, e
     drive = _drive("rover", environment)
     mounted = _errors(Localization(_record(filter_name, "0.25 0 0", environment)), drive, _standard(drive))[20:]
     ignored = _errors(Localization(_record(filter_name, "0 0 0", environment)), drive, _standard(drive))[20:]
-    # taken from the centre, the beams place the laser, 0.25 m ahead, where the robot is
-    assert ignored.mean() > 0.15, ignored.round(3)
-    assert ignored.mean() > 3 * mounted.mean(), (ignored.mean(), mounted.mean())
+    # taken from the centre, the beams place the laser, 0.25 m ahead, where the robot is (measured:
+    # 0.24 m mean error for Algorithm 3, 0.16 m for MCL, against 0.02-0.03 m with the mount)
+    assert ignored.mean() > 0.12, ignored.round(3)
+    assert ignored.mean() > 4 * mounted.mean(), (ignored.mean(), mounted.mean())
 
 
 def test_a_raw_frame_with_the_laser_geometry_in_params_localizes_the_rover(environment: Path) -> None:
