@@ -9,6 +9,7 @@ as a raw ``odometry``/``ranges`` frame.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -29,10 +30,13 @@ from plugins.localization.raster import GridMap
 from plugins.localization.raycast import LaserSpec, simulate_scan
 from plugins.localization.service import Localization
 from runtime.kernel.interfaces import ParamError
+from runtime.registry import Registry
 from runtime.resources.spt import Context, Topology
+from runtime.verification.verify import verify
 from tests.plugins.navigation.loop import ROVER_MODEL, TURTLEBOT_MODEL, RobotModel, room
 
 Array = npt.NDArray[np.float64]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @dataclass(frozen=True)
@@ -239,3 +243,24 @@ def test_beams_are_re_expressed_from_the_robot_centre() -> None:
     assert ranges[0] == pytest.approx(math.hypot(0.25, 1.0))
     assert bearings[0] == pytest.approx(math.atan2(1.0, 0.25))
     assert np.isinf(ranges[1:]).all()  # +inf, and a reading at range_max is no return
+
+
+def test_the_guide_example_validates_and_localizes_the_rover(tmp_path: Path, environment: Path) -> None:
+    # docs/localization.md's example, with the test room as its environment.xml
+    guide = (ROOT / "docs" / "localization.md").read_text(encoding="utf-8")
+    [example] = [b for b in re.findall(r"```xml\n(.*?)```", guide, re.S) if 'name="rover-localization"' in b]
+    (tmp_path / "environment.xml").write_text(environment.read_text())
+    (tmp_path / "system.xml").write_text(example)
+    system = ckmconf.load(tmp_path / "system.xml")
+    assert [e.message for e in verify(system, Registry(packages=("ckm",)))] == []
+    [resource] = system.resources
+    spt = Topology(resource)
+    spt.setup()
+    spt.select("AMCL", "localize")
+    drive = _drive("rover", environment)
+    errors = []
+    for k, frame in enumerate(_standard(drive)):  # two Inputs: the runtime gives {input name: newest message}
+        pose = spt.run(frame, stamp=0.2 * k).outputs["AMCL"]
+        errors.append(math.hypot(pose["x"] - drive.truth[k, 0], pose["y"] - drive.truth[k, 1]))
+    spt.stop()
+    assert np.mean(errors[20:]) < 0.06
