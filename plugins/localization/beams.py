@@ -48,9 +48,7 @@ def scan_beams(scan: Mapping[str, Any], owner: str) -> LaserBeams:
             f"{owner}: input 'scan' is not a LaserScan (ranges, angle_min, angle_increment, range_min, range_max)"
         ) from None
     if ranges.ndim != 1 or ranges.size == 0 or not step > 0 or not hi > lo or not np.isfinite([start, lo, hi]).all():
-        raise ValueError(
-            f"{owner}: input 'scan' has no ranges or a bad geometry (increment {step}, range {lo}–{hi})"
-        )
+        raise ValueError(f"{owner}: input 'scan' has no ranges or a bad geometry (increment {step}, range {lo}–{hi})")
     return LaserBeams(ranges, start + step * np.arange(ranges.size, dtype=np.float64), lo, hi)
 
 

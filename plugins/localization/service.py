@@ -80,11 +80,14 @@ class Localization(ProcessingPlugin):
     """
 
     # "*": one service Input carrying a whole frame mapping
-    PORTS = Ports(inputs={"odometry": NUMBERS, "ranges": NUMBERS, "scan": MAPPING, "odom": MAPPING, "*": MAPPING},
-                  outputs={"*": MAPPING})
+    PORTS = Ports(
+        inputs={"odometry": NUMBERS, "ranges": NUMBERS, "scan": MAPPING, "odom": MAPPING, "*": MAPPING},
+        outputs={"*": MAPPING},
+    )
     PROVIDES = "localization"  # docs/interfaces.md
-    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"pose": ("x", "y", "yaw", "covariance", "dispersion", "filter",
-                                                                "reliability")}
+    WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {
+        "pose": ("x", "y", "yaw", "covariance", "dispersion", "filter", "reliability")
+    }
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P(
             "filter",
@@ -93,17 +96,42 @@ class Localization(ProcessingPlugin):
             choices=("reliability", "mcl"),
         ),
         P("particles", 2500, "Number of particles (MCL: the maximum with KLD sampling).", min=10),
-        P("environment", REQUIRED, "XML file holding the system's <Environment> (the map), relative to the "
-          "configuration file.", type=str, file=ENVIRONMENT_FILE),
-        P("laserPose", REQUIRED, "The laser's mount 'x y yaw' in the robot frame (m, m, rad): the URDF's laser "
-          "joint. Beams are re-expressed from the robot's centre, so the estimate is the base's pose.", type=str),
+        P(
+            "environment",
+            REQUIRED,
+            "XML file holding the system's <Environment> (the map), relative to the configuration file.",
+            type=str,
+            file=ENVIRONMENT_FILE,
+        ),
+        P(
+            "laserPose",
+            REQUIRED,
+            "The laser's mount 'x y yaw' in the robot frame (m, m, rad): the URDF's laser "
+            "joint. Beams are re-expressed from the robot's centre, so the estimate is the base's pose.",
+            type=str,
+        ),
         P("beams", 60, "Beams of each scan used by the filter, evenly spread (AMCL's laser_max_beams).", min=3),
         P("resolution", 0.05, "Grid cell size of the map.", unit="m", above=0.0),
-        P("fov", None, "Raw 'ranges' frames only (required for them; a 'scan' carries its own geometry): the "
-          "laser's field of view, the ranges spread evenly over it centred on the laser's heading (2π: a full "
-          "turn from -π).", type=float, unit="rad", above=0.0, max=2 * math.pi),
-        P("max_range", None, "Raw 'ranges' frames only (required for them): the laser's longest range, a reading "
-          "at or beyond it is no return.", type=float, unit="m", above=0.0),
+        P(
+            "fov",
+            None,
+            "Raw 'ranges' frames only (required for them; a 'scan' carries its own geometry): the "
+            "laser's field of view, the ranges spread evenly over it centred on the laser's heading (2π: a full "
+            "turn from -π).",
+            type=float,
+            unit="rad",
+            above=0.0,
+            max=2 * math.pi,
+        ),
+        P(
+            "max_range",
+            None,
+            "Raw 'ranges' frames only (required for them): the laser's longest range, a reading "
+            "at or beyond it is no return.",
+            type=float,
+            unit="m",
+            above=0.0,
+        ),
         P("initial_pose", "", "'x y yaw' of the robot to start around, empty for global localization."),
         P("kld", False, "MCL only: KLD sampling of the particle count."),
         P("seed", 0, "Random seed of the filter.", min=0),
@@ -140,8 +168,12 @@ class Localization(ProcessingPlugin):
             rng = np.random.default_rng(p["seed"])
             built: AmclFilter | ReliabilityFilter
             if p["filter"] == "mcl":
-                settings = MclSettings(particles=p["particles"], min_particles=min(500, p["particles"]), kld=p["kld"],
-                                       field=FieldModel(max_range=longest))
+                settings = MclSettings(
+                    particles=p["particles"],
+                    min_particles=min(500, p["particles"]),
+                    kld=p["kld"],
+                    field=FieldModel(max_range=longest),
+                )
                 built = AmclFilter(self.grid, np.zeros(0), settings, rng)
             else:
                 built = ReliabilityFilter(
@@ -150,8 +182,9 @@ class Localization(ProcessingPlugin):
             built.reset(self.initial)
             self.filter = built
         elif isinstance(self.filter, AmclFilter):
-            self.filter.settings = replace(self.filter.settings, field=replace(self.filter.settings.field,
-                                                                                max_range=longest))
+            self.filter.settings = replace(
+                self.filter.settings, field=replace(self.filter.settings.field, max_range=longest)
+            )
         else:
             self.filter.settings = replace(self.filter.settings, max_range=longest)
         return self.filter
@@ -163,8 +196,10 @@ class Localization(ProcessingPlugin):
         if odom is not None:
             return odom_pose(odom, self.owner)
         if raw is None:
-            raise ValueError(f"{self.owner} expects the odometry: input 'odom' (an Odometry) or 'odometry' "
-                             f"(x, y, yaw); the frame has {sorted(map(str, data))}")
+            raise ValueError(
+                f"{self.owner} expects the odometry: input 'odom' (an Odometry) or 'odometry' "
+                f"(x, y, yaw); the frame has {sorted(map(str, data))}"
+            )
         try:
             odometry = np.asarray(raw, dtype=np.float64)
         except (TypeError, ValueError):
@@ -182,14 +217,18 @@ class Localization(ProcessingPlugin):
                 raise ValueError(f"{self.owner}: input 'scan' must be a LaserScan mapping, got {type(scan).__name__}")
             return scan_beams(scan, self.owner)
         if raw is None:
-            raise ValueError(f"{self.owner} expects a laser scan: input 'scan' (a LaserScan) or 'ranges'; the frame "
-                             f"has {sorted(map(str, data))}")
+            raise ValueError(
+                f"{self.owner} expects a laser scan: input 'scan' (a LaserScan) or 'ranges'; the frame "
+                f"has {sorted(map(str, data))}"
+            )
         fov, max_range = self.params["fov"], self.params["max_range"]
         if fov is None or max_range is None:
             missing = " and ".join(repr(n) for n, v in (("fov", fov), ("max_range", max_range)) if v is None)
-            raise ParamError(f"{self.owner}: a raw 'ranges' frame needs the parameters 'fov' and 'max_range' (the "
-                             f"laser's field of view and range), {missing} not given; or send a LaserScan as input "
-                             f"'scan', which carries its own geometry")
+            raise ParamError(
+                f"{self.owner}: a raw 'ranges' frame needs the parameters 'fov' and 'max_range' (the "
+                f"laser's field of view and range), {missing} not given; or send a LaserScan as input "
+                f"'scan', which carries its own geometry"
+            )
         try:
             ranges = np.asarray(raw, dtype=np.float64)
         except (TypeError, ValueError):

@@ -57,11 +57,13 @@ def _mount(model: RobotModel) -> tuple[float, float, float]:
 
 LASERS = {
     # the lab's Hokuyo URG-04LX, 0.10 m ahead of the Turtlebot's centre
-    "turtlebot": Laser(LaserSpec(beams=683, fov=math.radians(240), max_range=5.6, min_range=0.02, sigma=0.01),
-                       _mount(TURTLEBOT_MODEL)),
+    "turtlebot": Laser(
+        LaserSpec(beams=683, fov=math.radians(240), max_range=5.6, min_range=0.02, sigma=0.01), _mount(TURTLEBOT_MODEL)
+    ),
     # a 270° 12 m scanner, 0.25 m ahead of the rover's centre
-    "rover": Laser(LaserSpec(beams=541, fov=math.radians(270), max_range=12.0, min_range=0.1, sigma=0.01),
-                   _mount(ROVER_MODEL)),
+    "rover": Laser(
+        LaserSpec(beams=541, fov=math.radians(270), max_range=12.0, min_range=0.1, sigma=0.01), _mount(ROVER_MODEL)
+    ),
 }
 
 
@@ -76,13 +78,16 @@ def _path() -> Array:
 
     def turn(to: float, steps: int) -> None:
         start = poses[-1]
-        poses.extend(np.array([start[0], start[1], start[2] + (to - start[2]) * k / steps])
-                     for k in range(1, steps + 1))
+        poses.extend(
+            np.array([start[0], start[1], start[2] + (to - start[2]) * k / steps]) for k in range(1, steps + 1)
+        )
 
     def go(x: float, y: float, steps: int) -> None:
         start = poses[-1]
-        poses.extend(np.array([start[0] + (x - start[0]) * k / steps, start[1] + (y - start[1]) * k / steps,
-                               start[2]]) for k in range(1, steps + 1))
+        poses.extend(
+            np.array([start[0] + (x - start[0]) * k / steps, start[1] + (y - start[1]) * k / steps, start[2]])
+            for k in range(1, steps + 1)
+        )
 
     turn(-math.pi / 2, 10)
     go(1.0, 0.9, 11)
@@ -122,21 +127,40 @@ def _drive(robot: str, environment: Path) -> Drive:
     for k, pose in enumerate(truth):
         if k:
             reading = odometry.step(truth[k - 1], pose)
-        odom.append({"stamp": 0.2 * k, "pose": {"x": float(reading[0]), "y": float(reading[1]),
-                                                "yaw": float(reading[2])},
-                     "twist": {"linear": 0.0, "angular": 0.0}})
+        odom.append(
+            {
+                "stamp": 0.2 * k,
+                "pose": {"x": float(reading[0]), "y": float(reading[1]), "yaw": float(reading[2])},
+                "twist": {"linear": 0.0, "angular": 0.0},
+            }
+        )
         ranges = simulate_scan(grid, _compose(pose, laser.mount), spec, rng)
         ranges = np.where(ranges >= spec.max_range, np.inf, ranges)  # REP 117: no return is +inf
-        scans.append({"stamp": 0.2 * k, "angle_min": -spec.fov / 2, "angle_max": spec.fov / 2,
-                      "angle_increment": spec.fov / (spec.beams - 1), "range_min": spec.min_range,
-                      "range_max": spec.max_range, "ranges": ranges.astype(np.float32)})
+        scans.append(
+            {
+                "stamp": 0.2 * k,
+                "angle_min": -spec.fov / 2,
+                "angle_max": spec.fov / 2,
+                "angle_increment": spec.fov / (spec.beams - 1),
+                "range_min": spec.min_range,
+                "range_max": spec.max_range,
+                "ranges": ranges.astype(np.float32),
+            }
+        )
     return Drive(truth, odom, scans)
 
 
 def _record(filter_name: str, laser_pose: str, environment: Path, **params: str) -> Plugin:
     x, y, yaw = _path()[0] + np.array([0.25, -0.2, 0.1])  # start 0.3 m, 0.1 rad off the truth
-    given = {"filter": filter_name, "particles": "1000", "seed": "3", "environment": str(environment),
-             "laserPose": laser_pose, "initial_pose": f"{x} {y} {yaw}", **params}
+    given = {
+        "filter": filter_name,
+        "particles": "1000",
+        "seed": "3",
+        "environment": str(environment),
+        "laserPose": laser_pose,
+        "initial_pose": f"{x} {y} {yaw}",
+        **params,
+    }
     return Plugin(name="amcl", kind="localization", params=tuple(Param(name=k, value=v) for k, v in given.items()))
 
 
@@ -185,8 +209,10 @@ def test_a_raw_frame_with_the_laser_geometry_in_params_localizes_the_rover(envir
     plugin = Localization(
         _record("reliability", "0.25 0 0", environment, fov=str(spec.fov), max_range=str(spec.max_range))
     )
-    frames = [{"odometry": [o["pose"]["x"], o["pose"]["y"], o["pose"]["yaw"]], "ranges": s["ranges"]}
-              for s, o in zip(drive.scans, drive.odom, strict=True)]
+    frames = [
+        {"odometry": [o["pose"]["x"], o["pose"]["y"], o["pose"]["yaw"]], "ranges": s["ranges"]}
+        for s, o in zip(drive.scans, drive.odom, strict=True)
+    ]
     assert _errors(plugin, drive, frames)[20:].mean() < 0.06
 
 
@@ -206,8 +232,12 @@ def test_a_bad_laser_pose_is_refused_naming_the_plugin_and_the_param(bad: str, e
     refused = r"plugin 'amcl' \(localization\): parameter 'laserPose' = .* is not 'x y yaw'"
     with pytest.raises(ParamError, match=refused):
         Localization(_record("reliability", bad, environment))
-    resource = SmartResource(name="Navigation", node="pc", plugins=(_record("reliability", bad, environment),),
-                             profiles=(Profile(name="localize", output="amcl", root=Use(plugin="amcl")),))
+    resource = SmartResource(
+        name="Navigation",
+        node="pc",
+        plugins=(_record("reliability", bad, environment),),
+        profiles=(Profile(name="localize", output="amcl", root=Use(plugin="amcl")),),
+    )
     with pytest.raises(ConfigError, match="laserPose"):
         Topology(resource)
 
