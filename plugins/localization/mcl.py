@@ -98,13 +98,18 @@ class AmclFilter:
         self.weights = np.full(n, 1.0 / n)
         self.w_slow = self.w_fast = 0.0
 
-    def update(self, odometry: Array, ranges: Array) -> Estimate:
-        """One filter step: move by the odometry since the last call, weigh by the scan, publish, resample."""
+    def update(self, odometry: Array, ranges: Array, angles: Array | None = None) -> Estimate:
+        """One filter step: move by the odometry since the last call, weigh by the scan, publish, resample.
+
+        ``angles``: this scan's beam bearings from the robot's centre (they vary per scan for a laser
+        off the centre, plugins/localization/beams.py); None: the fixed ``self.angles``.
+        """
         s = self.settings
+        bearings = self.angles if angles is None else np.asarray(angles, dtype=np.float64)
         if self.odometry is not None:
             self.particles = sample_motion(self.particles, self.odometry, odometry, s.noise, self.rng)
         self.odometry = np.asarray(odometry, dtype=np.float64).copy()
-        likelihood = amcl_weights(self.grid, self.particles, ranges, self.angles, s.field)
+        likelihood = amcl_weights(self.grid, self.particles, ranges, bearings, s.field)
         weights = self.weights * likelihood
         total = weights.sum()
         w_avg = float(np.mean(likelihood))  # AMCL's average weight, without its 1/n factor (the rates' ratio is kept)

@@ -95,9 +95,14 @@ class ReliabilityFilter:
             [x + float(trans) * np.cos(heading), y + float(trans) * np.sin(heading), wrap(heading + float(rot2))]
         )
 
-    def update(self, odometry: Array, ranges: Array) -> Estimate:
-        """One iteration of Algorithm 3 for the odometry reading and the scan ``ranges``; E_k with its covariance."""
+    def update(self, odometry: Array, ranges: Array, angles: Array | None = None) -> Estimate:
+        """One iteration of Algorithm 3 for the odometry reading and the scan ``ranges``; E_k with its covariance.
+
+        ``angles``: this scan's beam bearings from the robot's centre (they vary per scan for a laser
+        off the centre, plugins/localization/beams.py); None: the fixed ``self.angles``.
+        """
         s = self.settings
+        bearings = self.angles if angles is None else np.asarray(angles, dtype=np.float64)
         odometry = np.asarray(odometry, dtype=np.float64)
         seed = self._predicted_estimate(odometry)
         if self.odometry is not None:  # lines 1-2, eq. 6.15
@@ -105,13 +110,13 @@ class ReliabilityFilter:
             self.particles = sample_motion(self.particles, self.odometry, odometry, noise, self.rng)
         self.odometry = odometry.copy()
         n = len(self.particles)
-        z = coherence(self.grid, self.particles, ranges, self.angles, s.sigma, s.max_range)  # line 3, eq. 6.17
+        z = coherence(self.grid, self.particles, ranges, bearings, s.sigma, s.max_range)  # line 3, eq. 6.17
         total = float(z.sum())
         p_success = n * z / total if total > 0 else np.ones(n)  # line 6, eq. 6.20
         self.reliability = float(np.mean(z))  # line 7, eq. 6.21 against the ideal coherence (D80)
         best = int(np.argmax(z))
         seeds = [self.particles[best]] if seed is None else [seed, self.particles[best]]
-        x_ref, z_ref = match(self.grid, np.stack(seeds), ranges, self.angles, s.sigma, s.max_range)  # line 11
+        x_ref, z_ref = match(self.grid, np.stack(seeds), ranges, bearings, s.sigma, s.max_range)  # line 11
         if z_ref < z[best]:  # eq. 6.25: no particle may be more coherent than x_ref
             x_ref, z_ref = self.particles[best].copy(), float(z[best])
         self.last_reference = (x_ref, z_ref)

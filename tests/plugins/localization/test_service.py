@@ -22,8 +22,17 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 def _resource(filter_name: str, **params: str) -> SmartResource:
-    given = {"filter": filter_name, "particles": "2500", "seed": "7",
-             "environment": str(ROOT / "configs" / "usecase" / "environment.xml"), **params}
+    given = {
+        "filter": filter_name,
+        "particles": "2500",
+        "seed": "7",
+        "environment": str(ROOT / "configs" / "usecase" / "environment.xml"),
+        # the benchmark's scans: 60 beams over a full turn, 8 m, from the robot's centre
+        "laserPose": "0 0 0",
+        "fov": str(2 * np.pi),
+        "max_range": "8",
+        **params,
+    }
     plugin = Plugin(name="amcl", kind="localization", params=tuple(Param(name=k, value=v) for k, v in given.items()))
     profile = Profile(name="localize", output="amcl", root=Use(plugin="amcl"))
     return SmartResource(name="Navigation", node="remote_pc", plugins=(plugin,), profiles=(profile,))
