@@ -83,7 +83,8 @@ _SPEC = Params(
     P("offset", 0.0, "Raw value at joint zero."),
     P("initial", "", "Raw value an out channel's joint(s) stand at when the robot is spawned (position mode)."),
     P("noise", 0.0, "Standard deviation of the noise added to each read.", min=0.0),
-    P("fov", 1.0123, "Horizontal field of view (camera, lidar).", unit="rad", above=0.0),
+    P("fov", None, "Horizontal field of view (required by a camera, sensor rgb or depth, and a lidar: no "
+      "default, it is the sensor's own).", type=float, unit="rad", above=0.0),
     P("rangeMin", 0.02, "Lidar minimum range.", unit="m", min=0.0),
     P("arc", 6.2832, "Contact sensor: the arc, centred ahead, where a touch presses it (2π: anywhere).",
       unit="rad", above=0.0),
@@ -147,6 +148,13 @@ class SimBackend(Backend):
             problem(None, "a wheel encoder (counter in, joint) needs Param 'ticksPerRev', its encoder's ticks per "
                           "wheel turn (no default: it is the encoder's own)")
         sensor = v["sensor"]
+        # A camera's or a lidar's geometry is its own: no default, so no user's sensor silently gets
+        # the lab's Xtion or Hokuyo (issue M, D284).
+        what = {"rgb": "a camera", "depth": "a depth camera", "lidar": "a lidar"}.get(sensor)
+        if what and v["fov"] is None:
+            problem(None, f"{what} needs its field of view: Param 'fov' (rad), the sensor's horizontal angle of view")
+        if sensor == "lidar" and channel.max is None:
+            problem(None, "a lidar needs its range: the HWChannel's max (m), the farthest distance it measures")
         expected = {
             "rgb": v["width"] * v["height"] * 3, "depth": v["width"] * v["height"], "imu": 6,
             "contact": 1, "altimeter": 1, "pose": 3,

@@ -157,7 +157,7 @@ class ChannelDevice:
         v, sensor, robot = self.spec.values, self.spec.values.get("sensor", ""), self.robot
         if sensor == "lidar":
             return Lidar(robot, v["link"], beams=self.spec.size, fov=v["fov"], range_min=v["rangeMin"],
-                         range_max=self.spec.max or 5.6, noise=v["noise"], seed=v["seed"])
+                         range_max=self.spec.max, noise=v["noise"], seed=v["seed"])
         if sensor in ("rgb", "depth"):
             return Camera(robot, v["link"], fov=v["fov"])
         if sensor == "imu":

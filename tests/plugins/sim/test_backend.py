@@ -25,11 +25,13 @@ from tests.runtime.network.conftest import private_network
 STATION = REPO / "configs" / "examples" / "sim_station.xml"
 
 
-def channel(name: str, direction: str = "in", kind: str = "analog", size: int = 1, **params: str) -> HWChannel:
-    """A sim channel record whose world is the example's workshop."""
+def channel(
+    name: str, direction: str = "in", kind: str = "analog", size: int = 1, max: float | None = None, **params: str
+) -> HWChannel:
+    """A sim channel record whose world is the example's workshop (``max``: the HWChannel's, a lidar's range)."""
     loc = Loc(str(STATION), 1, 1, "/System/Node[@name='test']/HWChannel")
     return HWChannel(
-        name=name, direction=direction, kind=kind, backend="sim", size=size, loc=loc,  # type: ignore[arg-type]
+        name=name, direction=direction, kind=kind, backend="sim", size=size, max=max, loc=loc,  # type: ignore[arg-type]
         params=tuple(Param(name=k, value=v) for k, v in params.items()),
     )
 
@@ -81,10 +83,10 @@ def test_joint_position_lidar_bumper_camera_imu(clock_and_scope: tuple[ManualClo
                 pose="1.0 1.0 0"),
         channel("j", "in", "bus", size=2, joints="turret_joint shoulder_joint", body="station_arm"),
         channel("l", "in", "stream", size=181, body="rover", pose="3.0 2.0 0", sensor="lidar", link="laser_link",
-                fov="3.14159"),
+                max=5.0, fov="3.14159"),
         channel("b", "in", "digital", body="rover", sensor="contact", link="bumper_link"),
         channel("d", "in", "stream", size=80 * 60, body="station_arm", sensor="depth",
-                link="wrist_camera_optical_frame", width="80", height="60"),
+                link="wrist_camera_optical_frame", width="80", height="60", fov="1.5184"),
         channel("i", "in", "analog", size=6, body="rover", sensor="imu"),
         channel("h", "in", "analog", body="rover", sensor="altimeter", link="laser_link"),
     )
@@ -176,7 +178,7 @@ def _lidar_reads(seed: str) -> list[list[float]]:
         channel("m", "out", "pwm", body="rover", pose="3 2 0.2", joint="left_wheel_joint", mode="velocity",
                 seed=seed),
         channel("l", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", noise="0.01",
-                seed=seed),
+                max=5.0, fov="4.7", seed=seed),
     )
     motor.write(0.4)
     reads = []
@@ -195,7 +197,7 @@ def test_same_seed_same_channel_data() -> None:
 
 def test_rgb_and_depth_channels_of_one_camera_share_a_render(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
     clock, scope = clock_and_scope
-    xtion = {"body": "turtlebot", "link": "camera_rgb_optical_frame", "width": "40", "height": "30"}
+    xtion = {"body": "turtlebot", "link": "camera_rgb_optical_frame", "width": "40", "height": "30", "fov": "1.0123"}
     rgb, depth = open_all(
         scope,
         channel("c", "in", "stream", size=40 * 30 * 3, sensor="rgb", pose="3 2 0", **xtion),

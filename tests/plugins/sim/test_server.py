@@ -79,6 +79,7 @@ CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
       <Param name="link" value="camera_depth_optical_frame"/>
       <Param name="width" value="80"/>
       <Param name="height" value="60"/>
+      <Param name="fov" value="1.0123"/>
     </HWChannel>
     <Topic name="wheel_speed" type="float64" scope="internal"/>
     <Topic name="wrist_depth" type="float64" scope="internal"/>
@@ -252,7 +253,8 @@ def test_client_mode_reads_what_the_in_process_world_reads(
     wrist = channel_of(config, "wrist")
     stray = dataclasses.replace(wrist, name="stray", params=tuple(  # a robot the plan did not load
         Param(name=k, value=v) for k, v in (("body", "station_arm"), ("pose", "1 3 0"), ("sensor", "depth"),
-                                            ("link", "wrist_camera_optical_frame"), ("width", "80"), ("height", "60"))
+                                            ("link", "wrist_camera_optical_frame"), ("width", "80"), ("height", "60"),
+                                            ("fov", "1.5184"))
     ))
     with ServerProcess(config, tmp_path / "server") as server:
         monkeypatch.setenv(ENV_ADDRESS, server.address)
