@@ -110,7 +110,14 @@ def test_bad_params_are_reported() -> None:
     with pytest.raises(ParamError, match="body"):
         SimBackend(channel("x", sensor="lidar"))
     with pytest.raises(ParamError, match="size"):
-        SimBackend(channel("x", "in", "stream", size=10, body="rover", sensor="rgb", width="4", height="4"))
+        SimBackend(channel("x", "in", "stream", size=10, body="rover", sensor="rgb", width="4", height="4", fov="1"))
+    # No lab value for a user's sensor (D284): a camera's field of view, a lidar's and its range are its own.
+    with pytest.raises(ParamError, match="a depth camera needs its field of view: Param 'fov'"):
+        SimBackend(channel("x", "in", "stream", size=16, body="rover", sensor="depth", width="4", height="4"))
+    with pytest.raises(ParamError, match="a lidar needs its field of view: Param 'fov'"):
+        SimBackend(channel("x", "in", "stream", size=90, max=4.0, body="rover", sensor="lidar", link="laser_link"))
+    with pytest.raises(ParamError, match="a lidar needs its range: the HWChannel's max"):
+        SimBackend(channel("x", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", fov="3"))
     with pytest.raises(ParamError, match="mode"):
         SimBackend(channel("x", "out", "bus", body="rover", joint="left_wheel_joint", mode="torque"))
     backend = SimBackend(channel("x", body="rover", joint="no_such_joint"), scope=PlantScope(ManualClock()))
