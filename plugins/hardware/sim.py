@@ -150,11 +150,13 @@ class SimBackend(Backend):
         sensor = v["sensor"]
         # A camera's or a lidar's geometry is its own: no default, so no user's sensor silently gets
         # the lab's Xtion or Hokuyo (issue M, D284).
-        what = {"rgb": "a camera", "depth": "a depth camera", "lidar": "a lidar"}.get(sensor)
+        what = {"rgb": "camera", "depth": "depth camera", "lidar": "lidar"}.get(sensor)
         if what and v["fov"] is None:
-            problem(None, f"{what} needs its field of view: Param 'fov' (rad), the sensor's horizontal angle of view")
+            problem(None, f"a {what} needs its field of view: Param 'fov' (rad), its horizontal angle of view "
+                          f"(no default: it is the {what}'s own)")
         if sensor == "lidar" and channel.max is None:
-            problem(None, "a lidar needs its range: the HWChannel's max (m), the farthest distance it measures")
+            problem(None, "a lidar needs its range: the HWChannel's max (m), the farthest distance it measures "
+                          "(no default: it is the lidar's own)")
         expected = {
             "rgb": v["width"] * v["height"] * 3, "depth": v["width"] * v["height"], "imu": 6,
             "contact": 1, "altimeter": 1, "pose": 3,
