@@ -6,7 +6,9 @@ it (the first channel of a body to be set up decides; default: the map's centre)
 scope (:mod:`plugins.hardware.simulation`: per node under ``ckm-run``), built by the first channel
 set up from the ``<Environment>`` of the file its ``world`` Param names (default: its own
 configuration file); a later ``world`` naming another file is an error. ``textures`` names the
-RGB recognition's model file so objects wear the textures it learnt.
+RGB recognition's model file so objects wear the textures it learnt. A camera's and a lidar's
+geometry has no default (D284): ``fov``, and a lidar's range (the HWChannel's ``max``), are the
+sensor's own, never the lab's Xtion's or Hokuyo's.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
 ``altimeter``, ``pose``) or by ``joint``/``joints``, and the channel's kind and direction:
 
@@ -20,8 +22,10 @@ analog/bus out, joint   joint target (``mode``), value = (raw − offset) × sca
                         joint stands at when the robot is spawned (a servo's power-on position)
 digital in, contact     1 while ``link`` touches an obstacle within ``arc`` (rad, centred ahead) of its
                         heading (a bumper: the Kobuki's three cover the front half, π; D236)
-stream in, lidar        ``size`` ranges (m) over ``fov`` from ``link``
-stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
+stream in, lidar        ``size`` ranges (m) over ``fov`` (required) from ``link``, from ``rangeMin`` up to the
+                        HWChannel's ``max`` (required: the lidar's range)
+stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major, over
+                        ``fov`` (required: the camera's horizontal field of view)
 analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
 bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
                         for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it

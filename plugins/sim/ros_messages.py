@@ -18,7 +18,10 @@ Param ``channel`` names the ``hardware.sim`` HWChannel (looked up in the plugin'
 file), whose ``link`` is the ``header.frame_id`` and must be a link of the robot's URDF (its
 ``body`` or ``model``), whose ``fov``/``size``/``rangeMin``/``max`` give the scan's geometry,
 ``fov``/``width``/``height`` the camera's intrinsics (:func:`plugins.sim.sensors.pinhole`, the
-projection the render uses), ``joints``/``scale``/``offset`` the joint names and radians. ``ros-tf``
+projection the render uses), ``joints``/``scale``/``offset`` the joint names and radians. The values
+are read through ``hardware.sim``'s own Param table and checks (:class:`plugins.hardware.sim.SimBackend`,
+D284): its defaults are the only ones, and a camera or lidar without its ``fov`` (a lidar without
+its ``max``) is refused as the backend refuses it, never given the lab's sensor's. ``ros-tf``
 is ``robot_state_publisher`` on the URDF of Param ``body`` plus the ``odom`` → root link transform.
 ``header.stamp`` is the raw message's ``stamp``: the sensor's read, on the run's clock (simulated
 time under ``--time-scale``). Results are dicts of the ROS fields (Time as float seconds), which the
