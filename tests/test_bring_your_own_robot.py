@@ -123,7 +123,8 @@ MISTAKES = (  # file, text, replaced by, the line it is refused at, what ckm-val
     ("robot.xml", '      <Param name="ticksPerRev" value="2048"/>\n', "", 16,
      "a wheel encoder (counter in, joint) needs Param 'ticksPerRev'"),
     ("services.xml", '      <Param name="fov" value="3.4907"/>\n', "", 23, "needs parameter 'fov'"),
-    ("robot.xml", '      <Param name="fov" value="3.4907"/>\n', "", 130, "a lidar needs its field of view: Param 'fov'"),
+    ("robot.xml", '      <Param name="fov" value="3.4907"/>\n', "", 130,
+     "a lidar needs its field of view: Param 'fov'"),
     ("robot.xml", 'min="0" max="8" size="541"', 'min="0" size="541"', 130,
      "a lidar needs its range: the HWChannel's max (m)"),
 )

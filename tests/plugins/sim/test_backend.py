@@ -3,6 +3,7 @@ interface, lock-step with a ManualClock; bad Params are reported; the example sy
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Iterator
@@ -15,6 +16,7 @@ from ckmconf.errors import Loc
 from ckmconf.model import HWChannel, Param
 from plugins.hardware.sim import SimBackend, find_world
 from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
+from plugins.sim.devices import ChannelDevice, SimWorld, Spec
 from runtime.kernel.interfaces import Backend, ParamError
 from runtime.kernel.node import NodeRuntime
 from runtime.network import Transport, open_transport
@@ -25,15 +27,18 @@ from tests.runtime.network.conftest import private_network
 STATION = REPO / "configs" / "examples" / "sim_station.xml"
 
 
-def channel(
-    name: str, direction: str = "in", kind: str = "analog", size: int = 1, max: float | None = None, **params: str
-) -> HWChannel:
-    """A sim channel record whose world is the example's workshop (``max``: the HWChannel's, a lidar's range)."""
+def channel(name: str, direction: str = "in", kind: str = "analog", size: int = 1, **params: str) -> HWChannel:
+    """A sim channel record whose world is the example's workshop."""
     loc = Loc(str(STATION), 1, 1, "/System/Node[@name='test']/HWChannel")
     return HWChannel(
-        name=name, direction=direction, kind=kind, backend="sim", size=size, max=max, loc=loc,  # type: ignore[arg-type]
+        name=name, direction=direction, kind=kind, backend="sim", size=size, loc=loc,  # type: ignore[arg-type]
         params=tuple(Param(name=k, value=v) for k, v in params.items()),
     )
+
+
+def ranging(record: HWChannel, top: float) -> HWChannel:
+    """``record`` with the HWChannel's ``max``: a lidar's range (m)."""
+    return dataclasses.replace(record, max=top)
 
 
 @pytest.fixture
@@ -82,8 +87,8 @@ def test_joint_position_lidar_bumper_camera_imu(clock_and_scope: tuple[ManualClo
         channel("s", "out", "bus", joint="shoulder_joint", scale="0.01", offset="100", body="station_arm",
                 pose="1.0 1.0 0"),
         channel("j", "in", "bus", size=2, joints="turret_joint shoulder_joint", body="station_arm"),
-        channel("l", "in", "stream", size=181, body="rover", pose="3.0 2.0 0", sensor="lidar", link="laser_link",
-                max=5.0, fov="3.14159"),
+        ranging(channel("l", "in", "stream", size=181, body="rover", pose="3.0 2.0 0", sensor="lidar",
+                        link="laser_link", fov="3.14159"), 5.0),
         channel("b", "in", "digital", body="rover", sensor="contact", link="bumper_link"),
         channel("d", "in", "stream", size=80 * 60, body="station_arm", sensor="depth",
                 link="wrist_camera_optical_frame", width="80", height="60", fov="1.5184"),
@@ -115,7 +120,7 @@ def test_bad_params_are_reported() -> None:
     with pytest.raises(ParamError, match="a depth camera needs its field of view: Param 'fov'"):
         SimBackend(channel("x", "in", "stream", size=16, body="rover", sensor="depth", width="4", height="4"))
     with pytest.raises(ParamError, match="a lidar needs its field of view: Param 'fov'"):
-        SimBackend(channel("x", "in", "stream", size=90, max=4.0, body="rover", sensor="lidar", link="laser_link"))
+        SimBackend(ranging(channel("x", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link"), 4.0))
     with pytest.raises(ParamError, match="a lidar needs its range: the HWChannel's max"):
         SimBackend(channel("x", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", fov="3"))
     with pytest.raises(ParamError, match="mode"):
@@ -123,6 +128,18 @@ def test_bad_params_are_reported() -> None:
     backend = SimBackend(channel("x", body="rover", joint="no_such_joint"), scope=PlantScope(ManualClock()))
     with pytest.raises(KeyError, match="no_such_joint"):
         backend.setup()
+
+
+def test_the_device_refuses_a_lidar_spec_without_its_geometry() -> None:
+    """A world server's device, given a spec no backend checked (a client of its own), has no lab value either."""
+    sim = SimWorld(ManualClock(), None, 0, "", "")
+    values = dict(SimBackend(ranging(channel("l", "in", "stream", size=90, body="rover", sensor="lidar",
+                                             link="laser_link", fov="4.7"), 5.0)).values)
+    assert ChannelDevice(sim, Spec("l", "stream", "in", 90, 5.0, values)).device.range_max == 5.0
+    with pytest.raises(ValueError, match="a lidar needs its range"):
+        ChannelDevice(sim, Spec("l", "stream", "in", 90, None, values))
+    with pytest.raises(ValueError, match="needs its field of view"):
+        ChannelDevice(sim, Spec("l", "stream", "in", 90, 5.0, {**values, "fov": None}))
 
 
 @pytest.fixture
@@ -184,8 +201,8 @@ def _lidar_reads(seed: str) -> list[list[float]]:
         PlantScope(clock),
         channel("m", "out", "pwm", body="rover", pose="3 2 0.2", joint="left_wheel_joint", mode="velocity",
                 seed=seed),
-        channel("l", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", noise="0.01",
-                max=5.0, fov="4.7", seed=seed),
+        ranging(channel("l", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link",
+                        noise="0.01", fov="4.7", seed=seed), 5.0),
     )
     motor.write(0.4)
     reads = []
