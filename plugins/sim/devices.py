@@ -160,8 +160,16 @@ class ChannelDevice:
         if sensor == "lidar":
             if self.spec.max is None:
                 raise ValueError(f"sim channel {self.spec.name!r}: a lidar needs its range (the HWChannel's max)")
-            return Lidar(robot, v["link"], beams=self.spec.size, fov=v["fov"], range_min=v["rangeMin"],
-                         range_max=self.spec.max, noise=v["noise"], seed=v["seed"])
+            return Lidar(
+                robot,
+                v["link"],
+                beams=self.spec.size,
+                fov=v["fov"],
+                range_min=v["rangeMin"],
+                range_max=self.spec.max,
+                noise=v["noise"],
+                seed=v["seed"],
+            )
         if sensor in ("rgb", "depth"):
             return Camera(robot, v["link"], fov=v["fov"])
         if sensor == "imu":

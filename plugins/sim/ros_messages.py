@@ -256,12 +256,18 @@ class RosOdometry(ProcessingPlugin):
             "header": header(float(stamp) if isinstance(stamp, int | float) else context.stamp, self.params["frame"]),
             "child_frame_id": self.child,
             "pose": {
-                "pose": {"position": {"x": float(pose["x"]), "y": float(pose["y"])},
-                         "orientation": {"x": x, "y": y, "z": z, "w": w}},
+                "pose": {
+                    "position": {"x": float(pose["x"]), "y": float(pose["y"])},
+                    "orientation": {"x": x, "y": y, "z": z, "w": w},
+                },
                 "covariance": covariance,
             },
-            "twist": {"twist": {"linear": {"x": float(twist.get("linear", 0.0))},
-                                "angular": {"z": float(twist.get("angular", 0.0))}}},
+            "twist": {
+                "twist": {
+                    "linear": {"x": float(twist.get("linear", 0.0))},
+                    "angular": {"z": float(twist.get("angular", 0.0))},
+                }
+            },
         }
 
 
@@ -301,11 +307,14 @@ class RosTf(ProcessingPlugin):
         if isinstance(odom, Mapping) and "pose" in odom:
             stamps.append(_stamp(odom, context.stamp))
             pose = odom["pose"]["pose"]
-            transforms.append(_transform(
-                odom["header"]["frame_id"], odom.get("child_frame_id") or self.model.root,
-                (pose["position"].get("x", 0.0), pose["position"].get("y", 0.0), pose["position"].get("z", 0.0)),
-                tuple(pose["orientation"].get(k, 0.0) for k in "xyzw"),
-            ))
+            transforms.append(
+                _transform(
+                    odom["header"]["frame_id"],
+                    odom.get("child_frame_id") or self.model.root,
+                    (pose["position"].get("x", 0.0), pose["position"].get("y", 0.0), pose["position"].get("z", 0.0)),
+                    tuple(pose["orientation"].get(k, 0.0) for k in "xyzw"),
+                )
+            )
         stamp = max(stamps[1:], default=stamps[0])
         for joint in self.model.joints.values():
             if joint.type in MOVING and joint.name not in self.positions:

@@ -71,12 +71,20 @@ def _chain(model: Kinematics, start: str, end: str, positions: dict[str, float])
 def test_urdf_transforms_compose_to_pybullets_link_poses(world: World) -> None:
     bot = robot(world, "turtlebot", (1.0, 1.0, 0.3))
     model = Kinematics.of_body("turtlebot")
-    positions = {"arm_shoulder_pan_joint": 0.4, "arm_shoulder_lift_joint": -0.7, "arm_elbow_flex_joint": 1.1,
-                 "arm_wrist_flex_joint": 0.5, "gripper_joint": 0.01}
+    positions = {
+        "arm_shoulder_pan_joint": 0.4,
+        "arm_shoulder_lift_joint": -0.7,
+        "arm_elbow_flex_joint": 1.1,
+        "arm_wrist_flex_joint": 0.5,
+        "gripper_joint": 0.01,
+    }
     for name, value in positions.items():
         p.resetJointState(bot.body, bot.joint(name), value, physicsClientId=world.client)
-    for start, end in [("arm_base_link", "gripper_tool_link"), ("arm_base_link", "gripper_left_link"),
-                       ("mast_link", "camera_rgb_optical_frame")]:
+    for start, end in [
+        ("arm_base_link", "gripper_tool_link"),
+        ("arm_base_link", "gripper_left_link"),
+        ("mast_link", "camera_rgb_optical_frame"),
+    ]:
         origin, origin_q = bot.link_pose(bot.link(start))
         target, target_q = bot.link_pose(bot.link(end))
         inverse = (-origin_q[0], -origin_q[1], -origin_q[2], origin_q[3])
@@ -187,13 +195,25 @@ class Sensors:
 
 
 TURTLEBOT = Sensors(
-    "turtlebot", ("hokuyo", "hokuyo_link", 683, 4.1888, 0.02, 5.6),
+    "turtlebot",
+    ("hokuyo", "hokuyo_link", 683, 4.1888, 0.02, 5.6),
     ("xtion_rgb", "xtion_depth", "camera_rgb_optical_frame", "camera_depth_optical_frame", 160, 120, 1.0123),
-    ("arm_state", ("arm_shoulder_pan_joint", "arm_shoulder_lift_joint", "arm_elbow_flex_joint",
-                   "arm_wrist_flex_joint", "gripper_joint"), 1.0, 0.0),
+    (
+        "arm_state",
+        (
+            "arm_shoulder_pan_joint",
+            "arm_shoulder_lift_joint",
+            "arm_elbow_flex_joint",
+            "arm_wrist_flex_joint",
+            "gripper_joint",
+        ),
+        1.0,
+        0.0,
+    ),
 )
 ROVER_AND_STATION_ARM = Sensors(
-    "rover-and-station-arm", ("laser", "laser_link", 360, 4.7, 0.1, 4.0),
+    "rover-and-station-arm",
+    ("laser", "laser_link", 360, 4.7, 0.1, 4.0),
     ("wrist_rgb", "wrist_depth", "wrist_camera_optical_frame", "wrist_camera_optical_frame", 80, 60, 1.5184),
     ("arm_state", ("turret_joint", "shoulder_joint", "elbow_joint"), 0.01, 100.0),
 )
@@ -221,8 +241,9 @@ def _backends(config: Path, *names: str) -> tuple[ManualClock, list[SimBackend]]
     return clock, backends
 
 
-def test_a_scan_is_a_laser_scan_of_the_channels_own_lidar(robots: tuple[Sensors, Path],
-                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_scan_is_a_laser_scan_of_the_channels_own_lidar(
+    robots: tuple[Sensors, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     sensors, config = robots
     channel, link, beams, fov, range_min, range_max = sensors.scan
     monkeypatch.delenv(ENV_ADDRESS, raising=False)  # the world in this process, not a run's server
@@ -274,15 +295,17 @@ def test_a_frame_is_an_image_and_the_camera_info_of_the_channels_own_camera(
     depth_image = _ros("sensor_msgs/msg/Image", out["image"])
     depth_info = _ros("sensor_msgs/msg/CameraInfo", out["info"])
     assert (depth_image.encoding, depth_image.header.frame_id) == ("16UC1", depth_link)
-    assert np.array_equal(np.frombuffer(bytes(depth_image.data), "<u2").reshape(height, width),
-                          np.round(depth_frame.depth * 1000.0))
+    assert np.array_equal(
+        np.frombuffer(bytes(depth_image.data), "<u2").reshape(height, width), np.round(depth_frame.depth * 1000.0)
+    )
     assert np.allclose(depth_info.k, info.k)  # one camera's two channels: one projection
     for backend in backends:
         backend.stop()
 
 
-def test_joint_states_are_the_channels_joints_in_radians(robots: tuple[Sensors, Path],
-                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+def test_joint_states_are_the_channels_joints_in_radians(
+    robots: tuple[Sensors, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     sensors, config = robots
     channel, names, scale, offset = sensors.joints
     monkeypatch.delenv(ENV_ADDRESS, raising=False)
@@ -306,12 +329,23 @@ def test_joint_states_odometry_and_tf() -> None:
     joints = RosJointState(_plugin("joints"))
     state = joints.process({"stamp": 5.0, "position": np.array([0.1, -0.2, 0.3, 0.0, 0.01])}, CONTEXT)
     message = _ros("sensor_msgs/msg/JointState", state)
-    assert list(message.name) == ["arm_shoulder_pan_joint", "arm_shoulder_lift_joint", "arm_elbow_flex_joint",
-                                  "arm_wrist_flex_joint", "gripper_joint"]
+    assert list(message.name) == [
+        "arm_shoulder_pan_joint",
+        "arm_shoulder_lift_joint",
+        "arm_elbow_flex_joint",
+        "arm_wrist_flex_joint",
+        "gripper_joint",
+    ]
     assert np.allclose(message.position, [0.1, -0.2, 0.3, 0.0, 0.01])
     odom = RosOdometry(_plugin("odom")).process(
-        {"stamp": 5.1, "pose": {"x": 2.5, "y": 1.0, "yaw": math.pi / 2}, "twist": {"linear": 0.2, "angular": 0.1},
-         "dispersion": 0.02}, CONTEXT)
+        {
+            "stamp": 5.1,
+            "pose": {"x": 2.5, "y": 1.0, "yaw": math.pi / 2},
+            "twist": {"linear": 0.2, "angular": 0.1},
+            "dispersion": 0.02,
+        },
+        CONTEXT,
+    )
     decoded = _ros("nav_msgs/msg/Odometry", odom)
     assert (decoded.header.frame_id, decoded.child_frame_id) == ("odom", "base_link")
     assert (decoded.pose.pose.orientation.z, decoded.pose.pose.orientation.w) == pytest.approx((0.7071068, 0.7071068))
@@ -331,8 +365,11 @@ def test_the_example_verifies_and_a_scan_onto_an_image_topic_is_refused(tmp_path
     other.write_text(ROVER_AND_ARM)
     assert verify(ckmconf.load(other)) == []  # the second configuration is a runnable one too
     wrong = tmp_path / "wrong.xml"
-    wrong.write_text(EXAMPLE.read_text().replace('name="/scan" type="sensor_msgs/msg/LaserScan"',
-                                                 'name="/scan" type="sensor_msgs/msg/Image"'))
+    wrong.write_text(
+        EXAMPLE.read_text().replace(
+            'name="/scan" type="sensor_msgs/msg/LaserScan"', 'name="/scan" type="sensor_msgs/msg/Image"'
+        )
+    )
     errors = [str(e) for e in verify(ckmconf.load(wrong))]
     assert len(errors) == 1 and "'/scan'" in errors[0] and "sensor_msgs/msg/Image" in errors[0], errors
 
@@ -341,8 +378,11 @@ def test_the_example_verifies_and_a_scan_onto_an_image_topic_is_refused(tmp_path
     ("old", "new", "message"),
     [
         ('value="hokuyo"/></Plugin>', 'value="lidar"/></Plugin>', "no HWChannel of that name"),
-        ('kind="ros-laser-scan"><Param name="channel" value="hokuyo"/>',
-         'kind="ros-laser-scan"><Param name="channel" value="xtion_rgb"/>', "is a rgb channel, not lidar"),
+        (
+            'kind="ros-laser-scan"><Param name="channel" value="hokuyo"/>',
+            'kind="ros-laser-scan"><Param name="channel" value="xtion_rgb"/>',
+            "is a rgb channel, not lidar",
+        ),
         ('<Param name="link" value="hokuyo_link"/>', '<Param name="link" value="laser"/>', "has no link 'laser'"),
         # no lab value fills in a lidar's geometry (D284): the backend's own refusal
         ('<Param name="fov" value="4.1888"/>', "", "HWChannel 'hokuyo': a lidar needs its field of view"),
@@ -350,8 +390,7 @@ def test_the_example_verifies_and_a_scan_onto_an_image_topic_is_refused(tmp_path
         ('<Param name="rangeMin" value="0.02"/>', '<Param name="rangeMin" value="-1"/>', "'rangeMin'"),
     ],
 )
-def test_a_plugin_naming_what_the_simulation_lacks_is_refused(old: str, new: str, message: str,
-                                                               tmp_path: Path) -> None:
+def test_a_plugin_naming_what_the_simulation_lacks_is_refused(old: str, new: str, message: str, tmp_path: Path) -> None:
     config = tmp_path / "bad.xml"
     text = EXAMPLE.read_text()
     assert old in text

@@ -105,6 +105,7 @@ def test_whole_scans_frames_and_joint_vectors_reach_their_topics(tmp_path: Path,
     def keep(name: str) -> Any:
         def on(sample: Sample) -> None:
             received[name] = codec.decode(sample.value)  # how every consumer reads a vector topic (D127)
+
         return on
 
     runtime = NodeRuntime(made.nodes[0], made, transport)
