@@ -35,8 +35,10 @@ CHECKS = (
     "ckm-mission validate configs/examples/byor/scout.xml",
 )
 HARDWARE_RUN = "ckm-run configs/examples/byor/robot.xml --lockstep 0.01 --duration 5 --log-dir runs/scout-hardware"
-MISSION_RUN = ("ckm-run configs/examples/byor/scout.xml --plan delivery --lockstep 0.01 --duration 300 "
-               "--log-dir runs/scout --record /nav/pose,/nav/status,/sim/scout/pose")
+MISSION_RUN = (
+    "ckm-run configs/examples/byor/scout.xml --plan delivery --lockstep 0.01 --duration 300 "
+    "--log-dir runs/scout --record /nav/pose,/nav/status,/sim/scout/pose"
+)
 REPORT = "ckm-mission report runs/scout --html --config configs/examples/byor/scout.xml"
 PALLET = (6.6, 7.4, 3.7, 4.3)  # world.xml: the pallet's outline, xmin xmax ymin ymax
 DOCK_AREA = (0.2, 1.8, 0.2, 1.8)
@@ -112,30 +114,60 @@ def test_the_scout_fetches_from_the_pallet_and_docks_by_the_worlds_own_record(tm
 
 
 MISTAKES = (  # file, text, replaced by, the line it is refused at, what ckm-validate says
-    ("services.xml", '      <Param name="robotRadius" value="0.29"/>\n', "", 58,
-     "needs parameter 'robotRadius'"),
+    ("services.xml", '      <Param name="robotRadius" value="0.29"/>\n', "", 58, "needs parameter 'robotRadius'"),
     ("services.xml", 'value="world.xml"', 'value="wrld.xml"', 59, "no such file"),
     ("services.xml", 'value="world.xml"', 'value="robot.xml"', 59, "robot.xml holds no <Environment>"),
     ("mission.xml", 'value="pallet"', 'value="palet"', 14, "did you mean 'pallet'?"),
-    ("services.xml", '<Input name="odom" topic="/base/odom"/>', '<Input name="odometry" topic="/base/odom"/>', 72,
-     "reads no Input 'odometry' (it reads: scan, odom)"),
+    (
+        "services.xml",
+        '<Input name="odom" topic="/base/odom"/>',
+        '<Input name="odometry" topic="/base/odom"/>',
+        72,
+        "reads no Input 'odometry' (it reads: scan, odom)",
+    ),
     ("mission.xml", 'as="nav">', 'as="navigation">', 15, "its kind reads a navigation service as 'nav'"),
-    ("robot.xml", '      <Param name="ticksPerRev" value="2048"/>\n', "", 16,
-     "a wheel encoder (counter in, joint) needs Param 'ticksPerRev'"),
+    (
+        "robot.xml",
+        '      <Param name="ticksPerRev" value="2048"/>\n',
+        "",
+        16,
+        "a wheel encoder (counter in, joint) needs Param 'ticksPerRev'",
+    ),
     ("services.xml", '      <Param name="fov" value="3.4907"/>\n', "", 23, "needs parameter 'fov'"),
+    (
+        "robot.xml",
+        '      <Param name="fov" value="3.4907"/>\n',
+        "",
+        130,
+        "a lidar needs its field of view: Param 'fov'",
+    ),
+    (
+        "robot.xml",
+        'min="0" max="8" size="541"',
+        'min="0" size="541"',
+        130,
+        "a lidar needs its range: the HWChannel's max (m)",
+    ),
 )
 
 
 @pytest.mark.parametrize(("name", "old", "new", "line", "message"), MISTAKES)
-def test_each_mistake_of_the_guide_is_refused_at_its_line(tmp_path: Path, name: str, old: str, new: str, line: int,
-                                                          message: str) -> None:
+def test_each_mistake_of_the_guide_is_refused_at_its_line(
+    tmp_path: Path, name: str, old: str, new: str, line: int, message: str
+) -> None:
     copy = tmp_path / "byor"
     shutil.copytree(BYOR, copy)
     text = (copy / name).read_text()
     assert old in text
     (copy / name).write_text(text.replace(old, new, 1))
-    done = subprocess.run([str(Path(sys.executable).parent / "ckm-validate"), str(copy / "scout.xml")], cwd=REPO,
-                          capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "ckm-validate"), str(copy / "scout.xml")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 1
-    assert re.search(rf"{re.escape(str(copy / name))}:{line}:\d+: .*{re.escape(message)}", done.stdout + done.stderr), \
+    assert re.search(rf"{re.escape(str(copy / name))}:{line}:\d+: .*{re.escape(message)}", done.stdout + done.stderr), (
         done.stdout + done.stderr
+    )

@@ -6,7 +6,9 @@ it (the first channel of a body to be set up decides; default: the map's centre)
 scope (:mod:`plugins.hardware.simulation`: per node under ``ckm-run``), built by the first channel
 set up from the ``<Environment>`` of the file its ``world`` Param names (default: its own
 configuration file); a later ``world`` naming another file is an error. ``textures`` names the
-RGB recognition's model file so objects wear the textures it learnt.
+RGB recognition's model file so objects wear the textures it learnt. A camera's and a lidar's
+geometry has no default (D284): ``fov``, and a lidar's range (the HWChannel's ``max``), are the
+sensor's own, never the lab's Xtion's or Hokuyo's.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
 ``altimeter``, ``pose``) or by ``joint``/``joints``, and the channel's kind and direction:
 
@@ -20,8 +22,10 @@ analog/bus out, joint   joint target (``mode``), value = (raw − offset) × sca
                         joint stands at when the robot is spawned (a servo's power-on position)
 digital in, contact     1 while ``link`` touches an obstacle within ``arc`` (rad, centred ahead) of its
                         heading (a bumper: the Kobuki's three cover the front half, π; D236)
-stream in, lidar        ``size`` ranges (m) over ``fov`` from ``link``
-stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major
+stream in, lidar        ``size`` ranges (m) over ``fov`` (required) from ``link``, from ``rangeMin`` up to the
+                        HWChannel's ``max`` (required: the lidar's range)
+stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major, over
+                        ``fov`` (required: the camera's horizontal field of view)
 analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
 bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
                         for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it
@@ -77,20 +81,44 @@ _SPEC = Params(
     P("sensor", "", "Sensor device.", choices=SENSORS),
     P("mode", "position", "Joint quantity.", choices=("position", "velocity", "effort")),
     P("maxVelocity", 10.0, "Joint speed at duty 1 (pwm, velocity mode).", unit="rad/s", above=0.0),
-    P("ticksPerRev", None, "Encoder ticks per wheel turn (required by a wheel encoder: counter in, joint).",
-      type=float, above=0.0),
+    P(
+        "ticksPerRev",
+        None,
+        "Encoder ticks per wheel turn (required by a wheel encoder: counter in, joint).",
+        type=float,
+        above=0.0,
+    ),
     P("scale", 1.0, "Joint units per raw unit.", unit="rad"),
     P("offset", 0.0, "Raw value at joint zero."),
     P("initial", "", "Raw value an out channel's joint(s) stand at when the robot is spawned (position mode)."),
     P("noise", 0.0, "Standard deviation of the noise added to each read.", min=0.0),
-    P("fov", 1.0123, "Horizontal field of view (camera, lidar).", unit="rad", above=0.0),
+    P(
+        "fov",
+        None,
+        "Horizontal field of view (required by a camera, sensor rgb or depth, and a lidar: no "
+        "default, it is the sensor's own).",
+        type=float,
+        unit="rad",
+        above=0.0,
+    ),
     P("rangeMin", 0.02, "Lidar minimum range.", unit="m", min=0.0),
-    P("arc", 6.2832, "Contact sensor: the arc, centred ahead, where a touch presses it (2π: anywhere).",
-      unit="rad", above=0.0),
+    P(
+        "arc",
+        6.2832,
+        "Contact sensor: the arc, centred ahead, where a touch presses it (2π: anywhere).",
+        unit="rad",
+        above=0.0,
+    ),
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
-    P("latency", 0.0, "Camera: time from the exposure to the frame's arrival; the world runs on while the "
-      "frame renders, in lock-step too (D246).", unit="s", min=0.0),
+    P(
+        "latency",
+        0.0,
+        "Camera: time from the exposure to the frame's arrival; the world runs on while the "
+        "frame renders, in lock-step too (D246).",
+        unit="s",
+        min=0.0,
+    ),
 )
 
 
@@ -134,8 +162,11 @@ class SimBackend(Backend):
         if v["latency"] and v["sensor"] not in ("rgb", "depth"):
             problem("latency", f"Param 'latency' is a camera's (sensor rgb or depth), not {v['sensor'] or 'a joint'}'s")
         if v["grasp"] and (channel.direction != "out" or v["mode"] != "position" or not v["mirror"]):
-            problem("grasp", "Param 'grasp' makes a gripper: only for an out channel in mode 'position' whose "
-                             "'joint' and 'mirror' are its two fingers")
+            problem(
+                "grasp",
+                "Param 'grasp' makes a gripper: only for an out channel in mode 'position' whose "
+                "'joint' and 'mirror' are its two fingers",
+            )
         if v["initial"]:
             if channel.direction != "out" or v["mode"] != "position":
                 problem("initial", "Param 'initial' places a joint: only for an out channel in mode 'position'")
@@ -144,12 +175,34 @@ class SimBackend(Backend):
             except ValueError:
                 problem("initial", f"Param 'initial' is {v['initial']!r}, not a number")
         if channel.kind == "counter" and channel.direction == "in" and v["joint"] and v["ticksPerRev"] is None:
-            problem(None, "a wheel encoder (counter in, joint) needs Param 'ticksPerRev', its encoder's ticks per "
-                          "wheel turn (no default: it is the encoder's own)")
+            problem(
+                None,
+                "a wheel encoder (counter in, joint) needs Param 'ticksPerRev', its encoder's ticks per "
+                "wheel turn (no default: it is the encoder's own)",
+            )
         sensor = v["sensor"]
+        # A camera's or a lidar's geometry is its own: no default, so no user's sensor silently gets
+        # the lab's Xtion or Hokuyo (issue M, D284).
+        what = {"rgb": "camera", "depth": "depth camera", "lidar": "lidar"}.get(sensor)
+        if what and v["fov"] is None:
+            problem(
+                None,
+                f"a {what} needs its field of view: Param 'fov' (rad), its horizontal angle of view "
+                f"(no default: it is the {what}'s own)",
+            )
+        if sensor == "lidar" and channel.max is None:
+            problem(
+                None,
+                "a lidar needs its range: the HWChannel's max (m), the farthest distance it measures "
+                "(no default: it is the lidar's own)",
+            )
         expected = {
-            "rgb": v["width"] * v["height"] * 3, "depth": v["width"] * v["height"], "imu": 6,
-            "contact": 1, "altimeter": 1, "pose": 3,
+            "rgb": v["width"] * v["height"] * 3,
+            "depth": v["width"] * v["height"],
+            "imu": 6,
+            "contact": 1,
+            "altimeter": 1,
+            "pose": 3,
         }.get(sensor)
         if v["joints"]:
             expected = len(v["joints"].split())
@@ -198,8 +251,10 @@ class SimBackend(Backend):
                 sim = SimWorld(self.scope.clock, environment, v["seed"], textures, self.world_file)
                 _worlds[self.scope] = sim
             elif v["world"] and sim.source != self.world_file:
-                raise ParamError(f"{self.owner}: Param 'world' names {self.world_file}, but the simulated world of "
-                                 f"this scope was built from {sim.source}")
+                raise ParamError(
+                    f"{self.owner}: Param 'world' names {self.world_file}, but the simulated world of "
+                    f"this scope was built from {sim.source}"
+                )
         with sim.lock:
             self._device = ChannelDevice(sim, self.spec())
         self.sim, self.device = sim, self._device.device

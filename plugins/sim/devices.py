@@ -155,9 +155,21 @@ class ChannelDevice:
 
     def _make(self) -> Any:
         v, sensor, robot = self.spec.values, self.spec.values.get("sensor", ""), self.robot
+        if sensor in ("lidar", "rgb", "depth") and v.get("fov") is None:  # the backend refuses it first (D284)
+            raise ValueError(f"sim channel {self.spec.name!r}: a {sensor} channel needs its field of view, Param 'fov'")
         if sensor == "lidar":
-            return Lidar(robot, v["link"], beams=self.spec.size, fov=v["fov"], range_min=v["rangeMin"],
-                         range_max=self.spec.max or 5.6, noise=v["noise"], seed=v["seed"])
+            if self.spec.max is None:
+                raise ValueError(f"sim channel {self.spec.name!r}: a lidar needs its range (the HWChannel's max)")
+            return Lidar(
+                robot,
+                v["link"],
+                beams=self.spec.size,
+                fov=v["fov"],
+                range_min=v["rangeMin"],
+                range_max=self.spec.max,
+                noise=v["noise"],
+                seed=v["seed"],
+            )
         if sensor in ("rgb", "depth"):
             return Camera(robot, v["link"], fov=v["fov"])
         if sensor == "imu":

@@ -18,7 +18,10 @@ Param ``channel`` names the ``hardware.sim`` HWChannel (looked up in the plugin'
 file), whose ``link`` is the ``header.frame_id`` and must be a link of the robot's URDF (its
 ``body`` or ``model``), whose ``fov``/``size``/``rangeMin``/``max`` give the scan's geometry,
 ``fov``/``width``/``height`` the camera's intrinsics (:func:`plugins.sim.sensors.pinhole`, the
-projection the render uses), ``joints``/``scale``/``offset`` the joint names and radians. ``ros-tf``
+projection the render uses), ``joints``/``scale``/``offset`` the joint names and radians. The values
+are read through ``hardware.sim``'s own Param table and checks (:class:`plugins.hardware.sim.SimBackend`,
+D284): its defaults are the only ones, and a camera or lidar without its ``fov`` (a lidar without
+its ``max``) is refused as the backend refuses it, never given the lab's sensor's. ``ros-tf``
 is ``robot_state_publisher`` on the URDF of Param ``body`` plus the ``odom`` → root link transform.
 ``header.stamp`` is the raw message's ``stamp``: the sensor's read, on the run's clock (simulated
 time under ``--time-scale``). Results are dicts of the ROS fields (Time as float seconds), which the
@@ -38,7 +41,8 @@ import numpy as np
 from ckmconf.loader import load
 from ckmconf.model import HWChannel, System
 from ckmconf.model.resources import Plugin
-from runtime.kernel.interfaces import ParamError
+from plugins.hardware.sim import SimBackend
+from runtime.kernel.interfaces import ParamError, read_params
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
@@ -68,11 +72,6 @@ def sim_channel(record: Plugin, name: str, owner: str) -> HWChannel:
     if found[0].backend != "sim":
         raise ParamError(f"{owner}: HWChannel {name!r} has backend {found[0].backend!r}, not 'sim'")
     return found[0]
-
-
-def channel_params(channel: HWChannel) -> dict[str, str]:
-    """The channel's Params as text, by name."""
-    return {p.name: p.value for p in channel.params}
 
 
 def raw_read(data: Any, context: Context, owner: str) -> tuple[float, np.ndarray]:
@@ -105,32 +104,30 @@ class _SimPlugin(ProcessingPlugin):
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
         self.channel = sim_channel(record, self.params["channel"], self.owner)
-        self.values = channel_params(self.channel)
-        sensor = self.values.get("sensor", "")
+        # The channel's values as hardware.sim reads them, defaults and checks included: the backend's
+        # Param table is the one place they live (D284), so a message cannot disagree with the device.
+        owner = f"{self.owner}: HWChannel {self.channel.name!r}"
+        self.values = read_params(self.channel.params, SimBackend.PARAMS, owner=owner)
+        problems = SimBackend.problems(self.channel)
+        if problems:
+            raise ParamError(f"{owner}: {problems[0][1]}")
+        sensor = self.values["sensor"]
         if self.SENSORS and sensor not in self.SENSORS:
             raise ParamError(
                 f"{self.owner}: HWChannel {self.channel.name!r} is a {sensor or 'joint'} channel, "
                 f"not {' or '.join(self.SENSORS)}"
             )
         try:
-            self.model = Kinematics.of_body(self.values.get("body", ""), self._model_path())
-            self.frame = self.model.link(self.values.get("link", "base_link"), self.owner)
+            self.model = Kinematics.of_body(self.values["body"], self._model_path())
+            self.frame = self.model.link(self.values["link"], self.owner)
         except ValueError as error:
             raise ParamError(str(error)) from None
 
     def _model_path(self) -> str:
-        model = self.values.get("model", "")
+        model: str = self.values["model"]
         if not model or self.channel.loc is None:
             return model
         return str((Path(self.channel.loc.file).parent / model).resolve())
-
-    def number(self, name: str, default: float) -> float:
-        """The channel's Param ``name`` as a number (``default`` when it has none)."""
-        text = self.values.get(name)
-        try:
-            return default if text is None else float(text)
-        except ValueError:
-            raise ParamError(f"{self.owner}: HWChannel {self.channel.name!r} Param {name!r} = {text!r}") from None
 
 
 class RosLaserScan(_SimPlugin):
@@ -144,15 +141,15 @@ class RosLaserScan(_SimPlugin):
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
-        fov, beams = self.number("fov", 1.0123), self.channel.size
+        fov, beams = float(self.values["fov"]), self.channel.size  # required of a lidar (SimBackend.problems)
         self.geometry = {
             "angle_min": -fov / 2,
             "angle_max": fov / 2,
             "angle_increment": fov / (beams - 1) if beams > 1 else 0.0,  # beams span -fov/2..fov/2 (Lidar)
             "time_increment": 0.0,  # a simulated sweep is taken at one instant
             "scan_time": self.params["scanTime"],
-            "range_min": self.number("rangeMin", 0.02),
-            "range_max": float(self.channel.max) if self.channel.max is not None else 5.6,
+            "range_min": float(self.values["rangeMin"]),
+            "range_max": float(self.channel.max or 0.0),  # required of a lidar (SimBackend.problems)
         }
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
@@ -173,9 +170,9 @@ class RosCamera(_SimPlugin):
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
-        self.width, self.height = int(self.number("width", 640)), int(self.number("height", 480))
-        self.depth = self.values.get("sensor") == "depth"
-        fx, fy, cx, cy = pinhole(self.width, self.height, self.number("fov", 1.0123))
+        self.width, self.height = int(self.values["width"]), int(self.values["height"])
+        self.depth = self.values["sensor"] == "depth"
+        fx, fy, cx, cy = pinhole(self.width, self.height, float(self.values["fov"]))  # required of a camera
         self.info = {
             "height": self.height,
             "width": self.width,
@@ -209,14 +206,14 @@ class RosJointState(_SimPlugin):
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
-        self.names = self.values.get("joints", "").split()
+        self.names = str(self.values["joints"]).split()
         if not self.names:
             raise ParamError(f"{self.owner}: HWChannel {self.channel.name!r} reads no 'joints'")
         unknown = [n for n in self.names if n not in self.model.joints]
         if unknown:
             raise ParamError(f"{self.owner}: the model {self.model.path.name} has no joint {', '.join(unknown)}")
-        self.scale, self.offset = self.number("scale", 1.0), self.number("offset", 0.0)
-        self.mode = self.values.get("mode", "position")
+        self.scale, self.offset = float(self.values["scale"]), float(self.values["offset"])
+        self.mode: str = self.values["mode"]
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
         """The JointState of one raw read; the channel's ``mode`` says which field it fills."""
@@ -259,12 +256,18 @@ class RosOdometry(ProcessingPlugin):
             "header": header(float(stamp) if isinstance(stamp, int | float) else context.stamp, self.params["frame"]),
             "child_frame_id": self.child,
             "pose": {
-                "pose": {"position": {"x": float(pose["x"]), "y": float(pose["y"])},
-                         "orientation": {"x": x, "y": y, "z": z, "w": w}},
+                "pose": {
+                    "position": {"x": float(pose["x"]), "y": float(pose["y"])},
+                    "orientation": {"x": x, "y": y, "z": z, "w": w},
+                },
                 "covariance": covariance,
             },
-            "twist": {"twist": {"linear": {"x": float(twist.get("linear", 0.0))},
-                                "angular": {"z": float(twist.get("angular", 0.0))}}},
+            "twist": {
+                "twist": {
+                    "linear": {"x": float(twist.get("linear", 0.0))},
+                    "angular": {"z": float(twist.get("angular", 0.0))},
+                }
+            },
         }
 
 
@@ -304,11 +307,14 @@ class RosTf(ProcessingPlugin):
         if isinstance(odom, Mapping) and "pose" in odom:
             stamps.append(_stamp(odom, context.stamp))
             pose = odom["pose"]["pose"]
-            transforms.append(_transform(
-                odom["header"]["frame_id"], odom.get("child_frame_id") or self.model.root,
-                (pose["position"].get("x", 0.0), pose["position"].get("y", 0.0), pose["position"].get("z", 0.0)),
-                tuple(pose["orientation"].get(k, 0.0) for k in "xyzw"),
-            ))
+            transforms.append(
+                _transform(
+                    odom["header"]["frame_id"],
+                    odom.get("child_frame_id") or self.model.root,
+                    (pose["position"].get("x", 0.0), pose["position"].get("y", 0.0), pose["position"].get("z", 0.0)),
+                    tuple(pose["orientation"].get(k, 0.0) for k in "xyzw"),
+                )
+            )
         stamp = max(stamps[1:], default=stamps[0])
         for joint in self.model.joints.values():
             if joint.type in MOVING and joint.name not in self.positions:

@@ -3,6 +3,7 @@ interface, lock-step with a ManualClock; bad Params are reported; the example sy
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Iterator
@@ -15,6 +16,7 @@ from ckmconf.errors import Loc
 from ckmconf.model import HWChannel, Param
 from plugins.hardware.sim import SimBackend, find_world
 from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
+from plugins.sim.devices import ChannelDevice, SimWorld, Spec
 from runtime.kernel.interfaces import Backend, ParamError
 from runtime.kernel.node import NodeRuntime
 from runtime.network import Transport, open_transport
@@ -29,9 +31,19 @@ def channel(name: str, direction: str = "in", kind: str = "analog", size: int = 
     """A sim channel record whose world is the example's workshop."""
     loc = Loc(str(STATION), 1, 1, "/System/Node[@name='test']/HWChannel")
     return HWChannel(
-        name=name, direction=direction, kind=kind, backend="sim", size=size, loc=loc,  # type: ignore[arg-type]
+        name=name,
+        direction=direction,  # type: ignore[arg-type]
+        kind=kind,  # type: ignore[arg-type]
+        backend="sim",
+        size=size,
+        loc=loc,
         params=tuple(Param(name=k, value=v) for k, v in params.items()),
     )
+
+
+def ranging(record: HWChannel, top: float) -> HWChannel:
+    """``record`` with the HWChannel's ``max``: a lidar's range (m)."""
+    return dataclasses.replace(record, max=top)
 
 
 @pytest.fixture
@@ -56,8 +68,16 @@ def test_wheel_motor_and_encoder_in_lock_step(clock_and_scope: tuple[ManualClock
     clock, scope = clock_and_scope
     motor, encoder, other = open_all(
         scope,
-        channel("m", "out", "pwm", joint="left_wheel_joint", mode="velocity", maxVelocity="8", body="rover",
-                pose="3.0 2.0 0"),
+        channel(
+            "m",
+            "out",
+            "pwm",
+            joint="left_wheel_joint",
+            mode="velocity",
+            maxVelocity="8",
+            body="rover",
+            pose="3.0 2.0 0",
+        ),
         channel("e", "in", "counter", joint="left_wheel_joint", ticksPerRev="1024", body="rover"),
         channel("r", "out", "pwm", joint="right_wheel_joint", mode="velocity", maxVelocity="8", body="rover"),
     )
@@ -77,14 +97,37 @@ def test_joint_position_lidar_bumper_camera_imu(clock_and_scope: tuple[ManualClo
     clock, scope = clock_and_scope
     servo, state, laser, bumper, depth, imu, height = open_all(
         scope,
-        channel("s", "out", "bus", joint="shoulder_joint", scale="0.01", offset="100", body="station_arm",
-                pose="1.0 1.0 0"),
+        channel(
+            "s", "out", "bus", joint="shoulder_joint", scale="0.01", offset="100", body="station_arm", pose="1.0 1.0 0"
+        ),
         channel("j", "in", "bus", size=2, joints="turret_joint shoulder_joint", body="station_arm"),
-        channel("l", "in", "stream", size=181, body="rover", pose="3.0 2.0 0", sensor="lidar", link="laser_link",
-                fov="3.14159"),
+        ranging(
+            channel(
+                "l",
+                "in",
+                "stream",
+                size=181,
+                body="rover",
+                pose="3.0 2.0 0",
+                sensor="lidar",
+                link="laser_link",
+                fov="3.14159",
+            ),
+            5.0,
+        ),
         channel("b", "in", "digital", body="rover", sensor="contact", link="bumper_link"),
-        channel("d", "in", "stream", size=80 * 60, body="station_arm", sensor="depth",
-                link="wrist_camera_optical_frame", width="80", height="60"),
+        channel(
+            "d",
+            "in",
+            "stream",
+            size=80 * 60,
+            body="station_arm",
+            sensor="depth",
+            link="wrist_camera_optical_frame",
+            width="80",
+            height="60",
+            fov="1.5184",
+        ),
         channel("i", "in", "analog", size=6, body="rover", sensor="imu"),
         channel("h", "in", "analog", body="rover", sensor="altimeter", link="laser_link"),
     )
@@ -108,12 +151,36 @@ def test_bad_params_are_reported() -> None:
     with pytest.raises(ParamError, match="body"):
         SimBackend(channel("x", sensor="lidar"))
     with pytest.raises(ParamError, match="size"):
-        SimBackend(channel("x", "in", "stream", size=10, body="rover", sensor="rgb", width="4", height="4"))
+        SimBackend(channel("x", "in", "stream", size=10, body="rover", sensor="rgb", width="4", height="4", fov="1"))
+    # No lab value for a user's sensor (D284): a camera's field of view, a lidar's and its range are its own.
+    with pytest.raises(ParamError, match="a depth camera needs its field of view: Param 'fov'"):
+        SimBackend(channel("x", "in", "stream", size=16, body="rover", sensor="depth", width="4", height="4"))
+    with pytest.raises(ParamError, match="a lidar needs its field of view: Param 'fov'"):
+        SimBackend(ranging(channel("x", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link"), 4.0))
+    with pytest.raises(ParamError, match="a lidar needs its range: the HWChannel's max"):
+        SimBackend(channel("x", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", fov="3"))
     with pytest.raises(ParamError, match="mode"):
         SimBackend(channel("x", "out", "bus", body="rover", joint="left_wheel_joint", mode="torque"))
     backend = SimBackend(channel("x", body="rover", joint="no_such_joint"), scope=PlantScope(ManualClock()))
     with pytest.raises(KeyError, match="no_such_joint"):
         backend.setup()
+
+
+def test_the_device_refuses_a_lidar_spec_without_its_geometry() -> None:
+    """A world server's device, given a spec no backend checked (a client of its own), has no lab value either."""
+    sim = SimWorld(ManualClock(), None, 0, "", "")
+    values = dict(
+        SimBackend(
+            ranging(
+                channel("l", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", fov="4.7"), 5.0
+            )
+        ).values
+    )
+    assert ChannelDevice(sim, Spec("l", "stream", "in", 90, 5.0, values)).device.range_max == 5.0
+    with pytest.raises(ValueError, match="a lidar needs its range"):
+        ChannelDevice(sim, Spec("l", "stream", "in", 90, None, values))
+    with pytest.raises(ValueError, match="needs its field of view"):
+        ChannelDevice(sim, Spec("l", "stream", "in", 90, 5.0, {**values, "fov": None}))
 
 
 @pytest.fixture
@@ -154,8 +221,7 @@ def test_gripper_mirror_and_effort_mode(clock_and_scope: tuple[ManualClock, Plan
     clock, scope = clock_and_scope
     gripper, fingers, wheel, speed = open_all(
         scope,
-        channel("g", "out", "bus", body="turtlebot", pose="3 2 0", joint="gripper_joint",
-                mirror="gripper_right_joint"),
+        channel("g", "out", "bus", body="turtlebot", pose="3 2 0", joint="gripper_joint", mirror="gripper_right_joint"),
         channel("f", "in", "bus", size=2, body="turtlebot", joints="gripper_joint gripper_right_joint"),
         channel("w", "out", "pwm", body="rover", pose="3 1 0", joint="left_wheel_joint", mode="effort"),
         channel("v", "in", "analog", body="rover", joint="left_wheel_joint", mode="velocity"),
@@ -173,10 +239,22 @@ def _lidar_reads(seed: str) -> list[list[float]]:
     clock = ManualClock()
     motor, laser = open_all(
         PlantScope(clock),
-        channel("m", "out", "pwm", body="rover", pose="3 2 0.2", joint="left_wheel_joint", mode="velocity",
-                seed=seed),
-        channel("l", "in", "stream", size=90, body="rover", sensor="lidar", link="laser_link", noise="0.01",
-                seed=seed),
+        channel("m", "out", "pwm", body="rover", pose="3 2 0.2", joint="left_wheel_joint", mode="velocity", seed=seed),
+        ranging(
+            channel(
+                "l",
+                "in",
+                "stream",
+                size=90,
+                body="rover",
+                sensor="lidar",
+                link="laser_link",
+                noise="0.01",
+                fov="4.7",
+                seed=seed,
+            ),
+            5.0,
+        ),
     )
     motor.write(0.4)
     reads = []
@@ -195,7 +273,7 @@ def test_same_seed_same_channel_data() -> None:
 
 def test_rgb_and_depth_channels_of_one_camera_share_a_render(clock_and_scope: tuple[ManualClock, PlantScope]) -> None:
     clock, scope = clock_and_scope
-    xtion = {"body": "turtlebot", "link": "camera_rgb_optical_frame", "width": "40", "height": "30"}
+    xtion = {"body": "turtlebot", "link": "camera_rgb_optical_frame", "width": "40", "height": "30", "fov": "1.0123"}
     rgb, depth = open_all(
         scope,
         channel("c", "in", "stream", size=40 * 30 * 3, sensor="rgb", pose="3 2 0", **xtion),

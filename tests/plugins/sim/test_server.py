@@ -79,6 +79,7 @@ CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
       <Param name="link" value="camera_depth_optical_frame"/>
       <Param name="width" value="80"/>
       <Param name="height" value="60"/>
+      <Param name="fov" value="1.0123"/>
     </HWChannel>
     <Topic name="wheel_speed" type="float64" scope="internal"/>
     <Topic name="wrist_depth" type="float64" scope="internal"/>
@@ -107,8 +108,6 @@ AHEAD = 45  # the lidar beam straight ahead (91 beams over 1.5 rad)
 STARTUP = 90.0  # s: bound on a run's processes coming up (seconds when quiet; the 2 cores are shared)
 
 
-
-
 @pytest.fixture
 def config(tmp_path: Path) -> Path:
     """The test system on a private loopback network."""
@@ -133,8 +132,13 @@ def ckm_run(config: Path, run_dir: Path, env: dict[str, str]) -> Iterator[subpro
     """ckm-run of ``config`` (its output in RUN_DIR.out); it and its children are killed at the end."""
     run_dir.parent.mkdir(parents=True, exist_ok=True)
     with (run_dir.parent / f"{run_dir.name}.out").open("wb") as out:
-        process = subprocess.Popen([sys.executable, "-m", "runtime.cli", str(config), "--log-dir", str(run_dir)],
-                                   cwd=REPO, stdout=subprocess.DEVNULL, stderr=out, env=env)
+        process = subprocess.Popen(
+            [sys.executable, "-m", "runtime.cli", str(config), "--log-dir", str(run_dir)],
+            cwd=REPO,
+            stdout=subprocess.DEVNULL,
+            stderr=out,
+            env=env,
+        )
     seen: list[psutil.Process] = []
     try:
         yield process
@@ -163,6 +167,7 @@ def test_a_partition_drives_the_robot_that_another_process_measures(
             laser = RemoteDevice(server.client_address(), SimBackend(channel_of(config, "laser")).spec())
             link = Link(server.client_address())
             try:
+
                 def sample() -> tuple[float, float]:
                     ranges = laser.read()
                     x = link.request({"op": "state"})["robots"]["rover"][0]
@@ -250,10 +255,22 @@ def test_client_mode_reads_what_the_in_process_world_reads(
         backend.setup()
     ranges, depth = local[1].read(), local[2].read()
     wrist = channel_of(config, "wrist")
-    stray = dataclasses.replace(wrist, name="stray", params=tuple(  # a robot the plan did not load
-        Param(name=k, value=v) for k, v in (("body", "station_arm"), ("pose", "1 3 0"), ("sensor", "depth"),
-                                            ("link", "wrist_camera_optical_frame"), ("width", "80"), ("height", "60"))
-    ))
+    stray = dataclasses.replace(
+        wrist,
+        name="stray",
+        params=tuple(  # a robot the plan did not load
+            Param(name=k, value=v)
+            for k, v in (
+                ("body", "station_arm"),
+                ("pose", "1 3 0"),
+                ("sensor", "depth"),
+                ("link", "wrist_camera_optical_frame"),
+                ("width", "80"),
+                ("height", "60"),
+                ("fov", "1.5184"),
+            )
+        ),
+    )
     with ServerProcess(config, tmp_path / "server") as server:
         monkeypatch.setenv(ENV_ADDRESS, server.address)
         monkeypatch.setenv(ENV_KEY, server.key.hex())
@@ -288,11 +305,19 @@ def test_the_plan_follows_the_channels_and_refuses_two_worlds(config: Path, tmp_
     assert plan.bodies == {"rover": ("", "2.0 2.0 0"), "turtlebot": ("", "4.5 2.0 3.1416")}
     other = tmp_path / "other.xml"
     other.write_text(config.read_text())
-    text = config.read_text().replace(
-        '<Param name="joint" value="right_wheel_joint"/>',
-        '<Param name="joint" value="right_wheel_joint"/><Param name="world" value="other.xml"/>', 1,
-    ).replace('<Param name="pose" value="2.0 2.0 0"/>', '<Param name="pose" value="2.0 2.0 0"/>'
-              '<Param name="world" value="shared_world.xml"/>', 1)
+    text = (
+        config.read_text()
+        .replace(
+            '<Param name="joint" value="right_wheel_joint"/>',
+            '<Param name="joint" value="right_wheel_joint"/><Param name="world" value="other.xml"/>',
+            1,
+        )
+        .replace(
+            '<Param name="pose" value="2.0 2.0 0"/>',
+            '<Param name="pose" value="2.0 2.0 0"/><Param name="world" value="shared_world.xml"/>',
+            1,
+        )
+    )
     two = tmp_path / "two_worlds.xml"
     two.write_text(text)
     with pytest.raises(ConfigError, match=r"right_motor.*a run has one simulated world"):
@@ -314,9 +339,7 @@ def test_a_session_starts_nothing_when_a_server_is_named_or_nothing_is_simulated
     assert not (tmp_path / "a" / READY).exists() and not (tmp_path / "b" / READY).exists() and not failures
 
 
-def test_a_node_run_session_names_its_files_and_cleans_up(
-    config: Path, tmp_path: Path, no_server: None
-) -> None:
+def test_a_node_run_session_names_its_files_and_cleans_up(config: Path, tmp_path: Path, no_server: None) -> None:
     system = ckmconf.load(config)
     other = dataclasses.replace(system.nodes[0], name="other", channels=())
     wider = dataclasses.replace(system, nodes=(*system.nodes, other))  # as if run with --node rover

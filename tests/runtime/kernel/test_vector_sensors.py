@@ -49,12 +49,12 @@ CHANNELS = """
     <HWChannel name="colour" direction="in" kind="stream" backend="sim" units="rgb8" size="576">
       <Param name="body" value="station_arm"/><Param name="pose" value="1.0 1.0 0"/>
       <Param name="sensor" value="rgb"/><Param name="link" value="wrist_camera_optical_frame"/>
-      <Param name="width" value="16"/><Param name="height" value="12"/>
+      <Param name="width" value="16"/><Param name="height" value="12"/><Param name="fov" value="1.5184"/>
     </HWChannel>
     <HWChannel name="depth" direction="in" kind="stream" backend="sim" units="mm" size="192">
       <Param name="body" value="station_arm"/><Param name="sensor" value="depth"/>
       <Param name="link" value="wrist_camera_optical_frame"/>
-      <Param name="width" value="16"/><Param name="height" value="12"/>
+      <Param name="width" value="16"/><Param name="height" value="12"/><Param name="fov" value="1.5184"/>
     </HWChannel>
     <HWChannel name="joints" direction="in" kind="bus" backend="sim" units="rad" size="3">
       <Param name="body" value="station_arm"/><Param name="joints" value="turret_joint shoulder_joint elbow_joint"/>
@@ -105,6 +105,7 @@ def test_whole_scans_frames_and_joint_vectors_reach_their_topics(tmp_path: Path,
     def keep(name: str) -> Any:
         def on(sample: Sample) -> None:
             received[name] = codec.decode(sample.value)  # how every consumer reads a vector topic (D127)
+
         return on
 
     runtime = NodeRuntime(made.nodes[0], made, transport)
