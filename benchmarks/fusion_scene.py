@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 import pybullet as p
+from ckm_lab.devices import XTION_FOV
 
 import ckmconf
 from ckmconf.model import Param
@@ -130,7 +131,7 @@ class Lab:
         self.robot = Robot(self.world, "turtlebot", self.world.load_robot("turtlebot", "turtlebot", (0.0, 0.0, 0.0)))
         for joint, angle in zip(ARM_JOINTS, POSES["rest"].joints or (), strict=True):
             p.resetJointState(self.robot.body, self.robot.joint(joint), angle, physicsClientId=self.world.client)
-        self.camera = Camera(self.robot, LINK)
+        self.camera = Camera(self.robot, LINK, fov=XTION_FOV)
         self.size = SIZES[rgb_profile]
         self.rng = np.random.default_rng(seed)
         self.noise = noise

@@ -24,6 +24,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ckm_lab.devices import HOKUYO, KOBUKI, NAO_HEAD, XTION_FOV
+
 import ckmconf
 from ckmconf.model import System
 from plugins.processing.textures import read_model
@@ -83,12 +85,12 @@ def world_steps(steps: int = 2400) -> float:
 def realtime(cameras: dict[str, tuple[int, int]], periods: dict[str, float], duration: float) -> dict[str, Any]:
     """Simulate ``duration`` seconds with every device at its period; the factor and render cost."""
     world, turtlebot, nao = _lab()
-    base = DiffDriveBase(turtlebot, noise=OdometryNoise(slip=0.02, seed=1))
-    lidar = Lidar(turtlebot, "hokuyo_link", noise=0.01)
-    xtion = Camera(turtlebot, "camera_rgb_optical_frame")
+    base = DiffDriveBase(turtlebot, **KOBUKI, noise=OdometryNoise(slip=0.02, seed=1))
+    lidar = Lidar(turtlebot, "hokuyo_link", **HOKUYO, noise=0.01)
+    xtion = Camera(turtlebot, "camera_rgb_optical_frame", fov=XTION_FOV)
     arm = Arm(turtlebot)
     top = Camera(nao, "CameraTop_optical_frame", fov=0.8331)
-    head = PanTiltHead(nao, top)
+    head = PanTiltHead(nao, top, **NAO_HEAD)
     target = world.pose(world.objects["cylinder_red_stripes"])[0]
     render_time = [0.0, 0]
 

@@ -101,7 +101,7 @@ _SPEC = Params(
         unit="rad",
         above=0.0,
     ),
-    P("rangeMin", 0.02, "Lidar minimum range.", unit="m", min=0.0),
+    P("rangeMin", 0.0, "Lidar minimum range (0: every return counts).", unit="m", min=0.0),
     P(
         "arc",
         6.2832,

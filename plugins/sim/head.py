@@ -17,7 +17,7 @@ class PanTiltHead:
     """Yaw and pitch joints carrying a camera (positive pitch looks down, as the Nao's)."""
 
     def __init__(
-        self, robot: Robot, camera: Camera, *, yaw: str = "HeadYaw", pitch: str = "HeadPitch",
+        self, robot: Robot, camera: Camera, *, yaw: str, pitch: str,
         gain: float = 0.6, tolerance: float = 0.02, width: int = 320, height: int = 240,
     ) -> None:
         self.robot, self.camera = robot, camera

@@ -118,13 +118,13 @@ class DiffDriveBase:
     """The differential-drive base: wheel speeds, encoder ticks and dead-reckoned odometry.
 
     Odometry integrates the noisy wheel travel between two ``update()`` calls (exact arc
-    formula), so its drift grows with the distance driven and with ``noise.slip``.
+    formula), so its drift grows with the distance driven and with ``noise.slip``. The wheel joints,
+    radius and track are the robot's own (no default); ``ticks()`` needs the encoders' ``ticks_per_rev``.
     """
 
     def __init__(
-        self, robot: Robot, *, left: str = "wheel_left_joint", right: str = "wheel_right_joint",
-        wheel_radius: float = 0.035, wheel_base: float = 0.230, ticks_per_rev: float = 2578.33,
-        noise: OdometryNoise | None = None,
+        self, robot: Robot, *, left: str, right: str, wheel_radius: float, wheel_base: float,
+        ticks_per_rev: float | None = None, noise: OdometryNoise | None = None,
     ) -> None:
         self.robot = robot
         self.left, self.right = robot.joint(left), robot.joint(right)
@@ -150,6 +150,8 @@ class DiffDriveBase:
 
     def ticks(self) -> tuple[int, int]:
         """Encoder counts of the left and right wheels."""
+        if self.ticks_per_rev is None:
+            raise ValueError(f"robot {self.robot.name!r}: the base was made without its encoders' ticks_per_rev")
         left, right = self._wheel_angles()
         scale = self.ticks_per_rev / (2 * math.pi)
         return int(left * scale), int(right * scale)

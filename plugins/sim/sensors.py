@@ -21,7 +21,8 @@ def _rotation(orientation: tuple[float, ...]) -> Array:
 
 
 class Lidar:
-    """A planar scanner on a link (Hokuyo URG-04LX by default: 683 beams over 240°, 0.02–5.6 m).
+    """A planar scanner on a link: ``beams`` beams over ``fov`` radians, ``range_min``–``range_max`` metres
+    (no default: they are the scanner's own data sheet, D284).
 
     Beams sweep counter-clockwise from -fov/2 to +fov/2 about the link's z axis, starting at the
     link's x axis; a beam that hits nothing reads ``range_max``. ``noise`` is the standard
@@ -29,8 +30,8 @@ class Lidar:
     """
 
     def __init__(
-        self, robot: Robot, link: str, *, beams: int = 683, fov: float = 4.1888, range_min: float = 0.02,
-        range_max: float = 5.6, noise: float = 0.0, seed: int = 0,
+        self, robot: Robot, link: str, *, beams: int, fov: float, range_max: float, range_min: float = 0.0,
+        noise: float = 0.0, seed: int = 0,
     ) -> None:
         self.robot, self.link = robot, robot.link(link)
         self.beams, self.fov, self.range_min, self.range_max = beams, fov, range_min, range_max
@@ -83,7 +84,7 @@ class Camera:
     image giving colour and depth together; nothing is rendered until asked.
     """
 
-    def __init__(self, robot: Robot, link: str, *, fov: float = 1.0123, near: float = 0.05, far: float = 10.0) -> None:
+    def __init__(self, robot: Robot, link: str, *, fov: float, near: float = 0.05, far: float = 10.0) -> None:
         self.robot, self.link = robot, robot.link(link)
         self.view = robot.viewpoint(self.link)  # the link whose renders this camera shares (D240)
         self.fov, self.near, self.far = fov, near, far

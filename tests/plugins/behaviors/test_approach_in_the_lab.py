@@ -20,6 +20,7 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 import pytest
+from ckm_lab.devices import KOBUKI
 
 import ckmconf
 from benchmarks.fusion_scene import Lab
@@ -74,7 +75,7 @@ class Approacher:
         self.arm = arm_plugin()
         self.arm.setup()
         self.loop = ArmLoop(lab.world, lab.robot, self.arm)
-        self.wheels = DiffDriveBase(lab.robot)
+        self.wheels = DiffDriveBase(lab.robot, **KOBUKI)
         self.odometer = DiffDriveOdometry(record(
             "diff-drive-odometry", 0.02, [("left_speed", "measure"), ("right_speed", "measure")],
             ["/kobuki/wheel_odom"], wheelBase=0.230,

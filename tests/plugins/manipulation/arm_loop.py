@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import pybullet as p
+from ckm_lab.devices import KOBUKI
 
 from ckmconf.errors import Loc
 from ckmconf.model import Param
@@ -70,7 +71,7 @@ class ArmLoop:
         self.joints = [robot.joint(name) for name in JOINTS.split()]
         self.mirror = robot.joint("gripper_right_joint")
         self.gripper = ChannelGrasp(robot, "gripper_joint", "gripper_right_joint", "arm_wrist_flex_link", 30.0)
-        DiffDriveBase(robot)  # the wheels held at rest (braked), as the Kobuki's loops do when idle
+        DiffDriveBase(robot, **KOBUKI)  # the wheels held at rest (braked), as the Kobuki's loops do when idle
         self.goal: dict[str, Any] | None = None
         self.trajectory: Any = None
         self.result: dict[str, Any] = {}

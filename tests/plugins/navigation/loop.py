@@ -25,6 +25,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from ckm_lab.devices import HOKUYO
+
 import ckmconf
 from ckmconf.model import Environment, MessageType, Param
 from ckmconf.model.kernel import HWChannel, Sensor
@@ -111,13 +113,17 @@ class RobotModel:
     wheel_base: float
     laser_link: str
     footprint: Mapping[str, object]
+    laser: Mapping[str, Any]
+    """The scanner's data sheet, as plugins.sim.sensors.Lidar takes it."""
 
 
 TURTLEBOT_MODEL = RobotModel("turtlebot", "wheel_left_joint", "wheel_right_joint", WHEEL_RADIUS, 0.230,
-                             "hokuyo_link", TURTLEBOT)
+                             "hokuyo_link", TURTLEBOT, HOKUYO)
 ROVER_MODEL = RobotModel("rover", "left_wheel_joint", "right_wheel_joint", 0.08, 0.40, "laser_link",
-                         {"robotRadius": 0.35, "robotHeight": 0.5, "laserPose": "0.25 0 0", "laserHeight": 0.25})
-"""rover.urdf: a wider base (0.6 × 0.45 m, half diagonal 0.37), larger wheels, its laser 0.25 m ahead."""
+                         {"robotRadius": 0.35, "robotHeight": 0.5, "laserPose": "0.25 0 0", "laserHeight": 0.25},
+                         {"beams": 541, "fov": 4.7124, "range_min": 0.05, "range_max": 8.0})
+"""rover.urdf: a wider base (0.6 × 0.45 m, half diagonal 0.37), larger wheels, its laser 0.25 m ahead: a
+270° scanner of 541 beams reaching 8 m (not the Turtlebot's Hokuyo)."""
 
 
 def plugin(kind: str, cls: type[ProcessingPlugin], file: Path | None = None, /, **params: object) -> Any:
@@ -157,7 +163,7 @@ class Bench:
         self.world.step(24)
         self.base = DiffDriveBase(self.robot, left=model.left, right=model.right, wheel_radius=model.wheel_radius,
                                   wheel_base=model.wheel_base)
-        self.lidar = Lidar(self.robot, model.laser_link, noise=lidar_noise, seed=seed)
+        self.lidar = Lidar(self.robot, model.laser_link, **model.laser, noise=lidar_noise, seed=seed)
         channel = HWChannel(name="hokuyo", direction="in", kind="stream", backend="sim", units="m", min=0.0,
                             max=self.lidar.range_max, size=self.lidar.beams)
         self.shape = shaper(LIDAR, "LaserScan", channel, _laser_types(), _no_ros)

@@ -9,6 +9,7 @@ import statistics
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.devices import HOKUYO, KOBUKI, NAO_HEAD, XTION_FOV
 
 from plugins.sim.arm import POSES, Arm
 from plugins.sim.grasp import Gripper
@@ -32,8 +33,8 @@ def _drive(world: World, odometers: list[DiffDriveBase], seconds: float) -> None
 def test_odometry_without_slip_follows_the_truth_and_slip_makes_it_drift_as_configured(world: World) -> None:
     tb = robot(world, "turtlebot", (1.0, 2.0, 0.0))
     slip = 0.2
-    exact = DiffDriveBase(tb)
-    noisy = [DiffDriveBase(tb, noise=OdometryNoise(slip=slip, seed=seed)) for seed in range(12)]
+    exact = DiffDriveBase(tb, **KOBUKI)
+    noisy = [DiffDriveBase(tb, **KOBUKI, noise=OdometryNoise(slip=slip, seed=seed)) for seed in range(12)]
     exact.drive(0.3, 0.0)
     _drive(world, [exact, *noisy], 5.0)
     truth = tb.planar_pose()
@@ -65,7 +66,7 @@ def test_a_grasped_object_stays_in_the_gripper_while_the_base_drives_2_m(world: 
     assert gripper.held == part
     arm.go("lift")
     world.step(480)
-    base = DiffDriveBase(tb)
+    base = DiffDriveBase(tb, **KOBUKI)
     base.drive(-0.25, 0.0)
     start = tb.planar_pose()
     offsets = []
@@ -101,7 +102,7 @@ def test_each_predefined_pose_is_reached(world: World, name: str) -> None:
 def test_the_pan_tilt_head_centres_a_moving_object(world: World) -> None:
     nao = robot(world, "nao", (1.0, 2.0, 0.0))
     camera = Camera(nao, "CameraTop_optical_frame", fov=0.8331)
-    head = PanTiltHead(nao, camera)
+    head = PanTiltHead(nao, camera, **NAO_HEAD)
     target = add_box(world, (2.5, 1.4, 0.3), 0.05, [0.0, 0.0, 1.0, 1.0])
     fixed_at: list[float] = []
     for k in range(150):  # 5 s; the tracker at 30 Hz; the object slides along y at 0.2 m/s
@@ -122,11 +123,11 @@ def _record(seed: int) -> tuple[np.ndarray, np.ndarray, tuple[float, float, floa
     with World(ROOM, seed=seed) as world:
         tb = robot(world, "turtlebot", (2.0, 2.0, 0.3))
         add_box(world, (3.5, 2.5, 0.2), 0.1, [1.0, 0.5, 0.0, 1.0], mass=0.5)
-        base = DiffDriveBase(tb, noise=OdometryNoise(slip=0.05, seed=seed))
+        base = DiffDriveBase(tb, **KOBUKI, noise=OdometryNoise(slip=0.05, seed=seed))
         base.drive(0.3, 0.4)
         _drive(world, [base], 2.0)
-        lidar = Lidar(tb, "hokuyo_link", noise=0.01, seed=seed)
-        frame = Camera(tb, "camera_rgb_optical_frame").render(80, 60)
+        lidar = Lidar(tb, "hokuyo_link", **HOKUYO, noise=0.01, seed=seed)
+        frame = Camera(tb, "camera_rgb_optical_frame", fov=XTION_FOV).render(80, 60)
         return lidar.scan(), frame.rgb, base.pose
 
 

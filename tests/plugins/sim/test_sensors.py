@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import pytest
+from ckm_lab.devices import HOKUYO, XTION_FOV
 
 from plugins.sim.arm import Arm
 from plugins.sim.devices import SimWorld
@@ -18,7 +19,7 @@ from .conftest import add_box, robot
 
 def test_lidar_measures_the_walls(world: World) -> None:
     tb = robot(world, "turtlebot", (3.0, 2.0, 0.0))
-    lidar = Lidar(tb, "hokuyo_link")
+    lidar = Lidar(tb, "hokuyo_link", **HOKUYO)
     ranges = lidar.scan()
     assert ranges.shape == (683,)
     step = lidar.fov / 682
@@ -31,7 +32,7 @@ def test_lidar_measures_the_walls(world: World) -> None:
 
 def test_lidar_range_is_capped(world: World) -> None:
     tb = robot(world, "turtlebot", (3.0, 2.0, 0.0))
-    ranges = Lidar(tb, "hokuyo_link", range_max=1.0).scan()
+    ranges = Lidar(tb, "hokuyo_link", **{**HOKUYO, "range_max": 1.0}).scan()
     assert float(ranges.max()) == pytest.approx(1.0)
 
 
@@ -41,7 +42,7 @@ def test_camera_sees_the_object_where_the_geometry_says(world: World) -> None:
     world.step(240)
     face = (2.8, 2.3, 0.1)  # centre of the red cube's face towards the robot
     add_box(world, (2.85, 2.3, 0.1), 0.05, [1.0, 0.0, 0.0, 1.0])
-    camera = Camera(tb, "camera_rgb_optical_frame")
+    camera = Camera(tb, "camera_rgb_optical_frame", fov=XTION_FOV)
     frame = camera.render(320, 240)
     assert frame.rgb.shape == (240, 320, 3) and frame.depth.shape == (240, 320)
     u, v, z = camera.project(face)
@@ -57,7 +58,7 @@ def test_camera_sees_the_object_where_the_geometry_says(world: World) -> None:
 
 def test_one_render_gives_colour_and_depth_at_the_asked_resolution(world: World) -> None:
     tb = robot(world, "turtlebot", (2.0, 2.0, 0.0))
-    camera = Camera(tb, "camera_depth_optical_frame")
+    camera = Camera(tb, "camera_depth_optical_frame", fov=XTION_FOV)
     for width, height in ((160, 120), (320, 240)):
         frame = camera.render(width, height)
         assert frame.rgb.shape == (height, width, 3)
@@ -71,10 +72,11 @@ def test_the_xtions_rgb_and_depth_frames_coincide_and_share_one_render() -> None
     sim = SimWorld(time.monotonic, None, 3, "", "")
     try:
         tb = sim.robot("turtlebot", "", "2 2 0.7")  # turned: float32 quaternions, no exact 1
-        rgb, depth = Camera(tb, "camera_rgb_optical_frame"), Camera(tb, "camera_depth_optical_frame")
+        rgb = Camera(tb, "camera_rgb_optical_frame", fov=XTION_FOV)
+        depth = Camera(tb, "camera_depth_optical_frame", fov=XTION_FOV)
         assert rgb.view == depth.view == rgb.link != depth.link
-        assert Camera(tb, "gripper_tool_link").view == tb.link("gripper_tool_link")
-        assert Camera(tb, "camera_link").view == tb.link("camera_link")  # rigid with them, but elsewhere
+        assert Camera(tb, "gripper_tool_link", fov=XTION_FOV).view == tb.link("gripper_tool_link")
+        assert Camera(tb, "camera_link", fov=XTION_FOV).view == tb.link("camera_link")  # rigid with them, but elsewhere
         colour = sim.frame(rgb, 80, 60)
         assert sim.frame(depth, 80, 60) is colour and rgb.renders + depth.renders == 1
         sim.world.step(1)

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.devices import XTION_FOV
 from ckm_lab.scenes import USECASE_MODEL
 
 from ckmconf.loader import load
@@ -71,7 +72,7 @@ def test_the_xtion_recognises_the_red_cylinder_and_tells_it_from_the_blue_one(re
     assert environment is not None
     with World(environment, seed=1, catalog=read_model(USECASE_MODEL)) as world:
         robot = _turtlebot(world)
-        frame = Camera(robot, LINK).render(640, 480)
+        frame = Camera(robot, LINK, fov=XTION_FOV).render(640, 480)
         found: dict[str, Any] = {o["name"]: o for o in recog.run(frame.rgb, 0.0).outputs["VGA"]["objects"]}
         red = _column(world, robot, frame, "cylinder_red_stripes")
         blue = _column(world, robot, frame, "cylinder_blue_dots")
@@ -115,7 +116,7 @@ def test_a_render_worker_mirror_wears_the_same_skins() -> None:
         for joint, angle in zip(ARM_JOINTS, POSES["rest"].joints or (), strict=True):
             p.resetJointState(robot.body, robot.joint(joint), angle, physicsClientId=sim.world.client)
         assert worker.await_ready(120.0)
-        camera = Camera(robot, LINK)
+        camera = Camera(robot, LINK, fov=XTION_FOV)
         worker.submit(sim.world, ("turtlebot", LINK, camera.fov, 320, 240))
         mirrored = worker.result()
         assert isinstance(mirrored, Frame), mirrored
