@@ -106,6 +106,7 @@ class ColourDetection(ProcessingPlugin):
         self.kernel = np.ones((3, 3), np.uint8)
 
     def _blobs(self, mask: Image, label: str, floor: float, rows: int, cols: int) -> list[dict[str, Any]]:
+        """The blobs of ``mask`` (0/255) of at least ``floor`` pixels, largest first, as detections."""
         opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self.kernel)
         count, labels, stats, centroids = cv2.connectedComponentsWithStats(opened, connectivity=8)
         found = []
@@ -120,7 +121,7 @@ class ColourDetection(ProcessingPlugin):
             x, y = centroids[blob]
             found.append({"name": label, "label": label, "x": float(x) / cols, "y": float(y) / rows,
                           "points": area, "reliability": float(reliability)})
-        found.sort(key=lambda o: -o["points"])
+        found.sort(key=lambda o: -int(o["points"]))
         return found[: self.params["maxObjects"]]
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
@@ -131,7 +132,7 @@ class ColourDetection(ProcessingPlugin):
                              f"{image.dtype}")
         rows, cols = image.shape[:2]
         order = cv2.COLOR_RGB2HSV if self.params["encoding"] == "rgb8" else cv2.COLOR_BGR2HSV
-        hsv = cv2.cvtColor(np.ascontiguousarray(image), order)
+        hsv: Image = cv2.cvtColor(np.ascontiguousarray(image), order).astype(np.uint8, copy=False)
         floor = max(1.0, self.params["minArea"] * rows * cols)
         objects = [o for colour in self.colours for o in self._blobs(colour.mask(hsv), colour.label, floor, rows, cols)]
         objects.sort(key=lambda o: -o["reliability"])
