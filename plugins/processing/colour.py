@@ -109,7 +109,7 @@ class ColourDetection(ProcessingPlugin):
         """The blobs of ``mask`` (0/255) of at least ``floor`` pixels, largest first, as detections."""
         opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self.kernel)
         count, labels, stats, centroids = cv2.connectedComponentsWithStats(opened, connectivity=8)
-        found = []
+        found: list[dict[str, Any]] = []
         for blob in range(1, count):  # 0 is the background
             area = int(stats[blob, cv2.CC_STAT_AREA])
             if area < floor:
@@ -121,7 +121,7 @@ class ColourDetection(ProcessingPlugin):
             x, y = centroids[blob]
             found.append({"name": label, "label": label, "x": float(x) / cols, "y": float(y) / rows,
                           "points": area, "reliability": float(reliability)})
-        found.sort(key=lambda o: -int(o["points"]))
+        found.sort(key=lambda o: -o["points"])
         return found[: self.params["maxObjects"]]
 
     def process(self, data: Any, context: Context) -> dict[str, Any]:
