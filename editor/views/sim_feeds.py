@@ -14,9 +14,11 @@ Fig. 7.16 picture of §7.4.1, drawn as the run goes).
 - **recognised objects**: every ``Detections`` topic (only objects in the ``map`` frame, the fused
   ``/recog/objects``, have a place on the map) and every ``ObjectPosition`` topic in that frame
   (the Nao's spotted target);
-- **camera images**: every external ``Image`` topic, and the node-internal ones (under their wire
-  name ``/NODE/~NAME``) of a node that publishes none: the Turtlebot's Xtion frames are internal to
-  its node, the Nao's are on the network as ``/nao/camera/image``;
+- **camera images**: every external ``Image`` topic (a MessageType of that name or
+  ``sensor_msgs/msg/Image``; likewise ``ckm_interfaces/msg/…`` for the other CKM types named here),
+  and the node-internal ones (under their wire name ``/NODE/~NAME``) of a node that publishes none:
+  the Turtlebot's Xtion frames are internal to its node, the Nao's are on the network as
+  ``/nao/camera/image``;
 - **zoom-map areas** and **particles**: topics whose name or type says ``zoom`` or ``particle``,
   and a ``particles`` field of a pose estimate. The use case's Navigation.AMCL publishes both
   (``/nav/zoom`` ZoomArea, ``/nav/particles`` ParticleCloud: D215); until an area arrives (or in a
@@ -285,6 +287,12 @@ def _pose_param(text: str) -> tuple[float, float, float] | None:
     return (values[0], values[1], values[2]) if len(values) == 3 and all(map(math.isfinite, values)) else None
 
 
+def _of_type(kind: str, name: str) -> bool:
+    """Whether a topic's type is ``name``: a configuration's own MessageType of that name, or the ROS
+    type of that name (``sensor_msgs/msg/Image``, ``ckm_interfaces/msg/Detections``), same fields."""
+    return kind == name or kind.endswith(f"/msg/{name}")
+
+
 def feeds_of(system: System) -> Feeds:
     """The robots, recognition, camera, zoom and particle topics of ``system`` (see the module docstring)."""
     every = [(_wire(t, None), t) for t in system.topics]
@@ -308,13 +316,13 @@ def feeds_of(system: System) -> Feeds:
             if source is not None and source.backend == "sim" and params.get("sensor") == "pose" and on:
                 found = local.get(sensor.topic)
                 truth.setdefault(on, _wire(found, node.name) if found is not None else sensor.topic)
-    cameras = [n for n, kind in topics.items() if kind == "Image" and "/~" not in n]
+    cameras = [n for n, kind in topics.items() if _of_type(kind, "Image") and "/~" not in n]
     for node in system.nodes:  # a node's raw frames when it publishes none on the network
-        if not any(t.type == "Image" and t.scope == "external" for t in node.topics):
-            cameras += [_wire(t, node.name) for t in node.topics if t.type == "Image"]
-    estimates = [name for name, kind in topics.items() if kind == "PoseEstimate"]
+        if not any(_of_type(t.type, "Image") and t.scope == "external" for t in node.topics):
+            cameras += [_wire(t, node.name) for t in node.topics if _of_type(t.type, "Image")]
+    estimates = [name for name, kind in topics.items() if _of_type(kind, "PoseEstimate")]
     setpoints = {i.topic for n in system.nodes for c in n.controllers for i in c.inputs if i.role == "setpoint"}
-    pan_tilt = [name for name, kind in topics.items() if kind == "PanTilt" and name not in setpoints]
+    pan_tilt = [name for name, kind in topics.items() if _of_type(kind, "PanTilt") and name not in setpoints]
     moving = [body for body in placed if body in truth]
     robots = []
     for body, pose in placed.items():
@@ -329,7 +337,8 @@ def feeds_of(system: System) -> Feeds:
 
     return Feeds(
         robots=tuple(robots),
-        objects=tuple(sorted(n for n, kind in topics.items() if kind in ("Detections", "ObjectPosition"))),
+        objects=tuple(sorted(n for n, kind in topics.items()
+                             if _of_type(kind, "Detections") or _of_type(kind, "ObjectPosition"))),
         cameras=tuple(sorted(cameras)),
         zoom=named("zoom"),
         particles=named("particle"),

@@ -256,3 +256,11 @@ def test_the_monitor_tab_draws_what_arrives_on_the_network(qtbot: QtBot, lab: Sy
         panel.live.stop()
         sim_side.stop()
         editor_side.stop()
+
+
+def test_ros_typed_topics_are_found_as_the_configuration_s_own_types_are() -> None:
+    """A system on ROS types (sensor_msgs/msg/Image, no MessageType of its own) gets its cameras shown."""
+    system = ckmconf.load(LAB.parents[1] / "examples" / "sim_ros_types.xml")
+    feeds = feeds_of(system)
+    assert feeds.cameras == ("/camera/depth/image_raw", "/camera/rgb/image_raw")
+    assert [r.name for r in feeds.robots] == ["turtlebot"]
