@@ -52,6 +52,8 @@ import threading
 import weakref
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
+from difflib import get_close_matches
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +61,7 @@ from ckmconf.loader import load
 from ckmconf.model import HWChannel, Node, System
 from plugins.sim.client import RemoteDevice, server_address
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
+from plugins.sim.urdf import MODELS, Kinematics
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
@@ -180,6 +183,12 @@ class SimBackend(Backend):
                 "a wheel encoder (counter in, joint) needs Param 'ticksPerRev', its encoder's ticks per "
                 "wheel turn (no default: it is the encoder's own)",
             )
+        if v["body"] and system is not None:  # a body's model may be named by another of its channels
+            found.extend(_model_problems(channel, v, named, system))
+        given_mode = named.get("mode")
+        if channel.kind == "pwm" and given_mode is not None and v["mode"] == "position":
+            problem("mode", "a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
+                            "or 'effort' (duty x the joint's effort limit); a position target needs kind 'analog'")
         sensor = v["sensor"]
         # A camera's or a lidar's geometry is its own: no default, so no user's sensor silently gets
         # the lab's Xtion or Hokuyo (issue M, D284).
@@ -327,3 +336,66 @@ class SimBackend(Backend):
         if self.remote is not None:
             self.remote.close()
         self.sim, self._device, self.device, self.remote = None, None, None, None
+
+
+def _model_file(channel: HWChannel, v: dict[str, Any], system: System | None) -> tuple[Path, HWChannel]:
+    """The URDF a channel's robot is loaded from, and the channel that says so: Param ``model`` (relative
+    to its channel's file) of this channel or of another channel of the same body, else the shipped
+    ``plugins/sim/models/<body>.urdf``."""
+    giver, model_text = channel, v["model"]
+    if not model_text and system is not None:
+        for other in (c for n in system.nodes for c in n.channels if c.backend == "sim"):
+            values = {p.name: p.value for p in other.params}
+            if values.get("body") == v["body"] and values.get("model"):
+                giver, model_text = other, values["model"]
+                break
+    if not model_text:
+        return MODELS / f"{v['body']}.urdf", channel
+    model = Path(model_text)
+    if model.is_absolute() or giver.loc is None:
+        return model, giver
+    return Path(giver.loc.file).parent / model, giver
+
+
+@lru_cache(maxsize=32)
+def _model(path: str, mtime: float) -> Kinematics:
+    return Kinematics(path)
+
+
+def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
+                    system: System | None) -> list[tuple[Any, str]]:
+    """The robot model a channel names that does not exist, and the links and joints its Params name
+    that the model does not have (each at its Param, offering the nearest names)."""
+    path, giver = _model_file(channel, v, system)
+    if giver is not channel and not path.is_file():  # the other channel reports its own model
+        return []
+    where = named.get("model") or named.get("body") or channel
+    if not path.is_file():
+        shipped = ", ".join(sorted(m.stem for m in MODELS.glob("*.urdf")))
+        also = f"; the shipped models: {shipped}" if giver is channel and not v["model"] else ""
+        return [(where, f"robot model {str(path)!r} does not exist (give Param 'model', a URDF relative to "
+                        f"this file{also})")]
+    try:
+        model = _model(str(path), path.stat().st_mtime)
+    except (ValueError, OSError) as error:
+        return [(where, f"robot model {path.name} cannot be read: {error}")]
+    found: list[tuple[Any, str]] = []
+
+    def unknown(param: str, name: str, choices: Sequence[str], what: str) -> None:
+        near = get_close_matches(name, choices, n=3)
+        hint = f"; did you mean {', '.join(near)}?" if near else f" (its {what}s: {', '.join(choices)})"
+        found.append((named.get(param, channel), f"Param {param!r}: the model {path.name} has no {what} "
+                                                 f"{name!r}{hint}"))
+
+    links, joints = list(model.links), list(model.joints)
+    if v["sensor"] and v["link"] not in links:
+        unknown("link", v["link"], links, "link")
+    if v["grasp"] and v["grasp"] not in links:
+        unknown("grasp", v["grasp"], links, "link")
+    for param in ("joint", "mirror"):
+        if v[param] and v[param] not in joints:
+            unknown(param, v[param], joints, "joint")
+    for joint in v["joints"].split():
+        if joint not in joints:
+            unknown("joints", joint, joints, "joint")
+    return found
