@@ -3,7 +3,7 @@
 - ``ckm-plugins list [--long] [--json]``: one line per kind (``CATEGORY.KIND`` and its summary;
   ``--long``: with its Params and ports);
 - ``ckm-plugins show KIND…``: a kind's description, Params (type, default, unit, range, doc) and
-  ports; ``KIND`` is ``CATEGORY.KIND`` or a kind name registered in one category only;
+  ports, then the rest of its class's and its module's documentation; ``KIND`` is ``CATEGORY.KIND`` or a kind name registered in one category only;
 - ``ckm-plugins markdown [--package NAME]``: the reference page ``docs/plugins.md`` is generated
   from (``--package ckm``: only the kinds this distribution registers);
 - ``ckm-plugins interfaces [--markdown]``: the standard service interfaces, each with the kinds that
@@ -28,6 +28,9 @@ from .verification.interfaces import STANDARD, Interface, Port, provided_by, use
 from .verification.manifest import Params, Ports, params_of, ports_of
 
 _NAMES = re.compile(r"^``[\w.-]+``(?:\s*/\s*``[\w.-]+``)*:\s*")
+_SEE_MODULE = re.compile(r"\s*\((?:see )?(?:the )?module doc(?:string)?\)"
+                         r"|,? (?:see )?the module doc(?:string)?|;\s*see the module doc(?:string)?")
+"""A summary's pointer to the module docstring, which ``show`` prints in full below it."""
 _TITLES = {
     "hardware": "Hardware backends (`HWChannel/@backend`)",
     "function": "Adaptation functions (`Function/@plugin`)",
@@ -38,10 +41,19 @@ _TITLES = {
 
 
 def summary(cls: type[Any]) -> str:
-    """The first paragraph of a class's docstring, on one line."""
+    """The first paragraph of a class's docstring, on one line (without a pointer to the module's)."""
     doc = inspect.getdoc(cls) or ""
     first = " ".join(doc.split("\n\n", 1)[0].split())
-    return _NAMES.sub("", first)  # "``plugin.resize``: an image …" → "an image …"
+    return _SEE_MODULE.sub("", _NAMES.sub("", first))  # "``plugin.resize``: an image …" → "an image …"
+
+
+def details(cls: type[Any]) -> str:
+    """The rest of a kind's documentation: its class docstring after the summary, then its module's
+    docstring (where most kinds document their messages, devices and decisions)."""
+    rest = (inspect.getdoc(cls) or "").split("\n\n", 1)[1:]
+    module = sys.modules.get(cls.__module__)
+    about = inspect.getdoc(module) if module is not None else None
+    return "\n\n".join(part.strip() for part in (*rest, about or "") if part.strip())
 
 
 def _params_rows(params: Params) -> list[dict[str, str]]:
@@ -78,6 +90,7 @@ def describe(registry: Registry, category: str, kind: str) -> dict[str, Any]:
         "class": registry.target(category, kind),
         "package": registry.origin(category, kind),
         "summary": summary(cls),
+        "details": details(cls),
         "params": _params_rows(params_of(cls)),
         "inputs": dict(ports.inputs),
         "outputs": dict(ports.outputs),
@@ -112,7 +125,7 @@ def _lookup(registry: Registry, name: str) -> tuple[str, str]:
     raise LookupError(f"no kind {name!r} is registered (see ckm-plugins list)")
 
 
-def _show(info: dict[str, Any]) -> str:
+def _show(info: dict[str, Any], full: bool = False) -> str:
     lines = [f"{info['name']}  ({info['class']})", f"  {info['summary']}" if info["summary"] else ""]
     if info["params"]:
         lines.append("  Params:")
@@ -125,7 +138,10 @@ def _show(info: dict[str, Any]) -> str:
     ports = Ports(info["inputs"], info["outputs"], tuple(info["sizes"]))
     lines += [f"  {line}" for line in _ports_text(ports)]
     lines += [f"  {line}" for line in _uses_text(info)]
-    return "\n".join(line for line in lines if line)
+    text = "\n".join(line for line in lines if line)
+    if full and info.get("details"):
+        text += "\n\n" + "\n".join(f"  {line}".rstrip() for line in info["details"].splitlines())
+    return text
 
 
 def _cell(text: str) -> str:
@@ -262,7 +278,7 @@ def _parser() -> argparse.ArgumentParser:
     listing = sub.add_parser("list", help="every registered kind, one per line")
     listing.add_argument("--json", action="store_true", help="every kind's manifest as a JSON list")
     listing.add_argument("--long", action="store_true", help="every kind with its Params and ports, as show does")
-    show = sub.add_parser("show", help="a kind's description, Params and ports")
+    show = sub.add_parser("show", help="a kind's description, Params and ports, and its module's documentation")
     show.add_argument("kinds", nargs="+", metavar="KIND", help="CATEGORY.KIND, or KIND when unambiguous")
     show.add_argument("--json", action="store_true", help="as JSON")
     page = sub.add_parser("markdown", help="the reference page docs/plugins.md is generated from")
@@ -318,7 +334,7 @@ def main(argv: Sequence[str] | None = None, registry: Registry | None = None) ->
                     print(f"{category}.{kind:<{width - len(category) - 1}}  {summary(cls) if cls else ''}")
         else:
             infos = [describe(registry, *_lookup(registry, name)) for name in args.kinds]
-            print(json.dumps(infos, indent=2) if args.json else "\n\n".join(_show(info) for info in infos))
+            print(json.dumps(infos, indent=2) if args.json else "\n\n".join(_show(info, full=True) for info in infos))
     except (LookupError, RegistryError) as exc:
         print(f"ckm-plugins: {exc.args[0] if exc.args else exc}", file=sys.stderr)
         return 1

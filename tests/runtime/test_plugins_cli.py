@@ -64,6 +64,18 @@ def test_show_prints_params_and_ports(capsys: pytest.CaptureFixture[str]) -> Non
     assert "  channel sizes: 1" in out
 
 
+def test_show_prints_the_kind_s_whole_documentation_and_list_a_clean_summary(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """issue N: the sim device table is reachable from the command line, not only from the source."""
+    assert main(["show", "hardware.sim"], builtin()) == 0
+    out = capsys.readouterr().out
+    assert "  A channel served by a device of a simulated robot.\n" in out  # no "see the module docstring"
+    assert "stream in, lidar" in out and "analog in, imu/alt." in out  # the module's device table
+    assert main(["list"], builtin()) == 0
+    listing = capsys.readouterr().out
+    assert "module docstring" not in listing and "module doc)" not in listing
+
+
 def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["show", "--json", "behavior.pick"], builtin()) == 0
     [info] = json.loads(capsys.readouterr().out)
