@@ -58,7 +58,9 @@ from pathlib import Path
 from typing import Any
 
 from ckmconf.loader import load
-from ckmconf.model import HWChannel, Node, System
+from ckmconf.model import Environment, HWChannel, Node, System
+from plugins.environment.geometry import Footprint
+from plugins.environment.map_model import BOUNDS, MapModel
 from plugins.sim.client import RemoteDevice, server_address
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
 from plugins.sim.urdf import MODELS, Kinematics
@@ -185,6 +187,8 @@ class SimBackend(Backend):
             )
         if v["body"] and system is not None:  # a body's model may be named by another of its channels
             found.extend(_model_problems(channel, v, named, system))
+        if v["pose"] and not v["world"] and system is not None and system.environment is not None:
+            found.extend(_spawn_problems(v["pose"], named["pose"], system.environment))
         given_mode = named.get("mode")
         if channel.kind == "pwm" and given_mode is not None and v["mode"] == "position":
             problem("mode", "a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
@@ -399,3 +403,25 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
         if joint not in joints:
             unknown("joints", joint, joints, "joint")
     return found
+
+
+def _spawn_problems(pose: str, param: Any, environment: Environment) -> list[tuple[Any, str]]:
+    """A robot placed outside the map, inside an avoided area (a wall in the simulation) or inside an
+    object standing on the floor: it would start stuck, or see nothing but the inside of it."""
+    try:
+        x, y = (float(v) for v in pose.split()[:2])
+    except ValueError:
+        return [(param, f"Param 'pose' = {pose!r} is not 'x y yaw' (m, m, rad)")]
+    model = _map(id(environment), environment)
+    base = Footprint(radius=0.01, height=0.05)  # the robot's base point, at the floor
+    hits = model.collisions(base, x, y)
+    if not hits:
+        return []
+    inside = ", ".join("the map's bounds" if h == BOUNDS else repr(h) for h in hits)
+    where = "outside the map" if hits == [BOUNDS] else f"inside {inside}"
+    return [(param, f"Param 'pose' places the robot at ({x:g}, {y:g}), {where}: it would start stuck in it")]
+
+
+@lru_cache(maxsize=4)
+def _map(key: int, environment: Environment) -> MapModel:
+    return MapModel.from_environment(environment)
