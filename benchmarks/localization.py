@@ -1,13 +1,14 @@
 """ckm-bench localization: Algorithm 3's reliability filter against an AMCL-like MCL (thesis §6.2.1, issue I).
 
-Both filters see the same simulated scans (60 beams) and odometry, with the same seeds, on four
-runs: a tour of the use-case lab, a kidnapping in the lab, a tour of a generated floor plan of
-symmetric rooms and a kidnapping there. Every run starts from a uniform prior (global localization).
+Both filters see the same simulated scans (60 beams) and odometry, with the same seeds, on two
+runs per world: a tour and a kidnapping in the use-case lab, in a generated floor plan of symmetric
+rooms and in a warehouse of repeating aisles (identical rack rows, each of identical segments: where a
+filter tracking a fetch gets lost). Every run starts from a uniform prior (global localization).
 
 Per filter and particle count: position and heading RMSE over the steps after convergence,
 time to converge, mean time to recover after the kidnapping — recovered when the estimate stays
 within 0.45 m for more than 10 s (Fox et al.) —, failure rate (runs that never converge or never
-recover) and milliseconds per update; the same per world (``worlds``: the lab, the floor plan),
+recover) and milliseconds per update; the same per world (``worlds``: the lab, the floor plan, the aisles),
 with the global-localization convergence rate (runs that converge from the uniform prior). A PNG
 plots the error over time of both filters. ``--rooms`` sets the floor plan's identical rooms per
 side (3), ``--worlds`` runs only some worlds.
@@ -182,7 +183,7 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Run the benchmark; the result dict (written as ``results.json`` with the plot in ``--out``)."""
     parser = argparse.ArgumentParser(prog="ckm-bench localization", description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one seed, 500 and 2,500 particles only")
-    parser.add_argument("--seeds", type=int, default=2, help="simulated data sets (each: four runs)")
+    parser.add_argument("--seeds", type=int, default=2, help="simulated data sets (each: two runs per world)")
     parser.add_argument("--particles", type=int, nargs="+", default=None, help="particle counts")
     parser.add_argument("--out", type=Path, default=Path("runs/bench-localization"), help="where the plot goes")
     parser.add_argument("--rooms", type=int, default=3, help="identical rooms per side of the floor plan's corridor")

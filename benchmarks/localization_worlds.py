@@ -1,4 +1,5 @@
-"""Test worlds and runs for the localization filters (§6.2): use-case lab, corridor, symmetric floor plan.
+"""Test worlds and runs for the localization filters (§6.2): use-case lab, corridor, symmetric floor plan,
+repeating aisles.
 
 A :class:`Run` is everything a filter consumes and is scored against: the true poses, the noisy
 odometry readings and the simulated scans at each step, generated once from a seed so that every
@@ -94,6 +95,41 @@ def floor_plan_grid(rooms: int = 3, resolution: float = 0.05) -> GridMap:
 
 Waypoints = tuple[tuple[float, float], ...]
 
+AISLES_SIZE = (14.0, 10.0)
+"""The warehouse's length and depth (m)."""
+RACK_ROWS, RACK_DEPTH = (1.9, 4.7, 7.5), 0.8
+RACK_SEGMENTS = ((2.0, 5.0), (5.4, 8.4), (8.8, 11.8))
+"""Three rows of racks (0.8 m deep) along x, each of three identical 3 m segments with 0.4 m gaps between
+them, and four aisles: y 0.75, 3.3, 6.1 and 8.9; cross-aisles at both ends."""
+
+
+def aisles_shapes() -> tuple[tuple[float, float, float, float], list[BaseGeometry]]:
+    """Bounds and racks of the repeating-aisles warehouse (issue N point 4): every aisle looks like every
+    other, and along an aisle every rack segment like the next. Only a pallet in the north-west corner
+    breaks the symmetry."""
+    half = RACK_DEPTH / 2
+    shapes: list[BaseGeometry] = [shapely.box(x0, y - half, x1, y + half)
+                                  for y in RACK_ROWS for x0, x1 in RACK_SEGMENTS]
+    shapes.append(shapely.box(0.3, 9.2, 0.9, 9.8))  # the pallet
+    return (0.0, 0.0, *AISLES_SIZE), shapes
+
+
+def aisles_grid(resolution: float = 0.05) -> GridMap:
+    """The repeating-aisles warehouse of :func:`aisles_shapes` rasterised."""
+    bounds, shapes = aisles_shapes()
+    return GridMap.from_shapes(bounds, shapes, resolution)
+
+
+def aisles_routes() -> tuple[Waypoints, Waypoints, Waypoints]:
+    """A serpentine tour up and down every aisle, and the two legs of a kidnapping from the second
+    aisle's east end to the third aisle's west end (the places a fetch through the aisles goes)."""
+    west, east = 1.0, 13.0
+    tour = ((west, 0.75), (east, 0.75), (east, 3.3), (west, 3.3), (west, 6.1), (east, 6.1), (east, 8.9),
+            (west + 1.0, 8.9))
+    before = ((west, 3.3), (east - 0.1, 3.3))
+    after = ((west, 6.1), (east, 6.1), (east, 8.9), (7.0, 8.9))
+    return tour, before, after
+
 
 def floor_plan_routes(
     rooms: int = 3, room: float = 4.0, corridor: float = 2.0
@@ -181,16 +217,17 @@ def simulate(
     return Run(name, grid, laser, dt, truth, np.stack(odometry), scans, kidnap)
 
 
-WORLDS = ("lab", "floor-plan")
-"""The benchmark's worlds: the use-case lab, the generated floor plan of symmetric rooms."""
+WORLDS = ("lab", "floor-plan", "aisles")
+"""The benchmark's worlds: the use-case lab, the generated floor plan of symmetric rooms, the warehouse
+of repeating aisles."""
 
 
 def standard_runs(
     seed: int, laser: LaserSpec | None = None, noise: OdometryNoise | None = None, *, rooms: int = 3,
     worlds: Sequence[str] = WORLDS,
 ) -> list[Run]:
-    """The benchmark's runs: a tour and a kidnapping in the lab and in the floor plan of ``rooms`` symmetric
-    rooms per side (``worlds``: which of the two)."""
+    """The benchmark's runs: a tour and a kidnapping in the lab, in the floor plan of ``rooms`` symmetric
+    rooms per side and in the repeating aisles (``worlds``: which of them)."""
     unknown = sorted(set(worlds) - set(WORLDS))
     if unknown:
         raise ValueError(f"unknown worlds {unknown}: choose among {', '.join(WORLDS)}")
@@ -210,5 +247,12 @@ def standard_runs(
         runs += [
             simulate("floor-plan-tour", plan, [drive(tour)], laser, noise, seed + 2),
             simulate("floor-plan-kidnap", plan, [drive(before), drive(after)], laser, noise, seed + 3),
+        ]
+    if "aisles" in worlds:
+        warehouse = aisles_grid()
+        tour, before, after = aisles_routes()
+        runs += [
+            simulate("aisles-tour", warehouse, [drive(tour)], laser, noise, seed + 4),
+            simulate("aisles-kidnap", warehouse, [drive(before), drive(after)], laser, noise, seed + 5),
         ]
     return runs
