@@ -48,8 +48,10 @@ partition sees the same robots. Without it the world is in-process, as above.
 
 from __future__ import annotations
 
+import math
 import threading
 import weakref
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from difflib import get_close_matches
@@ -189,6 +191,8 @@ class SimBackend(Backend):
             found.extend(_model_problems(channel, v, named, system))
         if v["pose"] and not v["world"] and system is not None and system.environment is not None:
             found.extend(_spawn_problems(v["pose"], named["pose"], system.environment))
+        if v["pose"] and v["body"] and system is not None:
+            found.extend(_overlap_problems(channel, v, named["pose"], system))
         given_mode = named.get("mode")
         if channel.kind == "pwm" and given_mode is not None and v["mode"] == "position":
             problem("mode", "a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
@@ -425,3 +429,56 @@ def _spawn_problems(pose: str, param: Any, environment: Environment) -> list[tup
 @lru_cache(maxsize=4)
 def _map(key: int, environment: Environment) -> MapModel:
     return MapModel.from_environment(environment)
+
+
+def _base_radius(path: Path) -> float | None:
+    """How far the robot's root link reaches from its origin in the plane: the half diagonal of a box
+    collision, a cylinder's or sphere's radius (the largest of its collisions); None when it has none."""
+    try:
+        model = _model(str(path), path.stat().st_mtime)
+        root = ET.parse(path).getroot()
+    except (ValueError, OSError, ET.ParseError):
+        return None
+    link = next((e for e in root.findall("link") if e.get("name") == model.root), None)
+    reach: list[float] = []
+    for geometry in ([] if link is None else link.findall("collision/geometry")):
+        for shape in geometry:
+            try:
+                if shape.tag == "box":
+                    sx, sy, _ = (float(v) for v in str(shape.get("size")).split())
+                    reach.append(math.hypot(sx, sy) / 2)
+                elif shape.tag in ("cylinder", "sphere"):
+                    reach.append(float(str(shape.get("radius"))))
+            except ValueError:
+                continue
+    return max(reach) if reach else None
+
+
+def _overlap_problems(channel: HWChannel, v: dict[str, Any], param: Any, system: System) -> list[tuple[Any, str]]:
+    """Two robots placed so that their bases overlap (each base as the circle its collision reaches):
+    reported once, at the pose of the robot whose name sorts later."""
+    try:
+        x, y = (float(t) for t in v["pose"].split()[:2])
+    except ValueError:
+        return []  # the pose itself is reported by _spawn_problems
+    mine = _base_radius(_model_file(channel, v, system)[0])
+    found: list[tuple[Any, str]] = []
+    seen: set[str] = set()
+    for other in (c for n in system.nodes for c in n.channels if c.backend == "sim"):
+        values = {p.name: p.value for p in other.params}
+        body, pose = values.get("body", ""), values.get("pose", "")
+        if not body or not pose or body >= v["body"] or body in seen:
+            continue
+        seen.add(body)
+        try:
+            ox, oy = (float(t) for t in pose.split()[:2])
+        except ValueError:
+            continue
+        theirs = _base_radius(_model_file(other, {"body": body, "model": values.get("model", "")}, system)[0])
+        if mine is None or theirs is None:
+            continue
+        apart = math.hypot(x - ox, y - oy)
+        if apart < mine + theirs:
+            found.append((param, f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
+                                 f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn"))
+    return found
