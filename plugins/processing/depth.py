@@ -29,8 +29,10 @@ import numpy as np
 import numpy.typing as npt
 from sklearn.neighbors import KDTree
 
+from ckmconf.model import System
 from ckmconf.model.resources import Plugin
 from plugins.processing.cameras import camera_of
+from plugins.processing.channel_camera import channel_camera, intrinsics_problems
 from plugins.processing.clusters import (
     Cluster,
     Depth,
@@ -47,7 +49,7 @@ from plugins.processing.descriptor import describe
 from plugins.processing.pcd import PcdError, ShapeModel, read_pcd
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import ANY, ARRAY, MAPPING, REQUIRED, P, Params, Ports
+from runtime.verification.manifest import ANY, ARRAY, MAPPING, P, Params, Ports
 
 __all__ = [
     "ENCODINGS",
@@ -110,18 +112,24 @@ def _decode(message: Mapping[str, Any], owner: str) -> npt.NDArray[Any]:
 
 
 INTRINSICS = (
-    P("fx", REQUIRED, "Focal length x at the calibration size.", type=float, unit="px", above=0.0),
+    P("camera", "", "A simulated camera HWChannel whose fov, width and height give the intrinsics (instead of "
+      "fx … calibrationHeight).", type=str),
+    P("fx", None, "Focal length x at the calibration size (required without camera).", type=float, unit="px",
+      above=0.0),
     P("fy", None, "Focal length y at the calibration size (default: fx).", type=float, unit="px", above=0.0),
     P("cx", None, "Principal point x at the calibration size (default: (calibrationWidth - 1) / 2).", type=float,
       unit="px"),
     P("cy", None, "Principal point y at the calibration size (default: (calibrationHeight - 1) / 2).", type=float,
       unit="px"),
-    P("calibrationWidth", REQUIRED, "Image width the intrinsics are given for.", type=int, unit="px", above=0),
-    P("calibrationHeight", REQUIRED, "Image height the intrinsics are given for.", type=int, unit="px", above=0),
+    P("calibrationWidth", None, "Image width the intrinsics are given for (required without camera).", type=int,
+      unit="px", above=0),
+    P("calibrationHeight", None, "Image height the intrinsics are given for (required without camera).",
+      type=int, unit="px", above=0),
 )
-"""The camera's intrinsics as Params: ``fx`` and the calibration size are required (the depth images
-the clustering plugins receive carry none, and no lab's camera is a default); ``fy``, ``cx``, ``cy``
-default to the ideal pinhole's (:meth:`~plugins.processing.cameras.Camera.pinhole`)."""
+"""The camera's intrinsics: the ``camera`` HWChannel's (:mod:`.channel_camera`), or as Params, ``fx`` and
+the calibration size required (the depth images the clustering plugins receive carry none, and no lab's
+camera is a default); ``fy``, ``cx``, ``cy`` default to the ideal pinhole's
+(:meth:`~plugins.processing.cameras.Camera.pinhole`)."""
 
 
 class DepthAcquisition(ProcessingPlugin):
@@ -162,9 +170,10 @@ class EuclideanClustering(ProcessingPlugin):
     plane (within ``planeAngle`` degrees of the image's up) is found by RANSAC and only points
     more than ``planeDistance`` above it are kept: the objects standing on the floor or a table,
     not what lies below a table edge. Clusters link points closer than ``tolerance`` and keep at
-    least ``minPoints``. The camera's intrinsics are Params, required (the depth images carry none):
-    ``fx`` at a ``calibrationWidth`` × ``calibrationHeight`` image, ``fy`` (default ``fx``), ``cx``,
-    ``cy`` (default the image's centre), scaled to the image received (a resize profile's).
+    least ``minPoints``. The camera's intrinsics (the depth images carry none) are those of the
+    ``camera`` HWChannel, or Params: ``fx`` at a ``calibrationWidth`` × ``calibrationHeight`` image, ``fy``
+    (default ``fx``), ``cx``, ``cy`` (default the image's centre); either is scaled to the image
+    received (a resize profile's).
     """
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ANY})  # a list of Clusters: in-process objects
@@ -188,7 +197,18 @@ class EuclideanClustering(ProcessingPlugin):
             raise ParamError(f"{self.owner}: parameter 'minPoints' = {p['minPoints']} must be at least 1")
         if not 0 < p["planeAngle"] <= 90:
             raise ParamError(f"{self.owner}: parameter 'planeAngle' = {p['planeAngle']} is not in (0, 90] degrees")
-        self.camera = camera_of(p, self.owner)
+        if p["camera"]:
+            self.camera = channel_camera(record, p["camera"], self.owner)
+        elif (problems := intrinsics_problems(record, None)):
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
+        else:
+            self.camera = camera_of(p, self.owner)
+
+    @classmethod
+    def problems(cls, record: Plugin, system: System | None) -> list[tuple[Any, str]]:
+        """Neither intrinsics nor a camera channel, or a camera naming no simulated camera (verify reports
+        each at its ``FILE:LINE:COL``)."""
+        return intrinsics_problems(record, system)
 
     def depth_image(self, data: Any) -> npt.NDArray[Any]:
         """``data`` as the float depth image in metres (H, W) this plugin clusters, else ValueError."""

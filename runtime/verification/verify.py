@@ -222,6 +222,10 @@ class _Verifier(InterfaceChecks, MessageChecks):
         kinds: dict[str, tuple[Plugin, type[Any] | None]] = {}
         for plugin in resource.plugins:
             kinds[plugin.name] = (plugin, self._checked(plugin, "plugin", plugin.kind, plugin.params))
+            problems = getattr(kinds[plugin.name][1], "problems", None)  # what the kind finds across its Params
+            for element, message in problems(plugin, self.system) if callable(problems) else ():
+                self.report.error(element, f"plugin {plugin.name!r} ({plugin.kind}): {message}",
+                                  "value" if isinstance(element, Param) else None)
         profiles = {p.name: p for p in resource.profiles}
         node = next((n for n in self.system.nodes if n.name == resource.node), None)
         streams: dict[str, list[Service]] = {}  # acquisition (root) plugin → the services it feeds

@@ -20,6 +20,7 @@ import pybullet as p
 import pytest
 
 import ckmconf
+from ckmconf.errors import Loc
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.processing.depth import DepthAcquisition, EuclideanClustering, KdTreeShapeClassifier
@@ -27,6 +28,7 @@ from plugins.processing.tabletop import TabletopClustering
 from plugins.sim.robots import Robot
 from plugins.sim.sensors import Camera
 from plugins.sim.world import World
+from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context
 from tests.conftest import CONFIGS
 
@@ -107,3 +109,24 @@ def test_the_station_s_depth_pipeline_names_each_shape_where_it_stands(
         near = [o for o in named if math.dist((o["x"], o["y"], o["z"]), truth) < 0.06]
         assert [o["name"] for o in near] == [shape], (shape, truth, named)
         assert near[0]["reliability"] >= 0.75
+
+
+def test_the_intrinsics_can_come_from_the_camera_s_own_channel(view: tuple[np.ndarray[Any, Any], Any, Any]) -> None:
+    """``camera`` names sim_station.xml's ``wrist_camera`` (160 × 120, 87°): its pinhole, scaled to the
+    320 × 240 frame, is the one the Params state, and the clusters are the same."""
+    frame, _, _ = view
+    context = Context(0, 0.0, "StationCamera")
+    depth = plugin(DepthAcquisition, "depth-acquisition", scale=0.001).process(frame, context)
+    station = Loc(str(CONFIGS / "examples" / "sim_station.xml"), 1, 1, "/Plugin")
+    by_channel = TabletopClustering(Plugin(name="c", kind="tabletop-clustering", loc=station, params=(
+        Param(name="camera", value="wrist_camera"), Param(name="tolerance", value="0.03"),
+        Param(name="minPoints", value="60"))))
+    by_params = plugin(TabletopClustering, "tabletop-clustering", tolerance=0.03, minPoints=60, **intrinsics())
+    assert by_channel.camera.intrinsics(HEIGHT, WIDTH) == pytest.approx(by_params.camera.intrinsics(HEIGHT, WIDTH))
+    ours, theirs = by_channel.process(depth, context), by_params.process(depth, context)
+    assert [c.points.shape for c in ours] == [c.points.shape for c in theirs] and len(ours) >= 2
+    with pytest.raises(ParamError, match=r"Param 'camera' = 'wrist_cam': no HWChannel of that name"):
+        TabletopClustering(Plugin(name="c", kind="tabletop-clustering", loc=station,
+                                  params=(Param(name="camera", value="wrist_cam"),)))
+    with pytest.raises(ParamError, match=r"give the camera's intrinsics: Params fx, calibrationWidth"):
+        TabletopClustering(Plugin(name="c", kind="tabletop-clustering", params=(Param(name="fx", value="300"),)))

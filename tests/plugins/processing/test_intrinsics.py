@@ -148,11 +148,10 @@ def test_verify_refuses_a_configuration_without_intrinsics_at_its_file_line_colu
     found = problems(tmp_path, fusion=cameras_xml(OTHER_ENTRY))
     file = tmp_path / "system.xml"
     column = file.read_text().splitlines()[10].index('value="other') + 1  # line 11: the cameras Param's value
-    clusters = f"{file}:7:5: {RESOURCE}/Plugin[@name='clusters']: {NEEDS}"
+    clusters = f"{file}:7:5: {RESOURCE}/Plugin[@name='clusters']: plugin 'clusters' (euclidean-clustering): "
     assert found == [
-        f"{clusters} 'calibrationHeight' (Image height the intrinsics are given for.)",
-        f"{clusters} 'calibrationWidth' (Image width the intrinsics are given for.)",
-        f"{clusters} 'fx' (Focal length x at the calibration size.)",
+        f"{clusters}give the camera's intrinsics: Params fx, calibrationWidth and calibrationHeight (missing: fx, "
+        "calibrationWidth, calibrationHeight), or camera naming its HWChannel",
         f"{file}:11:{column}: {RESOURCE}/Plugin[@name='fusion']/Param[@name='cameras']/@value: "
         + NO_CAMERA.format("rgb")
         + "parameters 'fx', 'calibrationWidth' and 'calibrationHeight' (the line inputs' default camera)",
@@ -177,8 +176,8 @@ def test_the_build_refuses_the_same_configuration() -> None:
     with pytest.raises(ParamError) as caught:
         EuclideanClustering(record("euclidean-clustering", {"fx": 525}))
     assert str(caught.value) == (
-        "plugin 'p' (euclidean-clustering) needs parameter 'calibrationWidth' "
-        "(Image width the intrinsics are given for.)"
+        "plugin 'p' (euclidean-clustering): give the camera's intrinsics: Params fx, calibrationWidth and "
+        "calibrationHeight (missing: calibrationWidth, calibrationHeight), or camera naming its HWChannel"
     )
     with pytest.raises(ParamError) as caught:
         FeatureFusion(record("feature-fusion", {"inputs": "rgb: line"}))
