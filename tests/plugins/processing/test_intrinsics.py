@@ -126,7 +126,6 @@ SYSTEM = """<?xml version="1.0" encoding="UTF-8"?>
 """
 RESOURCE = "/System[@name='intrinsics']/SmartResource[@name='R']"
 OTHER_ENTRY = "other: 460 455 412 291.5 800 600"
-NEEDS = "processing plugin 'euclidean-clustering' needs parameter"
 NO_CAMERA = "processing plugin 'feature-fusion': line input {!r} has no intrinsics: give it a 'cameras' entry, or "
 
 
