@@ -64,7 +64,8 @@ def test_noise_free_odometry_integrates_the_true_motion() -> None:
 
 def test_standard_runs_stay_clear_and_kidnap_without_odometry() -> None:
     runs = standard_runs(seed=5)
-    assert [r.name for r in runs] == ["lab-tour", "lab-kidnap", "floor-plan-tour", "floor-plan-kidnap"]
+    assert [r.name for r in runs] == ["lab-tour", "lab-kidnap", "floor-plan-tour", "floor-plan-kidnap", "aisles-tour",
+                                      "aisles-kidnap"]
     for run in runs:
         assert run.grid.distance_at(run.truth[:, 0], run.truth[:, 1]).min() >= 0.3, run.name
         assert run.scans.shape == (len(run.truth), 60)
