@@ -3,7 +3,8 @@
 - ``ckm-plugins list [--long] [--json]``: one line per kind (``CATEGORY.KIND`` and its summary;
   ``--long``: with its Params and ports);
 - ``ckm-plugins show KIND…``: a kind's description, Params (type, default, unit, range, doc) and
-  ports, then the rest of its class's and its module's documentation; ``KIND`` is ``CATEGORY.KIND`` or a kind name registered in one category only;
+  ports, then the rest of its class's and its module's documentation; ``KIND`` is ``CATEGORY.KIND``
+  or a kind name registered in one category only;
 - ``ckm-plugins markdown [--package NAME]``: the reference page ``docs/plugins.md`` is generated
   from (``--package ckm``: only the kinds this distribution registers);
 - ``ckm-plugins interfaces [--markdown]``: the standard service interfaces, each with the kinds that
