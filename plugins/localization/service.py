@@ -110,6 +110,8 @@ class Localization(ProcessingPlugin):
             "joint. Beams are re-expressed from the robot's centre, so the estimate is the base's pose.",
             type=str,
         ),
+        P("laserHeight", REQUIRED, "Height of the scan plane above the floor: the map's objects it cuts (as "
+          "amcl-navigation's).", type=float, unit="m", above=0.0),
         P("beams", 60, "Beams of each scan used by the filter, evenly spread (AMCL's laser_max_beams).", min=3),
         P("resolution", 0.05, "Grid cell size of the map.", unit="m", above=0.0),
         P(
@@ -153,7 +155,7 @@ class Localization(ProcessingPlugin):
         env = ckmconf.load(path).environment
         if env is None:
             raise ParamError(f"{self.owner}: {path} holds no <Environment>")
-        self.grid = GridMap.from_environment(env, self.params["resolution"])
+        self.grid = GridMap.from_environment(env, self.params["resolution"], scan_height=self.params["laserHeight"])
 
     def _filter(self, longest: float) -> AmclFilter | ReliabilityFilter:
         """The filter, built at the first frame; its models follow the scan's range if that changes."""

@@ -499,7 +499,7 @@ def test_several_inputs_are_checked_by_name_against_the_acquisition_plugin(tmp_p
     )
     problems = service_problems(tmp_path, "localization", "localization", topics, ports)
     # the template's plugins have no Params: no map file, no laser mount
-    unset = ("needs parameter 'environment'", "needs parameter 'laserPose'")
+    unset = ("needs parameter 'environment'", "needs parameter 'laserPose'", "needs parameter 'laserHeight'")
     problems = [p for p in problems if not any(u in p for u in unset)]
     assert problems == [
         "13: acquisition plugin 'first' (localization) of resource 'R' reads vectors of numbers "

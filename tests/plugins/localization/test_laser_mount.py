@@ -158,6 +158,7 @@ def _record(filter_name: str, laser_pose: str, environment: Path, **params: str)
         "seed": "3",
         "environment": str(environment),
         "laserPose": laser_pose,
+        "laserHeight": "0.2",
         "initial_pose": f"{x} {y} {yaw}",
         **params,
     }

@@ -29,6 +29,7 @@ def _resource(filter_name: str, **params: str) -> SmartResource:
         "environment": str(ROOT / "configs" / "usecase" / "environment.xml"),
         # the benchmark's scans: 60 beams over a full turn, 8 m, from the robot's centre
         "laserPose": "0 0 0",
+        "laserHeight": "0.2",
         "fov": str(2 * np.pi),
         "max_range": "8",
         **params,
