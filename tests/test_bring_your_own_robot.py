@@ -148,6 +148,10 @@ MISTAKES = (  # file, text, replaced by, the line it is refused at, what ckm-val
         130,
         "a lidar needs its range: the HWChannel's max (m)",
     ),
+    ("robot.xml", 'value="lidar_link"', 'value="lidar_lnk"', 132,
+     "Param 'link': the model scout.urdf has no link 'lidar_lnk'; did you mean lidar_link"),
+    ("robot.xml", '<Param name="pose" value="1.0 1.0 0"/>', '<Param name="pose" value="7.0 4.0 0"/>', 20,
+     "Param 'pose' places the robot at (7, 4), inside 'pallet'"),
 )
 
 

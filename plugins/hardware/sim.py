@@ -59,6 +59,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from ckmconf.errors import ConfigError, ConfigErrors
 from ckmconf.loader import load
 from ckmconf.model import Environment, HWChannel, Node, System
 from plugins.environment.geometry import Footprint
@@ -189,8 +190,9 @@ class SimBackend(Backend):
             )
         if v["body"] and system is not None:  # a body's model may be named by another of its channels
             found.extend(_model_problems(channel, v, named, system))
-        if v["pose"] and not v["world"] and system is not None and system.environment is not None:
-            found.extend(_spawn_problems(v["pose"], named["pose"], system.environment))
+        world = _world_of(channel, v, system) if v["pose"] and system is not None else None
+        if world is not None:
+            found.extend(_spawn_problems(v["pose"], named["pose"], world))
         if v["pose"] and v["body"] and system is not None:
             found.extend(_overlap_problems(channel, v, named["pose"], system))
         given_mode = named.get("mode")
@@ -407,6 +409,26 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
         if joint not in joints:
             unknown("joints", joint, joints, "joint")
     return found
+
+
+def _world_of(channel: HWChannel, v: dict[str, Any], system: System | None) -> Environment | None:
+    """The ``<Environment>`` the channel's world is built from: the file its ``world`` Param names
+    (relative to the channel's file), else the system's own; None when it cannot be read (reported
+    elsewhere) or there is none."""
+    if not v["world"]:
+        return system.environment if system is not None else None
+    if channel.loc is None:
+        return None
+    path = Path(channel.loc.file).parent / v["world"]
+    try:
+        return _environment(str(path.resolve()), path.stat().st_mtime)
+    except (OSError, ValueError, ConfigError, ConfigErrors):
+        return None
+
+
+@lru_cache(maxsize=8)
+def _environment(path: str, mtime: float) -> Environment | None:
+    return load(path).environment
 
 
 def _spawn_problems(pose: str, param: Any, environment: Environment) -> list[tuple[Any, str]]:
