@@ -2,23 +2,21 @@
 channel"), for the depth clustering kinds' ``camera`` Param.
 
 A simulated camera (``<HWChannel backend="sim">`` with ``sensor`` rgb or depth) renders an ideal
-pinhole of its ``fov`` at ``width`` × ``height`` (plugins/sim/sensors.py ``pinhole``): its focal
-length is ``(width / 2) / tan(fov / 2)``, its principal point the image's centre. Naming that channel
+pinhole of its ``fov`` at ``width`` × ``height`` (plugins/sim/sensors.py ``pinhole``, which this
+module calls): square pixels, the principal point at the image's centre. Naming that channel
 keeps the numbers in one place: change the camera's field of view or resolution and every plugin
 that reads its frames follows.
 """
 
 from __future__ import annotations
 
-import math
-from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
-from ckmconf.loader import load
 from ckmconf.model import HWChannel, System
 from ckmconf.model.resources import Plugin
 from plugins.hardware.sim import SimBackend
+from plugins.sim.ros_messages import sim_channel
+from plugins.sim.sensors import pinhole
 from runtime.kernel.interfaces import ParamError, read_params
 
 from .cameras import Camera
@@ -43,28 +41,17 @@ def channel_problem(channel: HWChannel) -> str | None:
 def pinhole_of(channel: HWChannel) -> Camera:
     """The ideal pinhole a simulated camera channel renders (module docstring)."""
     v = read_params(channel.params, SimBackend.PARAMS, owner=f"sim channel {channel.name!r}")
-    width, height, fov = int(v["width"]), int(v["height"]), float(v["fov"])
-    return Camera.pinhole((width / 2) / math.tan(fov / 2), width, height)
-
-
-@lru_cache(maxsize=8)
-def _system(path: str, mtime: float) -> System:
-    return load(path)
+    width, height = int(v["width"]), int(v["height"])
+    return Camera(*pinhole(width, height, float(v["fov"])), width, height)
 
 
 def channel_camera(record: Plugin, name: str, owner: str) -> Camera:
     """The intrinsics of the camera HWChannel ``name`` of the configuration ``record`` was read from."""
-    file = record.loc.file if record.loc is not None else ""
-    if not file or not Path(file).is_file():
-        raise ParamError(f"{owner}: Param 'camera' needs the plugin's configuration file, and it has none")
-    found = camera_channels(_system(str(Path(file).resolve()), Path(file).stat().st_mtime), name)
-    if len(found) != 1:
-        raise ParamError(f"{owner}: Param 'camera' = {name!r}: {'no' if not found else len(found)} HWChannel of "
-                         f"that name in {file}")
-    problem = channel_problem(found[0])
+    channel = sim_channel(record, name, owner, param="camera")
+    problem = channel_problem(channel)
     if problem is not None:
         raise ParamError(f"{owner}: Param 'camera': {problem}")
-    return pinhole_of(found[0])
+    return pinhole_of(channel)
 
 
 def intrinsics_problems(record: Plugin, system: System | None) -> list[tuple[Any, str]]:

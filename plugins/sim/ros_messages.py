@@ -59,16 +59,17 @@ def _system(path: str, mtime: float) -> System:
     return load(path)
 
 
-def sim_channel(record: Plugin, name: str, owner: str) -> HWChannel:
-    """The ``hardware.sim`` HWChannel ``name`` of the configuration file ``record`` was read from."""
+def sim_channel(record: Plugin, name: str, owner: str, param: str = "channel") -> HWChannel:
+    """The ``hardware.sim`` HWChannel ``name`` (the value of the plugin's Param ``param``) of the
+    configuration file ``record`` was read from."""
     file = record.loc.file if record.loc is not None else ""
     if not file or not Path(file).is_file():
-        raise ParamError(f"{owner}: Param 'channel' needs the plugin's configuration file, and it has none")
+        raise ParamError(f"{owner}: Param {param!r} needs the plugin's configuration file, and it has none")
     system = _system(str(Path(file).resolve()), Path(file).stat().st_mtime)
     found = [c for n in system.nodes for c in n.channels if c.name == name]
     if len(found) != 1:
         what = "no" if not found else f"{len(found)}"
-        raise ParamError(f"{owner}: Param 'channel' = {name!r}: {what} HWChannel of that name in {file}")
+        raise ParamError(f"{owner}: Param {param!r} = {name!r}: {what} HWChannel of that name in {file}")
     if found[0].backend != "sim":
         raise ParamError(f"{owner}: HWChannel {name!r} has backend {found[0].backend!r}, not 'sim'")
     return found[0]

@@ -1,0 +1,196 @@
+"""The checks of a ``hardware.sim`` channel against the rest of its system (decision D288): its
+robot's URDF (the model file, the links and joints its Params name) and where the robot is spawned
+(inside the map, clear of avoided areas, objects and the other robots). ``SimBackend.problems`` runs
+them when ``verify`` gives it the system; at run time the world loads the model anyway.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from difflib import get_close_matches
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from ckmconf.model import Environment, HWChannel, System
+from plugins.environment.geometry import Footprint
+from plugins.environment.map_model import BOUNDS, MapModel
+from plugins.environment_file import environment_of
+from plugins.sim.urdf import MODELS, Kinematics
+
+
+def system_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
+                    system: System) -> list[tuple[Any, str]]:
+    """What is wrong with the channel (its Params read as ``v``, given as ``named``) in ``system``."""
+    found: list[tuple[Any, str]] = []
+    if v["body"]:  # a body's model may be named by another of its channels
+        found.extend(_model_problems(channel, v, named, system))
+    if v["pose"]:
+        world = _world_of(channel, v, system)
+        if world is not None:
+            found.extend(_spawn_problems(v["pose"], named["pose"], world))
+        if v["body"]:
+            found.extend(_overlap_problems(channel, v, named["pose"], system))
+    return found
+
+
+def _model_file(channel: HWChannel, v: dict[str, Any], system: System) -> tuple[Path, HWChannel]:
+    """The URDF a channel's robot is loaded from, and the channel that says so: Param ``model`` (relative
+    to its channel's file) of this channel or of another channel of the same body, else the shipped
+    ``plugins/sim/models/<body>.urdf``."""
+    giver, model_text = channel, v["model"]
+    if not model_text:
+        for other in (c for n in system.nodes for c in n.channels if c.backend == "sim"):
+            values = {p.name: p.value for p in other.params}
+            if values.get("body") == v["body"] and values.get("model"):
+                giver, model_text = other, values["model"]
+                break
+    if not model_text:
+        return MODELS / f"{v['body']}.urdf", channel
+    model = Path(model_text)
+    if model.is_absolute() or giver.loc is None:
+        return model, giver
+    return Path(giver.loc.file).parent / model, giver
+
+
+@lru_cache(maxsize=32)
+def _model(path: str, mtime: float) -> Kinematics:
+    return Kinematics(path)
+
+
+def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
+                    system: System) -> list[tuple[Any, str]]:
+    """The robot model a channel names that does not exist, and the links and joints its Params name
+    that the model does not have (each at its Param, offering the nearest names)."""
+    path, giver = _model_file(channel, v, system)
+    if giver is not channel and not path.is_file():  # the other channel reports its own model
+        return []
+    where = named.get("model") or named.get("body") or channel
+    if not path.is_file():
+        shipped = ", ".join(sorted(m.stem for m in MODELS.glob("*.urdf")))
+        also = f"; the shipped models: {shipped}" if giver is channel and not v["model"] else ""
+        return [(where, f"robot model {str(path)!r} does not exist (give Param 'model', a URDF relative to "
+                        f"this file{also})")]
+    try:
+        model = _model(str(path), path.stat().st_mtime)
+    except (ValueError, OSError) as error:
+        return [(where, f"robot model {path.name} cannot be read: {error}")]
+    found: list[tuple[Any, str]] = []
+
+    def unknown(param: str, name: str, choices: Sequence[str], what: str) -> None:
+        near = get_close_matches(name, choices, n=3)
+        hint = f"; did you mean {', '.join(near)}?" if near else f" (its {what}s: {', '.join(choices)})"
+        found.append((named.get(param, channel), f"Param {param!r}: the model {path.name} has no {what} "
+                                                 f"{name!r}{hint}"))
+
+    links, joints = list(model.links), list(model.joints)
+    if v["sensor"] and v["link"] not in links:
+        unknown("link", v["link"], links, "link")
+    if v["grasp"] and v["grasp"] not in links:
+        unknown("grasp", v["grasp"], links, "link")
+    for param in ("joint", "mirror"):
+        if v[param] and v[param] not in joints:
+            unknown(param, v[param], joints, "joint")
+    for joint in v["joints"].split():
+        if joint not in joints:
+            unknown("joints", joint, joints, "joint")
+    return found
+
+
+def _world_of(channel: HWChannel, v: dict[str, Any], system: System) -> Environment | None:
+    """The ``<Environment>`` the channel's world is built from: the file its ``world`` Param names
+    (relative to the channel's file), else the system's own; None when it cannot be read (reported
+    elsewhere) or there is none."""
+    if not v["world"]:
+        return system.environment
+    if channel.loc is None:
+        return None
+    try:
+        return environment_of(Path(channel.loc.file).parent / v["world"], f"sim channel {channel.name!r}")
+    except ValueError:
+        return None
+
+
+def _spawn_problems(pose: str, param: Any, environment: Environment) -> list[tuple[Any, str]]:
+    """A robot placed outside the map, inside an avoided area (a wall in the simulation) or inside an
+    object standing on the floor: it would start stuck, or see nothing but the inside of it."""
+    try:
+        x, y = (float(v) for v in pose.split()[:2])
+    except ValueError:
+        return [(param, f"Param 'pose' = {pose!r} is not 'x y yaw' (m, m, rad)")]
+    model = _map(environment)
+    base = Footprint(radius=0.01, height=0.05)  # the robot's base point, at the floor
+    hits = model.collisions(base, x, y)
+    if not hits:
+        return []
+    inside = ", ".join("the map's bounds" if h == BOUNDS else repr(h) for h in hits)
+    where = "outside the map" if hits == [BOUNDS] else f"inside {inside}"
+    return [(param, f"Param 'pose' places the robot at ({x:g}, {y:g}), {where}: it would start stuck in it")]
+
+
+@lru_cache(maxsize=4)
+def _map(environment: Environment) -> MapModel:
+    return MapModel.from_environment(environment)
+
+
+def _base_radius(path: Path) -> float | None:
+    """How far the robot's root link reaches from its origin in the plane: the half diagonal of a box
+    collision, a cylinder's or sphere's radius (the largest of its collisions); None when it has none."""
+    try:
+        return _reach(str(path), path.stat().st_mtime)
+    except OSError:
+        return None
+
+
+@lru_cache(maxsize=32)  # keyed by the file's modification time: an edited URDF is read again
+def _reach(path: str, mtime: float) -> float | None:
+    try:
+        model = _model(path, mtime)
+        root = ET.parse(path).getroot()
+    except (ValueError, OSError, ET.ParseError):
+        return None
+    link = next((e for e in root.findall("link") if e.get("name") == model.root), None)
+    reach: list[float] = []
+    for geometry in ([] if link is None else link.findall("collision/geometry")):
+        for shape in geometry:
+            try:
+                if shape.tag == "box":
+                    sx, sy, _ = (float(v) for v in str(shape.get("size")).split())
+                    reach.append(math.hypot(sx, sy) / 2)
+                elif shape.tag in ("cylinder", "sphere"):
+                    reach.append(float(str(shape.get("radius"))))
+            except ValueError:
+                continue
+    return max(reach) if reach else None
+
+
+def _overlap_problems(channel: HWChannel, v: dict[str, Any], param: Any, system: System) -> list[tuple[Any, str]]:
+    """Two robots placed so that their bases overlap (each base as the circle its collision reaches):
+    reported once, at the pose of the robot whose name sorts later."""
+    try:
+        x, y = (float(t) for t in v["pose"].split()[:2])
+    except ValueError:
+        return []  # the pose itself is reported by _spawn_problems
+    mine = _base_radius(_model_file(channel, v, system)[0])
+    found: list[tuple[Any, str]] = []
+    seen: set[str] = set()
+    for other in (c for n in system.nodes for c in n.channels if c.backend == "sim"):
+        values = {p.name: p.value for p in other.params}
+        body, pose = values.get("body", ""), values.get("pose", "")
+        if not body or not pose or body >= v["body"] or body in seen:
+            continue
+        seen.add(body)
+        try:
+            ox, oy = (float(t) for t in pose.split()[:2])
+        except ValueError:
+            continue
+        theirs = _base_radius(_model_file(other, {"body": body, "model": values.get("model", "")}, system)[0])
+        if mine is None or theirs is None:
+            continue
+        apart = math.hypot(x - ox, y - oy)
+        if apart < mine + theirs:
+            found.append((param, f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
+                                 f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn"))
+    return found
