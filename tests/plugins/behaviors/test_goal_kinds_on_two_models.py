@@ -9,7 +9,6 @@ a behavior says.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -17,112 +16,29 @@ from typing import Any
 
 import pytest
 
-from ckmconf.model import Param
-from ckmconf.model.missions import Behavior as BehaviorRecord
-from ckmconf.model.missions import BehaviorInput, BehaviorOutput, Configure, Uses
 from plugins.behaviors.docking import Dock
 from plugins.behaviors.manipulation import BackOff
 from plugins.behaviors.navigation_goals import SetNavGoal, WaitGoal
 from plugins.behaviors.recovery import StopNavigation
-from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
-from runtime.resources.api import Bounds
-from tests.plugins.behaviors.closed_loop import BenchNavigation
+from runtime.missions.behaviors import Behavior
+from tests.plugins.behaviors.closed_loop import BenchBase, BenchNavigation, angle, run_states, wired
 from tests.plugins.navigation.loop import ROVER_MODEL, TURTLEBOT_MODEL, Bench, RobotModel, room
 
 MODELS = pytest.mark.parametrize("model", [TURTLEBOT_MODEL, ROVER_MODEL], ids=lambda m: m.urdf)
 
 
-class BenchBase:
-    """The bench's base-drive service as a behavior sees it: its ``move_status`` output."""
-
-    def __init__(self, bench: Bench) -> None:
-        self.bench, self.ref = bench, "MobileBase.Displacement"
-
-    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
-        return None
-
-    def output(self, name: str) -> Any:
-        return self.bench.latest({"move_status": "/base/move_status", "odom": "/base/odom"}[name])
-
-    def measures(self) -> dict[str, float]:
-        return {}
-
-    def samples(self, measure: str) -> list[float]:
-        return []
-
-    def running(self) -> bool:
-        return True
-
-
-def behavior(
-    bench: Bench,
-    cls: type[Behavior],
-    name: str,
-    *,
-    goal: str | None = None,
-    nav: bool = False,
-    base: bool = False,
-    pose_input: bool = False,
-    **params: str,
-) -> Behavior:
+def behavior(bench: Bench, cls: type[Behavior], name: str, *, goal: str | None = None, nav: bool = False,
+             base: bool = False, pose_input: bool = False, **params: str) -> Behavior:
     """A behavior on the bench's services: ``nav`` (configured with ``goal``, if given) and ``base``; a
     ``pose`` input on the navigation's estimate and a ``move`` output on the base's goal topic."""
-    uses = []
-    if nav:
-        configure = () if goal is None else (Configure(parameter="goal", value=goal),)
-        uses.append(Uses(service="Navigation.AMCL", as_="nav", configure=configure))
-    if base:
-        uses.append(Uses(service="MobileBase.Displacement", as_="base"))
-    input_topics = {"pose": "/nav/pose"} if pose_input else {}
-    output_topics = {"move": "/base/move_goal"} if base else {}
-    inputs = tuple(BehaviorInput(name=n, topic=t) for n, t in input_topics.items())
-    outputs = tuple(BehaviorOutput(name=n, topic=t) for n, t in output_topics.items())
-    record = BehaviorRecord(
-        name=name,
-        kind="-",
-        timeout=120.0,
-        uses=tuple(uses),
-        inputs=inputs,
-        outputs=outputs,
-        params=tuple(Param(name=k, value=v) for k, v in params.items()),
-    )
     services: dict[str, Any] = {}
     if nav:
         services["nav"] = BenchNavigation(bench)
     if base:
         services["base"] = BenchBase(bench)
-    context = BehaviorContext(
-        services=services, now=lambda: bench.now,
-        inputs={n: functools.partial(bench.latest, t) for n, t in input_topics.items()},
-        outputs={n: functools.partial(bench.publish, t) for n, t in output_topics.items()},
-    )  # fmt: skip
-    return cls(record, context)
-
-
-def run_states(bench: Bench, states: list[Behavior], timeout: float) -> list[tuple[str, BehaviorStatus]]:
-    """Step ``states`` one after the other at every physics step until the last is done or one fails."""
-    pending = list(states)
-    pending[0].start()
-    statuses: list[tuple[str, BehaviorStatus]] = []
-
-    def ended() -> bool:
-        status = pending[0].step()
-        statuses.append((pending[0].name, status))
-        if status.failed:
-            return True
-        if status.done:
-            pending.pop(0)
-            if not pending:
-                return True
-            pending[0].start()
-        return False
-
-    assert bench.run(ended, timeout), f"not ended: {statuses[-1]}, at {bench.truth()}"
-    return statuses
-
-
-def angle(a: float, b: float) -> float:
-    return abs(math.atan2(math.sin(a - b), math.cos(a - b)))
+    return wired(bench, cls, name, services, {"pose": "/nav/pose"} if pose_input else {},
+                 {"move": "/base/move_goal"} if base else {},
+                 configure={"nav": {"goal": goal}} if goal is not None else None, **params)
 
 
 def navigation_bench(tmp_path: Path, model: RobotModel) -> Bench:

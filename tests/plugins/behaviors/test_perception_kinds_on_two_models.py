@@ -9,56 +9,22 @@ base alone. What counts is where the robot ends in the world.
 
 from __future__ import annotations
 
-import functools
 import math
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from ckmconf.model import Param
 from ckmconf.model.missions import Behavior as BehaviorRecord
-from ckmconf.model.missions import BehaviorInput, BehaviorOutput, Uses
+from ckmconf.model.missions import Uses
 from plugins.behaviors.approach import Approach
 from plugins.behaviors.perception import SpotObjects
 from plugins.behaviors.recovery import SearchObject
-from runtime.missions.behaviors import Behavior, BehaviorContext
-from tests.plugins.behaviors.closed_loop import SightDetector
-from tests.plugins.behaviors.test_goal_kinds_on_two_models import BenchBase, angle, run_states
+from tests.plugins.behaviors.closed_loop import BenchBase, SightDetector, angle, run_states, wired
 from tests.plugins.navigation.loop import ROVER_MODEL, TURTLEBOT_MODEL, Bench, RobotModel, room
 
 MODELS = pytest.mark.parametrize("model", [TURTLEBOT_MODEL, ROVER_MODEL], ids=lambda m: m.urdf)
 PARCEL = (1.9, 2.6)
 """On the map: ahead and to the left of the start, clear of the pillar."""
-
-
-def wired(
-    bench: Bench,
-    cls: type[Behavior],
-    name: str,
-    services: Mapping[str, Any],
-    inputs: Mapping[str, str] | None = None,
-    outputs: Mapping[str, str] | None = None,
-    **params: str,
-) -> Behavior:
-    """A behavior on ``services`` (by alias), its inputs and outputs on bench topics."""
-    inputs, outputs = dict(inputs or {}), dict(outputs or {})
-    record = BehaviorRecord(
-        name=name,
-        kind="-",
-        timeout=120.0,
-        params=tuple(Param(name=k, value=v) for k, v in params.items()),
-        uses=tuple(Uses(service=f"S.{alias}", as_=alias) for alias in services),
-        inputs=tuple(BehaviorInput(name=n, topic=t) for n, t in inputs.items()),
-        outputs=tuple(BehaviorOutput(name=n, topic=t) for n, t in outputs.items()),
-    )
-    context = BehaviorContext(
-        services=dict(services), now=lambda: bench.now,
-        inputs={n: functools.partial(bench.latest, t) for n, t in inputs.items()},
-        outputs={n: functools.partial(bench.publish, t) for n, t in outputs.items()},
-    )  # fmt: skip
-    return cls(record, context)
 
 
 def bearing_to(bench: Bench, point: tuple[float, float]) -> float:

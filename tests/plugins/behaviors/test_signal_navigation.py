@@ -9,41 +9,17 @@ engine steps them (start, step until done, then the next state), at every physic
 
 from __future__ import annotations
 
-import functools
 import math
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from ckmconf.model import Param
-from ckmconf.model.missions import Behavior as BehaviorRecord
-from ckmconf.model.missions import BehaviorInput, BehaviorOutput, Uses
 from plugins.behaviors.navigate import NavigateTo
 from plugins.behaviors.signals import EmitSignal, WaitSignal
-from runtime.missions.behaviors import Behavior, BehaviorContext
-from tests.plugins.behaviors.closed_loop import BenchNavigation
+from runtime.missions.behaviors import Behavior
+from tests.plugins.behaviors.closed_loop import BenchNavigation, wired
 from tests.plugins.navigation.loop import ROVER_MODEL, TURTLEBOT_MODEL, Bench, RobotModel, room
-
-
-def wired(bench: Bench, cls: type[Behavior], name: str, inputs: dict[str, str], outputs: dict[str, str],
-          nav: bool = False, **params: str) -> Behavior:
-    """A behavior whose inputs and outputs are bench topics (arrival counts: the topics' sequence numbers)."""
-    record = BehaviorRecord(name=name, kind="-", timeout=120.0,
-                            params=tuple(Param(name=k, value=v) for k, v in params.items()),
-                            uses=(Uses(service="Base.Nav", as_="nav"),) if nav else (),
-                            inputs=tuple(BehaviorInput(name=n, topic=t) for n, t in inputs.items()),
-                            outputs=tuple(BehaviorOutput(name=n, topic=t) for n, t in outputs.items()))
-    def heard(topic: str) -> int:
-        return bench.topics[topic][0] if topic in bench.topics else 0
-
-    context = BehaviorContext(
-        services={"nav": BenchNavigation(bench)} if nav else {}, now=lambda: bench.now,
-        inputs={n: functools.partial(bench.latest, t) for n, t in inputs.items()},
-        heard={n: functools.partial(heard, t) for n, t in inputs.items()},
-        outputs={n: functools.partial(bench.publish, t) for n, t in outputs.items()},
-    )  # fmt: skip
-    return cls(record, context)
 
 
 @pytest.mark.parametrize("model", [TURTLEBOT_MODEL, ROVER_MODEL], ids=lambda m: m.urdf)
@@ -53,11 +29,12 @@ def test_a_goal_carried_by_a_signal_is_driven_to_and_a_stale_one_ignored(tmp_pat
     try:
         stale = {"label": "parcel", "position": {"frame": "map", "x": 1.0, "y": 3.3}}
         bench.publish("/spotted", stale)  # left by an earlier run of the plan
-        tell = wired(bench, EmitSignal, "TELL", {"seen": "/seen"}, {"spotted": "/spotted"},
+        tell = wired(bench, EmitSignal, "TELL", {}, {"seen": "/seen"}, {"spotted": "/spotted"},
                      fields="label: parcel; agent: air", take="position: seen", fresh="true")
-        wait = wired(bench, WaitSignal, "WAIT", {"spotted": "/spotted"}, {"goal": "/goal"},
+        wait = wired(bench, WaitSignal, "WAIT", {}, {"spotted": "/spotted"}, {"goal": "/goal"},
                      field="label", equals="parcel")
-        go = wired(bench, NavigateTo, "GO", {"goal": "/goal"}, {}, nav=True, input="goal", standoff="0.3")
+        go = wired(bench, NavigateTo, "GO", {"nav": BenchNavigation(bench)}, {"goal": "/goal"}, {}, input="goal",
+                   standoff="0.3")
         ground: list[Behavior] = [wait, go]
         wait.start()
         tell_started = False
