@@ -191,10 +191,15 @@ class Localization(ProcessingPlugin):
             self.filter.settings = replace(self.filter.settings, max_range=longest)
         return self.filter
 
+    def _either(self, data: Mapping[str, Any], standard: str, raw: str) -> tuple[Any, Any]:
+        """The frame's ``standard`` and ``raw`` inputs, at most one of them given."""
+        one, other = data.get(standard), data.get(raw)
+        if one is not None and other is not None:
+            raise ValueError(f"{self.owner}: the frame has both {standard!r} and {raw!r}: give one")
+        return one, other
+
     def _odometry(self, data: Mapping[str, Any]) -> Array:
-        odom, raw = data.get("odom"), data.get("odometry")
-        if odom is not None and raw is not None:
-            raise ValueError(f"{self.owner}: the frame has both 'odom' and 'odometry': give one")
+        odom, raw = self._either(data, "odom", "odometry")
         if odom is not None:
             return odom_pose(odom, self.owner)
         if raw is None:
@@ -211,9 +216,7 @@ class Localization(ProcessingPlugin):
         return odometry
 
     def _sweep(self, data: Mapping[str, Any]) -> LaserBeams:
-        scan, raw = data.get("scan"), data.get("ranges")
-        if scan is not None and raw is not None:
-            raise ValueError(f"{self.owner}: the frame has both 'scan' and 'ranges': give one")
+        scan, raw = self._either(data, "scan", "ranges")
         if scan is not None:
             if not isinstance(scan, Mapping):
                 raise ValueError(f"{self.owner}: input 'scan' must be a LaserScan mapping, got {type(scan).__name__}")
