@@ -149,7 +149,8 @@ def test_history_depth_is_kept(transports: Make, network: Network) -> None:
 
 
 def test_deadline_missed_only_when_the_publisher_is_silent(transports: Make, network: Network) -> None:
-    a, b = pair(transports, network)
+    # a stall of 0.2 s on a loaded machine would otherwise declare the peer lost mid-stream (liveliness, not deadline)
+    a, b = pair(transports, dataclasses.replace(network, lost_after=100))
     events = Events(b)
     qos = TopicQoS("/t/deadline", deadline=1.0)
     subscription = b.subscribe(qos)
@@ -161,7 +162,7 @@ def test_deadline_missed_only_when_the_publisher_is_silent(transports: Make, net
     for i in range(1, 60):  # 1.2 s of samples every 20 ms: never a second without one
         publisher.publish(i)
         time.sleep(0.02)
-    assert subscription.wait(60, TIMEOUT)
+    assert subscription.wait(60, TIMEOUT), [(e.kind, e.detail) for e in events.items]
     assert len(events.of("deadline-missed", topic=qos.name)) == before
     assert wait_until(lambda: len(events.of("deadline-missed", topic=qos.name)) > before)
 
