@@ -93,7 +93,7 @@ def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
         (
             "controller.pdi",
             "ckm-plugins: no controller kind 'pdi' (registered: back-off, constant, diff-drive, diff-drive-odometry,"
-            " friction-feedforward, gpc, joint-trajectory, pan-tilt-position, pid, ramp-stop, relay)",
+            " friction-feedforward, gpc, joint-trajectory, pan-tilt-position, pid, ramp-stop, relay, twist-axes)",
         ),
     ],
 )
