@@ -100,7 +100,8 @@ class FlyTo(_FlightGoal):
     """Flies to the map point ``goal``, or ``altitude`` above the position received on its input."""
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("goal", "", "Map point to fly to: 'x y z' or 'x y z yaw' (m, m, m, rad); not with an input.", type=str),
+        P("goal", "", "Map point to fly to: 'x y z' or 'x y z yaw' (m, m, m, rad); not with an input.", type=str,
+          numbers=(3, 4), form="'x y z' or 'x y z yaw'"),
         P("altitude", None, "With an input: the height above the floor to fly at over the received position.",
           type=float, unit="m", above=0.0),
     )

@@ -69,7 +69,8 @@ SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose")
 _SPEC = Params(
     P("body", "", "Robot the channel belongs to (model plugins/sim/models/<body>.urdf)."),
     P("model", "", "URDF of the robot, relative to the configuration file (default: from body)."),
-    P("pose", "", "Initial pose of the robot: 'x y yaw' (m, m, rad); default the map's centre."),
+    P("pose", "", "Initial pose of the robot: 'x y yaw' (m, m, rad); default the map's centre.", numbers=(3,),
+      form="'x y yaw'"),
     P("world", "", "Configuration file whose <Environment> is built (default: the channel's own)."),
     P("textures", "", "RGB recognition model file whose textures paint the objects it names."),
     P("seed", 0, "Seed of the world and of this channel's noise."),

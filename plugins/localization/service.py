@@ -109,6 +109,7 @@ class Localization(ProcessingPlugin):
             "The laser's mount 'x y yaw' in the robot frame (m, m, rad): the URDF's laser "
             "joint. Beams are re-expressed from the robot's centre, so the estimate is the base's pose.",
             type=str,
+            numbers=(3,), form="'x y yaw'",
         ),
         P("laserHeight", REQUIRED, "Height of the scan plane above the floor: the map's objects it cuts (as "
           "amcl-navigation's).", type=float, unit="m", above=0.0),
@@ -134,7 +135,8 @@ class Localization(ProcessingPlugin):
             unit="m",
             above=0.0,
         ),
-        P("initial_pose", "", "'x y yaw' of the robot to start around, empty for global localization."),
+        P("initial_pose", "", "'x y yaw' of the robot to start around, empty for global localization.",
+          numbers=(3,), form="'x y yaw'"),
         P("kld", False, "MCL only: KLD sampling of the particle count."),
         P("seed", 0, "Random seed of the filter.", min=0),
     )
