@@ -244,10 +244,16 @@ class Localization(ProcessingPlugin):
             raise ValueError(f"{self.owner}: ranges must be a non-empty vector of numbers")
         return raw_beams(ranges, fov, max_range)
 
-    def process(self, data: Any, context: Context) -> dict[str, Any]:
-        """One filter update for the frame's odometry and scan; the PoseEstimate of the robot's centre."""
+    def process(self, data: Any, context: Context) -> dict[str, Any] | None:
+        """One filter update for the frame's odometry and scan; the PoseEstimate of the robot's centre.
+        None (nothing published) while the frame's odometry or scan has not arrived yet."""
         if not isinstance(data, Mapping):
             raise ValueError(f"{self.owner} expects a mapping: 'scan' and 'odom', or 'odometry' and 'ranges'")
+        names = set(map(str, data))
+        expected = names & {"odom", "odometry"} and names & {"scan", "ranges"}
+        if expected and any(all(data.get(n) is None for n in pair if n in names)
+                            for pair in (("odom", "odometry"), ("scan", "ranges"))):
+            return None
         odometry = self._odometry(data)
         sweep = self._sweep(data)
         ranges, bearings = robot_beams(sweep, self.laser, self.params["beams"])
