@@ -91,6 +91,7 @@ def test_initial_pose_starts_tracking_there(lab_run: Run) -> None:
     plugin = Localization(_resource("mcl", initial_pose=f"{x} {y} {yaw}").plugins[0])
     plugin.setup()
     message = plugin.process({"odometry": lab_run.odometry[0], "ranges": lab_run.scans[0]}, Context(0, 0.0))
+    assert message is not None
     assert np.hypot(message["x"] - x, message["y"] - y) < 0.3
     assert message["dispersion"] < 1.0
     with pytest.raises(ValueError, match="odometry"):
