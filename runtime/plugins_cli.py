@@ -3,12 +3,17 @@
 - ``ckm-plugins list [--long] [--json]``: one line per kind (``CATEGORY.KIND`` and its summary;
   ``--long``: with its Params and ports);
 - ``ckm-plugins show KIND…``: a kind's description, Params (type, default, unit, range, doc) and
-  ports, then the rest of its class's and its module's documentation; ``KIND`` is ``CATEGORY.KIND``
-  or a kind name registered in one category only;
+  ports, then the rest of its class's and its module's documentation and its reference (below);
+  ``KIND`` is ``CATEGORY.KIND`` or a kind name registered in one category only;
 - ``ckm-plugins markdown [--package NAME]``: the reference page ``docs/plugins.md`` is generated
   from (``--package ckm``: only the kinds this distribution registers);
 - ``ckm-plugins interfaces [--markdown]``: the standard service interfaces, each with the kinds that
   implement it and the behavior kinds that use it (``docs/interfaces.md`` is ``--markdown``).
+
+A kind's reference: a kind class may define a classmethod ``reference(form)`` returning a text
+generated from its own data (``form`` "text" for ``show``, "markdown" for the page), such as
+``hardware.sim``'s device table (D295); ``show`` prints it after the documentation, the page after
+the kind's ports.
 
 Exit codes: 0, or 1 when a kind is unknown or cannot be imported (one line on stderr, no traceback).
 """
@@ -57,6 +62,12 @@ def details(cls: type[Any]) -> str:
     return "\n\n".join(part.strip() for part in (*rest, about or "") if part.strip())
 
 
+def reference(cls: type[Any], form: str) -> str:
+    """A kind's generated reference in ``form`` ("text" or "markdown"); "" when it has none."""
+    made = getattr(cls, "reference", None)
+    return str(made(form)).strip() if callable(made) else ""
+
+
 def _params_rows(params: Params) -> list[dict[str, str]]:
     return [
         {
@@ -92,6 +103,7 @@ def describe(registry: Registry, category: str, kind: str) -> dict[str, Any]:
         "package": registry.origin(category, kind),
         "summary": summary(cls),
         "details": details(cls),
+        "reference": reference(cls, "text"),
         "params": _params_rows(params_of(cls)),
         "inputs": dict(ports.inputs),
         "outputs": dict(ports.outputs),
@@ -140,8 +152,9 @@ def _show(info: dict[str, Any], full: bool = False) -> str:
     lines += [f"  {line}" for line in _ports_text(ports)]
     lines += [f"  {line}" for line in _uses_text(info)]
     text = "\n".join(line for line in lines if line)
-    if full and info.get("details"):
-        text += "\n\n" + "\n".join(f"  {line}".rstrip() for line in info["details"].splitlines())
+    for part in ("details", "reference") if full else ():
+        if info.get(part):
+            text += "\n\n" + "\n".join(f"  {line}".rstrip() for line in info[part].splitlines())
     return text
 
 
@@ -179,8 +192,11 @@ def markdown(registry: Registry, package: str | None = None) -> str:
                     out.append("| " + " | ".join(_cell(c) for c in cells) + " |")
             else:
                 out.append("No Params.")
-            out += ["", "Ports: " + "; ".join(_ports_text(ports_of(registry.find(category, kind) or object))) + "."]
+            cls = registry.find(category, kind) or object
+            out += ["", "Ports: " + "; ".join(_ports_text(ports_of(cls))) + "."]
             out += [f"\n{line[0].upper()}{line[1:]}." for line in _uses_text(info)]
+            generated = reference(cls, "markdown")
+            out += ["", generated] if generated else []
     return "\n".join(out) + "\n"
 
 

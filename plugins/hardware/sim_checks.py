@@ -1,7 +1,10 @@
-"""The checks of a ``hardware.sim`` channel against the rest of its system (decision D288): its
-robot's URDF (the model file, the links and joints its Params name) and where the robot is spawned
-(inside the map, clear of avoided areas, objects and the other robots). ``SimBackend.problems`` runs
-them when ``verify`` gives it the system; at run time the world loads the model anyway.
+"""The checks of a ``hardware.sim`` channel: against the device table (decision D295: its kind,
+direction, size, mode and Params as the row of :data:`plugins.sim.device_table.DEVICES` serving it
+allows, so the documented table and the checks cannot disagree) and against the rest of its system
+(decision D288): its robot's URDF (the model file, the links and joints its Params name) and where the
+robot is spawned (inside the map, clear of avoided areas, objects and the other robots).
+``SimBackend.problems`` runs the first always, the others when ``verify`` gives it the system; at run
+time the world loads the model anyway.
 """
 
 from __future__ import annotations
@@ -18,7 +21,44 @@ from ckmconf.model import Environment, HWChannel, System
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import BOUNDS, MapModel
 from plugins.environment_file import environment_of
+from plugins.sim.device_table import find, selector_of, unserved
 from plugins.sim.urdf import MODELS, Kinematics
+
+PWM_MODE = ("a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
+            "or 'effort' (duty x the joint's effort limit); a position target needs kind 'analog'")
+
+
+def device_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]) -> list[tuple[str | None, Any, str]]:
+    """What the device table refuses in the channel (its Params read as ``v``, given as ``named``), as
+    ``(the Param it is about or None, the Param or the channel, message)``: no row for its kind,
+    direction and device, a size the device cannot give, a ``mode`` it does not take, a Param it does
+    not read, a Param it requires left out."""
+    if not selector_of(v):
+        return []  # SimBackend.problems asks for 'sensor' or 'joint'/'joints'
+    device = find(channel.kind, channel.direction, v)
+    if device is None:
+        return [(None, channel, unserved(channel.kind, channel.direction, v))]
+    found: list[tuple[str | None, Any, str]] = []
+    expected = device.size.count(v)
+    if expected is not None and channel.size != expected:
+        plural = "" if expected == 1 else "s"
+        found.append((None, channel, f"size is {channel.size}, its {device.name} device gives {expected} value{plural}"))
+    if "mode" in named and v["mode"] not in device.modes:
+        if channel.kind == "pwm":
+            message = PWM_MODE
+        elif device.modes:
+            message = f"Param 'mode' is {v['mode']!r}: the {device.name} device ({device.where}) takes {', '.join(device.modes)}"
+        else:
+            message = f"Param 'mode' chooses a joint quantity: the {device.name} device ({device.where}) takes none"
+        found.append(("mode", named["mode"], message))
+    for name, param in named.items():
+        if name not in device.params:
+            found.append((name, param, f"Param {name!r} is not read by the {device.name} device ({device.where}), "
+                                       f"which reads {', '.join(p for p in device.params if p != 'body')}"))
+    for name in device.required:
+        if name not in named:
+            found.append((name, channel, f"the {device.name} device ({device.where}) needs Param {name!r}"))
+    return found
 
 
 def system_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
