@@ -182,8 +182,9 @@ class SimBackend(Backend):
         # The device table's checks (D295), each Param reported once: a specific message above wins.
         told = {name for name, param in named.items() if any(target is param for target, _ in found)}
         told |= set(re.findall(r"Param '(\w+)'", " ".join(message for _, message in found)))
-        found.extend((target, message) for param, target, message in device_problems(channel, v, named)
-                     if param not in told)
+        found.extend(
+            (target, message) for param, target, message in device_problems(channel, v, named) if param not in told
+        )
         return found
 
     def __init__(self, channel: HWChannel, *, scope: PlantScope | None = None) -> None:

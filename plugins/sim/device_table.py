@@ -94,75 +94,176 @@ _CAMERA_OPTIONAL = ("link", "width", "height", "latency")
 
 
 def _joint_in(kind: str) -> Device:
-    return Device(kind, "in", "joint", f"{_READ_JOINT}, plus `noise` (s.d., raw)", _JOINT_READ, fixed(1),
-                  ("position", "velocity", "effort"), ("joint",), ("mode", "scale", "offset", "noise"))
+    return Device(
+        kind,
+        "in",
+        "joint",
+        f"{_READ_JOINT}, plus `noise` (s.d., raw)",
+        _JOINT_READ,
+        fixed(1),
+        ("position", "velocity", "effort"),
+        ("joint",),
+        ("mode", "scale", "offset", "noise"),
+    )
 
 
 def _joint_out(kind: str) -> Device:
     return Device(
-        kind, "out", "joint",
-        "drives the joint to a target q, its position, velocity or effort (`mode`); `mirror`: a second joint driven alike (a gripper's other "
-        "finger); `initial`: the raw value the joint(s) stand at when the robot is spawned (mode position)",
-        _JOINT_TARGET, fixed(1), ("position", "velocity", "effort"), ("joint",),
+        kind,
+        "out",
+        "joint",
+        "drives the joint to a target q, its position, velocity or effort (`mode`); `mirror`: a second joint "
+        "driven alike (a gripper's other finger); `initial`: the raw value the joint(s) stand at when the "
+        "robot is spawned (mode position)",
+        _JOINT_TARGET,
+        fixed(1),
+        ("position", "velocity", "effort"),
+        ("joint",),
         ("mode", "scale", "offset", "mirror", "initial"),
     )
 
 
 def _gripper(kind: str) -> Device:
     return Device(
-        kind, "out", "joint + grasp",
+        kind,
+        "out",
+        "joint + grasp",
         "a gripper: `joint` and `mirror` are its fingers (closing towards their lower limit); an object both "
         "touch while closing is held to link `grasp` until a command opens them or `holdForce` (N) is "
         "exceeded (D87, D187)",
-        _JOINT_TARGET, fixed(1), ("position",), ("joint", "mirror", "grasp"),
+        _JOINT_TARGET,
+        fixed(1),
+        ("position",),
+        ("joint", "mirror", "grasp"),
         ("mode", "scale", "offset", "holdForce", "initial"),
     )
 
 
 DEVICES: tuple[Device, ...] = (
-    Device("counter", "in", "joint", "a wheel encoder: the joint's speed in ticks/s, plus `noise` (s.d., ticks/s)",
-           (("speed", "ticks/s"),), fixed(1), (), ("joint", "ticksPerRev"), ("noise",)),
-    Device("pwm", "out", "joint",
-           "a motor: duty × the joint's effort limit (mode effort) or × `maxVelocity` (mode velocity); "
-           "`mirror`: a second joint driven alike",
-           (("duty", "−1 … 1"),), fixed(1), ("effort", "velocity"), ("joint",), ("mode", "maxVelocity", "mirror")),
+    Device(
+        "counter",
+        "in",
+        "joint",
+        "a wheel encoder: the joint's speed in ticks/s, plus `noise` (s.d., ticks/s)",
+        (("speed", "ticks/s"),),
+        fixed(1),
+        (),
+        ("joint", "ticksPerRev"),
+        ("noise",),
+    ),
+    Device(
+        "pwm",
+        "out",
+        "joint",
+        "a motor: duty × the joint's effort limit (mode effort) or × `maxVelocity` (mode velocity); "
+        "`mirror`: a second joint driven alike",
+        (("duty", "−1 … 1"),),
+        fixed(1),
+        ("effort", "velocity"),
+        ("joint",),
+        ("mode", "maxVelocity", "mirror"),
+    ),
     _joint_in("analog"),
     _joint_in("bus"),
-    Device("bus", "in", "joints", f"each named joint's value, in the order `joints` names them: {_READ_JOINT}",
-           _JOINT_READ, PER_JOINT, ("position", "velocity", "effort"), ("joints",),
-           ("mode", "scale", "offset", "noise")),
+    Device(
+        "bus",
+        "in",
+        "joints",
+        f"each named joint's value, in the order `joints` names them: {_READ_JOINT}",
+        _JOINT_READ,
+        PER_JOINT,
+        ("position", "velocity", "effort"),
+        ("joints",),
+        ("mode", "scale", "offset", "noise"),
+    ),
     _joint_out("analog"),
     _joint_out("bus"),
     _gripper("analog"),
     _gripper("bus"),
-    Device("digital", "in", "sensor=contact",
-           "a bumper: 1 while `link` touches an obstacle within `arc` (rad, centred ahead) of its heading "
-           "(the Kobuki's three cover the front half, π; D236)",
-           (("pressed", "0 or 1"),), fixed(1), (), ("sensor",), ("link", "arc")),
-    Device("stream", "in", "sensor=lidar",
-           "a planar lidar on `link`: one range per beam, counter-clockwise from −fov/2 to +fov/2, from "
-           "`rangeMin` up to the HWChannel's `max` (required: the lidar's range; a beam hitting nothing "
-           "reads it), plus `noise` (s.d., m)",
-           (("range", "m"),), ANY_SIZE, (), ("sensor", "fov"), ("link", "rangeMin", "noise")),
-    Device("stream", "in", "sensor=rgb",
-           "a colour camera on `link`: one `width`×`height` frame over `fov` (its horizontal field of view), "
-           "pixels row-major from the top left; `latency`: exposure to arrival (D246)",
-           (("red", "0–255"), ("green", "0–255"), ("blue", "0–255")), RGB_FRAME, (), _CAMERA, _CAMERA_OPTIONAL),
-    Device("stream", "in", "sensor=depth",
-           "a depth camera on `link`: one `width`×`height` frame over `fov`, row-major from the top left "
-           "(shares the render of an rgb channel of the same camera, D240)",
-           (("depth", "mm"),), DEPTH_FRAME, (), _CAMERA, _CAMERA_OPTIONAL),
-    Device("analog", "in", "sensor=imu",
-           "an IMU on `link`: angular velocity and linear acceleration (with gravity) in the link's frame, "
-           "plus `noise` (s.d., each value)",
-           (("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s"), ("ax", "m/s²"), ("ay", "m/s²"), ("az", "m/s²")),
-           fixed(6), (), ("sensor",), ("link", "noise")),
-    Device("analog", "in", "sensor=altimeter", "the height of `link` above the floor, plus `noise` (s.d., m)",
-           (("height", "m"),), fixed(1), (), ("sensor",), ("link", "noise")),
-    Device("bus", "in", "sensor=pose",
-           "the true planar pose of `link` on the map: ground truth for reports and benchmarks, as Gazebo's "
-           "p3d plugin gives; no robot has it, never noisy",
-           (("x", "m"), ("y", "m"), ("yaw", "rad")), fixed(3), (), ("sensor",), ("link",)),
+    Device(
+        "digital",
+        "in",
+        "sensor=contact",
+        "a bumper: 1 while `link` touches an obstacle within `arc` (rad, centred ahead) of its heading "
+        "(the Kobuki's three cover the front half, π; D236)",
+        (("pressed", "0 or 1"),),
+        fixed(1),
+        (),
+        ("sensor",),
+        ("link", "arc"),
+    ),
+    Device(
+        "stream",
+        "in",
+        "sensor=lidar",
+        "a planar lidar on `link`: one range per beam, counter-clockwise from −fov/2 to +fov/2, from "
+        "`rangeMin` up to the HWChannel's `max` (required: the lidar's range; a beam hitting nothing "
+        "reads it), plus `noise` (s.d., m)",
+        (("range", "m"),),
+        ANY_SIZE,
+        (),
+        ("sensor", "fov"),
+        ("link", "rangeMin", "noise"),
+    ),
+    Device(
+        "stream",
+        "in",
+        "sensor=rgb",
+        "a colour camera on `link`: one `width`×`height` frame over `fov` (its horizontal field of view), "
+        "pixels row-major from the top left; `latency`: exposure to arrival (D246)",
+        (("red", "0–255"), ("green", "0–255"), ("blue", "0–255")),
+        RGB_FRAME,
+        (),
+        _CAMERA,
+        _CAMERA_OPTIONAL,
+    ),
+    Device(
+        "stream",
+        "in",
+        "sensor=depth",
+        "a depth camera on `link`: one `width`×`height` frame over `fov`, row-major from the top left "
+        "(shares the render of an rgb channel of the same camera, D240)",
+        (("depth", "mm"),),
+        DEPTH_FRAME,
+        (),
+        _CAMERA,
+        _CAMERA_OPTIONAL,
+    ),
+    Device(
+        "analog",
+        "in",
+        "sensor=imu",
+        "an IMU on `link`: angular velocity and linear acceleration (with gravity) in the link's frame, "
+        "plus `noise` (s.d., each value)",
+        (("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s"), ("ax", "m/s²"), ("ay", "m/s²"), ("az", "m/s²")),
+        fixed(6),
+        (),
+        ("sensor",),
+        ("link", "noise"),
+    ),
+    Device(
+        "analog",
+        "in",
+        "sensor=altimeter",
+        "the height of `link` above the floor, plus `noise` (s.d., m)",
+        (("height", "m"),),
+        fixed(1),
+        (),
+        ("sensor",),
+        ("link", "noise"),
+    ),
+    Device(
+        "bus",
+        "in",
+        "sensor=pose",
+        "the true planar pose of `link` on the map: ground truth for reports and benchmarks, as Gazebo's "
+        "p3d plugin gives; no robot has it, never noisy",
+        (("x", "m"), ("y", "m"), ("yaw", "rad")),
+        fixed(3),
+        (),
+        ("sensor",),
+        ("link",),
+    ),
 )
 """Every device ``hardware.sim`` serves, one row per kind × direction × device."""
 
@@ -194,8 +295,10 @@ def unserved(kind: str, direction: str, values: Mapping[str, Any]) -> str:
     if not serving:
         sensors = ", ".join(sorted({d.name for d in DEVICES if d.selector.startswith("sensor=")}))
         return f"no sim device is {selector!r} (the sensors: {sensors}; or Param 'joint'/'joints')"
-    return (f"a {kind} {direction} channel cannot be the {selector} device: it is served as "
-            f"{' or '.join(serving)} (ckm-plugins show hardware.sim lists every device)")
+    return (
+        f"a {kind} {direction} channel cannot be the {selector} device: it is served as "
+        f"{' or '.join(serving)} (ckm-plugins show hardware.sim lists every device)"
+    )
 
 
 def _values_text(device: Device, unit: Callable[[str], str]) -> str:
@@ -253,13 +356,18 @@ def markdown() -> str:
             device.summary,
         ]
         out.append("| " + " | ".join(_cell(c) for c in cells) + " |")
-    out += ["", f"Every device also reads `body` (required: the robot) and "
-                f"{', '.join(f'`{p}`' for p in ROBOT_PARAMS[1:])}. {OUT_READ}"]
+    out += [
+        "",
+        f"Every device also reads `body` (required: the robot) and "
+        f"{', '.join(f'`{p}`' for p in ROBOT_PARAMS[1:])}. {OUT_READ}",
+    ]
     return "\n".join(out)
 
 
-BEGIN = ("<!-- BEGIN generated by python -m plugins.sim.device_table docs/simulation.md "
-         "(from plugins/sim/device_table.py): do not edit -->")
+BEGIN = (
+    "<!-- BEGIN generated by python -m plugins.sim.device_table docs/simulation.md "
+    "(from plugins/sim/device_table.py): do not edit -->"
+)
 END = "<!-- END generated device table -->"
 
 

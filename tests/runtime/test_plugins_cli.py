@@ -67,7 +67,8 @@ def test_show_prints_params_and_ports(capsys: pytest.CaptureFixture[str]) -> Non
 
 
 def test_show_prints_the_kind_s_whole_documentation_and_list_a_clean_summary(
-        capsys: pytest.CaptureFixture[str]) -> None:
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     """issue N: the sim device table is reachable from the command line, not only from the source."""
     assert main(["show", "hardware.sim"], builtin()) == 0
     out = capsys.readouterr().out

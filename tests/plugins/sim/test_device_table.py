@@ -15,7 +15,7 @@ from ckmconf.model import HWChannel, Param
 from plugins.hardware.sim import SENSORS, SimBackend
 from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
 from plugins.sim.device_table import DEVICES, ROBOT_PARAMS, Device, find, selector_of
-from plugins.sim.devices import KINDS, ChannelDevice, SimWorld, Spec, to_value
+from plugins.sim.devices import KINDS, ChannelDevice, SimWorld, Spec
 from runtime.kernel.interfaces import read_params
 from tests.conftest import REPO
 
@@ -115,8 +115,11 @@ def test_every_row_is_a_device_whose_reads_give_its_values() -> None:
         assert count(value) % len(device.values) == 0, device.where
         if device.direction == "out":
             assert value == written[device.where], device.where  # an out channel reads back what was written
-    named = {d.where: dict(zip((n for n, _ in d.values), reads[d.where], strict=False)) for d in DEVICES
-             if isinstance(reads[d.where], tuple)}
+    named: dict[str, dict[str, float]] = {}  # a tuple read by the names of the row's values
+    for device in DEVICES:
+        value = reads[device.where]
+        if isinstance(value, tuple) and not device.size.each:  # one group of values: each has its name
+            named[device.where] = dict(zip((name for name, _ in device.values), value, strict=True))
     pose = named["bus in, sensor=pose"]
     assert (pose["x"], pose["y"], pose["yaw"]) == pytest.approx((3.0, 1.0, 0.5), abs=0.05)
     assert named["analog in, sensor=imu"]["az"] == pytest.approx(9.81, abs=0.3)  # gravity, m/s²
@@ -127,7 +130,7 @@ def test_every_row_is_a_device_whose_reads_give_its_values() -> None:
     assert isinstance(speed, float) and abs(speed) < 1.0  # ticks/s: the wheel is held at duty 0
     assert reads["digital in, sensor=contact"] in (0.0, 1.0)
     ranges = reads["stream in, sensor=lidar"]
-    assert isinstance(ranges, np.ndarray) and 0.0 < ranges.min() and ranges.max() <= 5.0  # m, up to max
+    assert isinstance(ranges, np.ndarray) and ranges.min() > 0.0 and ranges.max() <= 5.0  # m, up to max
 
 
 def _selectors() -> dict[str, dict[str, str]]:
@@ -168,17 +171,31 @@ def test_the_checks_apply_the_rows_sizes_modes_and_params() -> None:
             found = messages(example(device, mode=mode))
             assert (found == []) == (mode in device.modes), (device.where, mode, found)
         for name in sorted(every - set(device.params) - {"mode"}):
-            value = {"noise": "0.1", "holdForce": "5", "ticksPerRev": "10", "fov": "1", "initial": "0",
-                     "maxVelocity": "2", "sensor": "imu", "arc": "1", "width": "4", "height": "4",
-                     "rangeMin": "0.1", "latency": "0.1", "scale": "2", "offset": "1"}.get(name, "x")
+            value = {
+                "noise": "0.1",
+                "holdForce": "5",
+                "ticksPerRev": "10",
+                "fov": "1",
+                "initial": "0",
+                "maxVelocity": "2",
+                "sensor": "imu",
+                "arc": "1",
+                "width": "4",
+                "height": "4",
+                "rangeMin": "0.1",
+                "latency": "0.1",
+                "scale": "2",
+                "offset": "1",
+            }.get(name, "x")
             found = messages(example(device, **{name: value}))
             assert found, (device.where, name)  # a Param the device does not read is refused
         for name in device.required:
             if name in ("sensor", "joint", "joints", "grasp"):
                 continue  # these choose the device: without them it is another row
             _, _, params = EXAMPLES[device.where]
-            left_out = record("c", device.kind, device.direction, size, top,
-                              {k: v for k, v in params.items() if k != name})
+            left_out = record(
+                "c", device.kind, device.direction, size, top, {k: v for k, v in params.items() if k != name}
+            )
             assert any(f"Param {name!r}" in m for m in messages(left_out)), (device.where, name)
 
 
