@@ -88,181 +88,173 @@ class Device:
 
 _JOINT_READ = (("q", "raw = q / scale + offset"),)
 _JOINT_TARGET = (("q target", "raw; q = (raw − offset) × scale"),)
+_JOINT_MODES = ("position", "velocity", "effort")
 _READ_JOINT = "q, the joint's position, velocity or effort (`mode`; rad, rad/s, N·m, or m, m/s, N if prismatic)"
-_CAMERA = ("sensor", "fov")
 _CAMERA_OPTIONAL = ("link", "width", "height", "latency")
 
 
 def _joint_in(kind: str) -> Device:
     return Device(
-        kind,
-        "in",
-        "joint",
-        f"{_READ_JOINT}, plus `noise` (s.d., raw)",
-        _JOINT_READ,
-        fixed(1),
-        ("position", "velocity", "effort"),
-        ("joint",),
-        ("mode", "scale", "offset", "noise"),
+        kind=kind,
+        direction="in",
+        selector="joint",
+        summary=f"{_READ_JOINT}, plus `noise` (s.d., raw)",
+        values=_JOINT_READ,
+        size=fixed(1),
+        modes=_JOINT_MODES,
+        required=("joint",),
+        optional=("mode", "scale", "offset", "noise"),
     )
 
 
 def _joint_out(kind: str) -> Device:
     return Device(
-        kind,
-        "out",
-        "joint",
-        "drives the joint to a target q, its position, velocity or effort (`mode`); `mirror`: a second joint "
-        "driven alike (a gripper's other finger); `initial`: the raw value the joint(s) stand at when the "
-        "robot is spawned (mode position)",
-        _JOINT_TARGET,
-        fixed(1),
-        ("position", "velocity", "effort"),
-        ("joint",),
-        ("mode", "scale", "offset", "mirror", "initial"),
+        kind=kind,
+        direction="out",
+        selector="joint",
+        summary="drives the joint to a target q, its position, velocity or effort (`mode`); `mirror`: a second "
+        "joint driven alike (a gripper's other finger); `initial`: the raw value the joint(s) stand at when "
+        "the robot is spawned (mode position)",
+        values=_JOINT_TARGET,
+        size=fixed(1),
+        modes=_JOINT_MODES,
+        required=("joint",),
+        optional=("mode", "scale", "offset", "mirror", "initial"),
     )
 
 
 def _gripper(kind: str) -> Device:
     return Device(
-        kind,
-        "out",
-        "joint + grasp",
-        "a gripper: `joint` and `mirror` are its fingers (closing towards their lower limit); an object both "
-        "touch while closing is held to link `grasp` until a command opens them or `holdForce` (N) is "
+        kind=kind,
+        direction="out",
+        selector="joint + grasp",
+        summary="a gripper: `joint` and `mirror` are its fingers (closing towards their lower limit); an object "
+        "both touch while closing is held to link `grasp` until a command opens them or `holdForce` (N) is "
         "exceeded (D87, D187)",
-        _JOINT_TARGET,
-        fixed(1),
-        ("position",),
-        ("joint", "mirror", "grasp"),
-        ("mode", "scale", "offset", "holdForce", "initial"),
+        values=_JOINT_TARGET,
+        size=fixed(1),
+        modes=("position",),
+        required=("joint", "mirror", "grasp"),
+        optional=("mode", "scale", "offset", "holdForce", "initial"),
     )
 
 
 DEVICES: tuple[Device, ...] = (
     Device(
-        "counter",
-        "in",
-        "joint",
-        "a wheel encoder: the joint's speed in ticks/s, plus `noise` (s.d., ticks/s)",
-        (("speed", "ticks/s"),),
-        fixed(1),
-        (),
-        ("joint", "ticksPerRev"),
-        ("noise",),
+        kind="counter",
+        direction="in",
+        selector="joint",
+        summary="a wheel encoder: the joint's speed in ticks/s, plus `noise` (s.d., ticks/s)",
+        values=(("speed", "ticks/s"),),
+        size=fixed(1),
+        required=("joint", "ticksPerRev"),
+        optional=("noise",),
     ),
     Device(
-        "pwm",
-        "out",
-        "joint",
-        "a motor: duty × the joint's effort limit (mode effort) or × `maxVelocity` (mode velocity); "
+        kind="pwm",
+        direction="out",
+        selector="joint",
+        summary="a motor: duty × the joint's effort limit (mode effort) or × `maxVelocity` (mode velocity); "
         "`mirror`: a second joint driven alike",
-        (("duty", "−1 … 1"),),
-        fixed(1),
-        ("effort", "velocity"),
-        ("joint",),
-        ("mode", "maxVelocity", "mirror"),
+        values=(("duty", "−1 … 1"),),
+        size=fixed(1),
+        modes=("effort", "velocity"),  # effort first: a pwm channel without `mode` drives the effort
+        required=("joint",),
+        optional=("mode", "maxVelocity", "mirror"),
     ),
     _joint_in("analog"),
     _joint_in("bus"),
     Device(
-        "bus",
-        "in",
-        "joints",
-        f"each named joint's value, in the order `joints` names them: {_READ_JOINT}",
-        _JOINT_READ,
-        PER_JOINT,
-        ("position", "velocity", "effort"),
-        ("joints",),
-        ("mode", "scale", "offset", "noise"),
+        kind="bus",
+        direction="in",
+        selector="joints",
+        summary=f"each named joint's value, in the order `joints` names them: {_READ_JOINT}",
+        values=_JOINT_READ,
+        size=PER_JOINT,
+        modes=_JOINT_MODES,
+        required=("joints",),
+        optional=("mode", "scale", "offset", "noise"),
     ),
     _joint_out("analog"),
     _joint_out("bus"),
     _gripper("analog"),
     _gripper("bus"),
     Device(
-        "digital",
-        "in",
-        "sensor=contact",
-        "a bumper: 1 while `link` touches an obstacle within `arc` (rad, centred ahead) of its heading "
+        kind="digital",
+        direction="in",
+        selector="sensor=contact",
+        summary="a bumper: 1 while `link` touches an obstacle within `arc` (rad, centred ahead) of its heading "
         "(the Kobuki's three cover the front half, π; D236)",
-        (("pressed", "0 or 1"),),
-        fixed(1),
-        (),
-        ("sensor",),
-        ("link", "arc"),
+        values=(("pressed", "0 or 1"),),
+        size=fixed(1),
+        required=("sensor",),
+        optional=("link", "arc"),
     ),
     Device(
-        "stream",
-        "in",
-        "sensor=lidar",
-        "a planar lidar on `link`: one range per beam, counter-clockwise from −fov/2 to +fov/2, from "
-        "`rangeMin` up to the HWChannel's `max` (required: the lidar's range; a beam hitting nothing "
-        "reads it), plus `noise` (s.d., m)",
-        (("range", "m"),),
-        ANY_SIZE,
-        (),
-        ("sensor", "fov"),
-        ("link", "rangeMin", "noise"),
+        kind="stream",
+        direction="in",
+        selector="sensor=lidar",
+        summary="a planar lidar on `link`: one range per beam, counter-clockwise from −fov/2 to +fov/2, from "
+        "`rangeMin` up to the HWChannel's `max` (required: the lidar's range; a beam hitting nothing reads it), "
+        "plus `noise` (s.d., m)",
+        values=(("range", "m"),),
+        size=ANY_SIZE,
+        required=("sensor", "fov"),
+        optional=("link", "rangeMin", "noise"),
     ),
     Device(
-        "stream",
-        "in",
-        "sensor=rgb",
-        "a colour camera on `link`: one `width`×`height` frame over `fov` (its horizontal field of view), "
-        "pixels row-major from the top left; `latency`: exposure to arrival (D246)",
-        (("red", "0–255"), ("green", "0–255"), ("blue", "0–255")),
-        RGB_FRAME,
-        (),
-        _CAMERA,
-        _CAMERA_OPTIONAL,
+        kind="stream",
+        direction="in",
+        selector="sensor=rgb",
+        summary="a colour camera on `link`: one `width`×`height` frame over `fov` (its horizontal field of "
+        "view), pixels row-major from the top left; `latency`: exposure to arrival (D246)",
+        values=(("red", "0–255"), ("green", "0–255"), ("blue", "0–255")),
+        size=RGB_FRAME,
+        required=("sensor", "fov"),
+        optional=_CAMERA_OPTIONAL,
     ),
     Device(
-        "stream",
-        "in",
-        "sensor=depth",
-        "a depth camera on `link`: one `width`×`height` frame over `fov`, row-major from the top left "
+        kind="stream",
+        direction="in",
+        selector="sensor=depth",
+        summary="a depth camera on `link`: one `width`×`height` frame over `fov`, row-major from the top left "
         "(shares the render of an rgb channel of the same camera, D240)",
-        (("depth", "mm"),),
-        DEPTH_FRAME,
-        (),
-        _CAMERA,
-        _CAMERA_OPTIONAL,
+        values=(("depth", "mm"),),
+        size=DEPTH_FRAME,
+        required=("sensor", "fov"),
+        optional=_CAMERA_OPTIONAL,
     ),
     Device(
-        "analog",
-        "in",
-        "sensor=imu",
-        "an IMU on `link`: angular velocity and linear acceleration (with gravity) in the link's frame, "
+        kind="analog",
+        direction="in",
+        selector="sensor=imu",
+        summary="an IMU on `link`: angular velocity and linear acceleration (with gravity) in the link's frame, "
         "plus `noise` (s.d., each value)",
-        (("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s"), ("ax", "m/s²"), ("ay", "m/s²"), ("az", "m/s²")),
-        fixed(6),
-        (),
-        ("sensor",),
-        ("link", "noise"),
+        values=(("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s"), ("ax", "m/s²"), ("ay", "m/s²"), ("az", "m/s²")),
+        size=fixed(6),
+        required=("sensor",),
+        optional=("link", "noise"),
     ),
     Device(
-        "analog",
-        "in",
-        "sensor=altimeter",
-        "the height of `link` above the floor, plus `noise` (s.d., m)",
-        (("height", "m"),),
-        fixed(1),
-        (),
-        ("sensor",),
-        ("link", "noise"),
+        kind="analog",
+        direction="in",
+        selector="sensor=altimeter",
+        summary="the height of `link` above the floor, plus `noise` (s.d., m)",
+        values=(("height", "m"),),
+        size=fixed(1),
+        required=("sensor",),
+        optional=("link", "noise"),
     ),
     Device(
-        "bus",
-        "in",
-        "sensor=pose",
-        "the true planar pose of `link` on the map: ground truth for reports and benchmarks, as Gazebo's "
+        kind="bus",
+        direction="in",
+        selector="sensor=pose",
+        summary="the true planar pose of `link` on the map: ground truth for reports and benchmarks, as Gazebo's "
         "p3d plugin gives; no robot has it, never noisy",
-        (("x", "m"), ("y", "m"), ("yaw", "rad")),
-        fixed(3),
-        (),
-        ("sensor",),
-        ("link",),
+        values=(("x", "m"), ("y", "m"), ("yaw", "rad")),
+        size=fixed(3),
+        required=("sensor",),
+        optional=("link",),
     ),
 )
 """Every device ``hardware.sim`` serves, one row per kind × direction × device."""
