@@ -22,8 +22,8 @@ Docking: a move to the staging pose (``staging`` m short of the docked pose alon
 from a pose estimate taken after that move, a straight final move onto the docked pose; docked when
 that move is done and, with ``contact``, contact is made within ``contactTimeout`` s. A failed move, a
 pose estimate more than ``tolerance`` m off the docked pose (the first estimate after the final
-move's end, when the service has no ``contact`` input), or no contact, retries from staging, ``retries`` times, then fails
-with the reason. Undocking: a straight move ``staging`` m back. A goal with no pose estimate yet
+move's end, when the service has no ``contact`` input), or no contact, retries from staging,
+``retries`` times, then fails with the reason. Undocking: a straight move ``staging`` m back. A goal with no pose estimate yet
 waits for one.
 """
 

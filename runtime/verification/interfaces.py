@@ -217,7 +217,8 @@ STANDARD: dict[str, Interface] = {
                 Port("pose", "the base's pose estimate on the map (a navigation or localization `pose`)",
                      (POSE, f"{CKM}PoseEstimate", POSE_STAMPED), ("pose.x", "pose.y", "pose.yaw")),
                 Port("move_status", "the base-drive service's `move_status`, for the moves the docking service "
-                                    "sends on its `move_goal` Output", (f"{CKM}MoveStatus",), ("id", "state", "reason")),
+                                    "sends on its `move_goal` Output", (f"{CKM}MoveStatus",),
+                     ("id", "state", "reason")),
             ),
             outputs=(
                 Port("move_goal", "relative moves `{id, frame: robot, x, y, yaw}` for the base-drive service's "

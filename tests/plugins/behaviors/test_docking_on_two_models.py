@@ -70,7 +70,8 @@ def states(bench: Bench, dock: Behavior) -> list[Behavior]:
             wired(bench, WaitGoal, "WAIT", {"nav": BenchNavigation(bench)}), dock]
 
 
-def docker(bench: Bench, cls: type[Behavior] = DockRobot, **params: str) -> Behavior:
+def docker(bench: Bench, cls: type[Behavior] = DockRobot, dock: str = "", pose: str = "") -> Behavior:
+    params = {k: v for k, v in (("dock", dock), ("pose", pose)) if v}
     return wired(bench, cls, cls.__name__.upper(), {"dock": BenchDocking(bench)}, {},
                  {"dock_goal": "/dock/goal"}, **params)
 
