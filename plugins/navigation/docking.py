@@ -23,8 +23,8 @@ from a pose estimate taken after that move, a straight final move onto the docke
 that move is done and, with ``contact``, contact is made within ``contactTimeout`` s. A failed move, a
 pose estimate more than ``tolerance`` m off the docked pose (the first estimate after the final
 move's end, when the service has no ``contact`` input), or no contact, retries from staging,
-``retries`` times, then fails with the reason. Undocking: a straight move ``staging`` m back. A goal with no pose estimate yet
-waits for one.
+``retries`` times, then fails with the reason. Undocking: a straight move ``staging`` m back. A goal
+with no pose estimate yet waits for one.
 """
 
 from __future__ import annotations

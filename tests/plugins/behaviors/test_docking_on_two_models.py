@@ -73,7 +73,7 @@ def states(bench: Bench, dock: Behavior) -> list[Behavior]:
 def docker(bench: Bench, cls: type[Behavior] = DockRobot, dock: str = "", pose: str = "") -> Behavior:
     params = {k: v for k, v in (("dock", dock), ("pose", pose)) if v}
     return wired(bench, cls, cls.__name__.upper(), {"dock": BenchDocking(bench)}, {},
-                 {"dock_goal": "/dock/goal"}, **params)
+                 {"dock_goal": "/dock/goal"}, configure=None, **params)
 
 
 @MODELS
