@@ -39,11 +39,8 @@ def check_environment(system: System, report: Reporter) -> None:
             report.error(region, f"{region.TAG} {region.name!r} reaches outside the map bounds")
     for avoided in env.avoided:
         if avoided.height is not None and avoided.height > bounds.height + 1e-9:
-            report.error(
-                avoided,
-                f"AvoidedArea {avoided.name!r} is {avoided.height:g} m tall, above the map height ({bounds.height:g} m)",
-                "height",
-            )
+            tall = f"{avoided.height:g} m tall, above the map height ({bounds.height:g} m)"
+            report.error(avoided, f"AvoidedArea {avoided.name!r} is {tall}", "height")
     missions = [m.name for m in system.missions]
     for entry in env.semantics:
         if entry.dynamic == "static" and entry.max_speed:

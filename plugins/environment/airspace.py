@@ -91,7 +91,9 @@ class Airspace:
     def _under(self, swept: BaseGeometry) -> list[Solid]:
         return [self.solids[int(i)] for i in self._tree.query(swept, predicate="intersects")]
 
-    def highest(self, points: Sequence[XY], *, radius: float = 0.0, below: float = math.inf) -> tuple[float, str | None]:
+    def highest(
+        self, points: Sequence[XY], *, radius: float = 0.0, below: float = math.inf
+    ) -> tuple[float, str | None]:
         """The top (m) of the highest solid under a point or path (``radius``: the body's), and its name.
 
         Only solids starting below ``below`` count (a table top over a low flight is not under it);
@@ -113,7 +115,7 @@ class Airspace:
         solid blocks it when their height ranges overlap and their floor shapes meet along the way.
         """
         if half_height < 0 or not math.isfinite(altitude + half_height):
-            raise ValueError(f"altitude and half height must be finite, half height zero or more: {altitude}, {half_height}")
+            raise ValueError(f"altitude {altitude} and half height {half_height}: finite, the half height zero or more")
         low, high = altitude - half_height, altitude + half_height
         swept = self._swept([a, b], radius)
         hits: list[tuple[float, str]] = []

@@ -67,12 +67,14 @@ class MapObject:
 
     @property
     def zmin(self) -> float:
-        """The lowest height (m) of the parts (§6.1.1.1): ``-inf`` with a 2D atom of no height, the ``<Pose>`` z with none."""
+        """The lowest height (m) of the parts (§6.1.1.1): ``-inf`` with a 2D atom of no height, the ``<Pose>`` z
+        with none."""
         return min((p.zmin for p in self.parts), default=self.z)
 
     @property
     def zmax(self) -> float:
-        """The highest height (m) of the parts (§6.1.1.1): ``inf`` with a 2D atom of no height, the ``<Pose>`` z with none."""
+        """The highest height (m) of the parts (§6.1.1.1): ``inf`` with a 2D atom of no height, the ``<Pose>`` z
+        with none."""
         return max((p.zmax for p in self.parts), default=self.z)
 
 

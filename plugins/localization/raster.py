@@ -56,9 +56,8 @@ def object_shapes(obj: EnvObject, scan_height: float) -> list[BaseGeometry]:
     atoms: list[Atom2D] = []
     z = obj.pose.z  # heights are measured from the object's <Pose> z, as the simulated world places them
     if isinstance(geometry, Geometry2D):
-        if geometry.height is None:  # projected onto the floor: a wall at every height (§6.1.1.1)
-            atoms = list(geometry.atoms)
-        elif geometry.height > 0 and z <= scan_height <= z + geometry.height:  # a marking (0) is no wall
+        # no height: projected onto the floor, a wall at every height (§6.1.1.1); a marking (0) is no wall
+        if geometry.height is None or (geometry.height > 0 and z <= scan_height <= z + geometry.height):
             atoms = list(geometry.atoms)
     else:
         prisms = (geometry.prism,) if isinstance(geometry, Geometry25D) else geometry.prisms

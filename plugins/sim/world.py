@@ -7,8 +7,9 @@
 - Map bounds → floor and four walls; ``<AvoidedArea>`` → obstacles its ``height`` tall (the map's
   when absent); ``<Object>`` prisms → static bodies, except objects whose semantic tag affords
   ``pick``, which are dynamic (they can be grasped and carried); a 2D-only object stands its
-  ``<Geometry2D height>`` tall (``FOOTPRINT_HEIGHT`` when absent), and at ``height="0"`` is a
-  marking: a visual-only slab ``MARKING_THICKNESS`` thick that the cameras see and nothing hits (D294).
+  ``<Geometry2D height>`` tall (``FOOTPRINT_HEIGHT`` of ``ckmconf.model.environment``, 0.75 m, when
+  absent), and at ``height="0"`` is a marking: a visual-only slab ``MARKING_THICKNESS`` thick that
+  the cameras see and nothing hits (D294).
 - A textured 2.5D cylinder or box wears a texture skin (:mod:`plugins.sim.skins`, D145) as its
   visual shape: its print upright at its own aspect, which the RGB recognition knows; its collision
   shape is the plain prism's.
@@ -27,7 +28,6 @@ import pybullet as p
 
 from ckmconf.model import Environment
 from ckmconf.model.environment import (
-    FOOTPRINT_HEIGHT,
     Circle,
     EnvObject,
     Geometry2D,

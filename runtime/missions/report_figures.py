@@ -2,7 +2,8 @@
 
 - :func:`map_png`: Fig. 7.16 — the ``<Environment>`` of the configuration (schemas/environment.xsd,
   §6.1: map bounds as walls, areas, avoided areas, object footprints, a flat marking (D294) as a pale
-  dashed outline) drawn from the ``ckmconf`` records, with the trajectories, the zoom-map areas and where the target was recognised.
+  dashed outline) drawn from the ``ckmconf`` records, with the trajectories, the zoom-map areas and
+  where the target was recognised.
 - :func:`reliability_png`: Fig. 7.19 — the target's recognition reliability against time (every
   recognition topic) and against its distance to the robot (the fused result).
 - :func:`image_png`: a camera frame (Fig. 7.22, 7.24).
