@@ -5,7 +5,6 @@ the map's height."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
 import pybullet as p
@@ -38,15 +37,25 @@ def square(name: str, x0: float, y0: float, x1: float, y1: float, height: float 
 
 def flat(name: str, x: float, y: float, height: float | None, size: float = 0.8) -> EnvObject:
     """A red square object of ``size`` m at ``(x, y)``, ``height`` m tall (None: no height given)."""
-    return EnvObject(name=name, tag="mark", texture="red", pose=Pose(x=x, y=y),
-                     geometry=Geometry2D(height=height, atoms=(Rectangle(width=size, depth=size),)))
+    return EnvObject(
+        name=name,
+        tag="mark",
+        texture="red",
+        pose=Pose(x=x, y=y),
+        geometry=Geometry2D(height=height, atoms=(Rectangle(width=size, depth=size),)),
+    )
 
 
 def room(*objects: EnvObject, avoided: tuple[AvoidedArea, ...] = ()) -> Environment:
     """A 6 × 4 m room, 4 m tall, with red objects of tag ``mark``."""
-    return Environment(name="heights", map=MapBounds(xmin=0.0, ymin=0.0, xmax=6.0, ymax=4.0, height=4.0),
-                       avoided=avoided, textures=(Texture(name="red", color="#ff0000"),),
-                       semantics=(Semantic(tag="mark"),), objects=objects)
+    return Environment(
+        name="heights",
+        map=MapBounds(xmin=0.0, ymin=0.0, xmax=6.0, ymax=4.0, height=4.0),
+        avoided=avoided,
+        textures=(Texture(name="red", color="#ff0000"),),
+        semantics=(Semantic(tag="mark"),),
+        objects=objects,
+    )
 
 
 @pytest.fixture
@@ -61,7 +70,7 @@ def test_a_marking_is_a_thin_visual_slab_without_collision(marked: World) -> Non
     pad = marked.objects["pad"]
     assert p.getCollisionShapeData(pad, -1, physicsClientId=marked.client) == ()
     low, high = p.getAABB(pad, physicsClientId=marked.client)
-    assert high[2] == pytest.approx(MARKING_THICKNESS / 2)  # a visual-only body's box is its origin, mid-slab
+    assert low == high and high[2] == pytest.approx(MARKING_THICKNESS / 2)  # no collision box: its origin, mid-slab
     visual = p.getVisualShapeData(pad, physicsClientId=marked.client)[0]
     assert visual[3][2] == pytest.approx(MARKING_THICKNESS)  # the box's extents: 0.8 × 0.8 × 4 mm
     assert visual[3][:2] == pytest.approx((0.8, 0.8))
@@ -124,8 +133,13 @@ def test_the_robot_drives_over_a_marking_without_rising(marked: World) -> None:
 def _fly(world: World, height: float, seconds: float = 2.0) -> tuple[float, float, float]:
     """A 0.1 m ball sent along +x at 1 m/s at ``height`` from x = 1 towards the area at x 2.5..3.5."""
     cid = world.client
-    ball = p.createMultiBody(1.0, p.createCollisionShape(p.GEOM_SPHERE, radius=0.1, physicsClientId=cid), -1,
-                             [1.0, 2.0, height], physicsClientId=cid)
+    ball = p.createMultiBody(
+        1.0,
+        p.createCollisionShape(p.GEOM_SPHERE, radius=0.1, physicsClientId=cid),
+        -1,
+        [1.0, 2.0, height],
+        physicsClientId=cid,
+    )
     p.resetBaseVelocity(ball, [1.0, 0.0, 0.0], physicsClientId=cid)
     world.step(round(seconds * 240))
     position, _ = world.pose(ball)
@@ -135,7 +149,7 @@ def _fly(world: World, height: float, seconds: float = 2.0) -> tuple[float, floa
 def test_an_avoided_area_2_m_tall_lets_a_body_at_3_m_pass_and_stops_one_at_1_m() -> None:
     with World(room(avoided=(square("rack", 2.5, 1.0, 3.5, 3.0, height=2.0),)), seed=3) as world:
         low, high = p.getAABB(world.objects["rack"], physicsClientId=world.client)
-        assert high[2] == pytest.approx(2.0, abs=0.01)
+        assert (low[2], high[2]) == (pytest.approx(0.0, abs=0.01), pytest.approx(2.0, abs=0.01))
         p.setGravity(0, 0, 0, physicsClientId=world.client)  # a hovering body: only the geometry decides
         above = _fly(world, 3.0, seconds=3.5)
         below = _fly(world, 1.0, seconds=3.5)
@@ -146,7 +160,6 @@ def test_an_avoided_area_2_m_tall_lets_a_body_at_3_m_pass_and_stops_one_at_1_m()
 def test_an_avoided_area_without_height_stands_the_map_height() -> None:
     with World(room(avoided=(square("column", 2.5, 1.0, 3.5, 3.0),)), seed=3) as world:
         low, high = p.getAABB(world.objects["column"], physicsClientId=world.client)
-        assert high[2] == pytest.approx(4.0, abs=0.01)
+        assert (low[2], high[2]) == (pytest.approx(0.0, abs=0.01), pytest.approx(4.0, abs=0.01))
         p.setGravity(0, 0, 0, physicsClientId=world.client)
-        assert _fly(world, 3.0, seconds=3.5)[0] < 2.5
-        assert math.isfinite(low[2])
+        assert _fly(world, 3.0, seconds=3.5)[0] < 2.5  # a wall to the ceiling, as before heights
