@@ -69,9 +69,9 @@ def is_marking(obj: EnvObject) -> bool:
 
 def _footprint(obj: EnvObject, atom: CircleRecord | RectangleRecord | PolygonRecord, color: str) -> Circle | Polygon:
     # a marking: a pale fill in a dashed outline, under the obstacles (a robot's track crosses it)
-    style = {"facecolor": color, "edgecolor": "black", "lw": 0.5}
+    style = {"facecolor": color, "edgecolor": "black", "lw": 0.5, "zorder": 1.5}
     if is_marking(obj):
-        style = {"facecolor": color, "edgecolor": "#555555", "lw": 0.8, "ls": "--", "alpha": 0.45, "zorder": 1}
+        style = {"facecolor": color, "edgecolor": "#555555", "lw": 0.8, "ls": "--", "alpha": 0.45, "zorder": 1.2}
     if isinstance(atom, CircleRecord):
         return Circle(_placed(obj, atom.x, atom.y), atom.radius, **style)
     if isinstance(atom, RectangleRecord):
