@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import shapely
+import shapely.ops
 from shapely.geometry import LineString, Point
 from shapely.geometry.base import BaseGeometry
 
@@ -34,6 +35,7 @@ FLOOR = "floor"
 """The name a body flying lower than its own half height meets."""
 
 XY = tuple[float, float]
+XYZ = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -109,27 +111,58 @@ class Airspace:
         return best
 
     def blockers(self, a: XY, b: XY, altitude: float, *, radius: float = 0.0, half_height: float = 0.0) -> list[str]:
-        """What a body flying straight from ``a`` to ``b`` at ``altitude`` meets, in the order met.
-
-        The body is a cylinder of ``radius`` reaching ``half_height`` above and below ``altitude``; a
-        solid blocks it when their height ranges overlap and their floor shapes meet along the way.
-        """
-        if half_height < 0 or not math.isfinite(altitude + half_height):
-            raise ValueError(f"altitude {altitude} and half height {half_height}: finite, the half height zero or more")
-        low, high = altitude - half_height, altitude + half_height
-        swept = self._swept([a, b], radius)
-        hits: list[tuple[float, str]] = []
-        if low < -1e-9:
-            hits.append((0.0, FLOOR))
-        if high > self.height + 1e-9 or not self.outline.contains(swept):
-            hits.append((0.0, BOUNDS))
-        line = LineString([a, b]) if a != b else Point(a)
-        for solid in self._under(swept):
-            if solid.zmin < high and solid.zmax > low:
-                hits.append((line.project(solid.floor.centroid) if a != b else 0.0, solid.name))
-        names = [name for _, name in sorted(hits)]
-        return list(dict.fromkeys(names))  # a multi-prism object once
+        """What a body flying straight from ``a`` to ``b`` at ``altitude`` meets, in the order met
+        (:meth:`path_blockers` at one altitude)."""
+        return self.path_blockers((*a, altitude), (*b, altitude), radius=radius, half_height=half_height)
 
     def clears(self, a: XY, b: XY, altitude: float, *, radius: float = 0.0, half_height: float = 0.0) -> bool:
         """Whether a straight flight from ``a`` to ``b`` at ``altitude`` meets nothing (:meth:`blockers`)."""
         return not self.blockers(a, b, altitude, radius=radius, half_height=half_height)
+
+    def path_blockers(self, start: XYZ, end: XYZ, *, radius: float = 0.0, half_height: float = 0.0) -> list[str]:
+        """What a body flying the straight segment ``start`` → ``end`` (x, y, z: a climb, a descent or a
+        level flight) meets, in the order met.
+
+        The body is a vertical cylinder of ``radius`` reaching ``half_height`` above and below its
+        centre. Over each solid the segment's centre spans the heights it has while the body is over
+        the solid's floor; the solid blocks when those, widened by ``half_height``, overlap its own.
+        """
+        points = (*start, *end)
+        if len(start) != 3 or len(end) != 3 or not all(math.isfinite(v) for v in points):
+            raise ValueError(f"a flight goes between two finite (x, y, z) points, got {start} and {end}")
+        if half_height < 0 or not math.isfinite(half_height):
+            raise ValueError(f"half height {half_height}: finite, zero or more")
+        (x0, y0, z0), (x1, y1, z1) = start, end
+        ground = [(x0, y0), (x1, y1)]
+        swept = self._swept(ground, radius)
+        hits: list[tuple[float, str]] = []
+        if min(z0, z1) - half_height < -1e-9:
+            hits.append((0.0, FLOOR))
+        if max(z0, z1) + half_height > self.height + 1e-9 or not self.outline.contains(swept):
+            hits.append((0.0, BOUNDS))
+        line = LineString(ground) if ground[0] != ground[1] else None
+        for solid in self._under(swept):
+            first, last = self._over(line, solid, radius)
+            low = min(z0 + first * (z1 - z0), z0 + last * (z1 - z0)) - half_height
+            high = max(z0 + first * (z1 - z0), z0 + last * (z1 - z0)) + half_height
+            if solid.zmin < high and solid.zmax > low:
+                hits.append((first * (line.length if line is not None else 0.0), solid.name))
+        names = [name for _, name in sorted(hits)]
+        return list(dict.fromkeys(names))  # a multi-prism object once
+
+    def path_clear(self, start: XYZ, end: XYZ, *, radius: float = 0.0, half_height: float = 0.0) -> bool:
+        """Whether the straight flight ``start`` → ``end`` meets nothing (:meth:`path_blockers`)."""
+        return not self.path_blockers(start, end, radius=radius, half_height=half_height)
+
+    @staticmethod
+    def _over(line: LineString | None, solid: Solid, radius: float) -> tuple[float, float]:
+        """The share (0..1) of the way at which the body comes over ``solid`` and the share where it leaves."""
+        if line is None:  # straight up or down: over it the whole way
+            return 0.0, 1.0
+        zone = solid.floor.buffer(radius) if radius > 0 else solid.floor
+        piece = line.intersection(zone)
+        if piece.is_empty:  # the swept body only grazes it (the buffers' polygons differ): where it comes nearest
+            share = line.project(shapely.ops.nearest_points(line, zone)[0], normalized=True)
+            return share, share
+        ends = [line.project(Point(c), normalized=True) for g in getattr(piece, "geoms", [piece]) for c in g.coords]
+        return min(ends), max(ends)

@@ -155,8 +155,25 @@ def test_a_flight_meets_walls_blocks_and_the_floor_in_the_order_met(air: Airspac
     assert air.clears((3.0, 0.8), (3.0, 0.8), 1.0)  # hovering over the desk
 
 
+def test_a_climbing_or_descending_flight_is_checked_at_the_heights_it_has_over_each_solid(air: Airspace) -> None:
+    # from 1 m at x = 5 up to 3 m at x = 8: over the rack (x 6..7) it is at 1.67..2.33 m, into its 2 m top
+    assert air.path_blockers((5.0, 3.0, 1.0), (8.0, 3.0, 3.0)) == ["rack"]
+    assert air.path_clear((5.0, 3.0, 1.5), (5.8, 3.0, 3.0))  # climbs short of it
+    # from 3 m at x = 5 down to 2.2 m at x = 7.5: over the rack (5.9..7.1 with its 0.1 m radius) at 2.33..2.71 m
+    assert air.path_clear((5.0, 3.0, 3.0), (7.5, 3.0, 2.2), radius=0.1, half_height=0.3)  # its bottom 2.03 m up
+    assert air.path_blockers((5.0, 3.0, 3.0), (7.5, 3.0, 2.2), radius=0.1, half_height=0.4) == ["rack"]
+    assert air.path_blockers((5.0, 3.0, 3.0), (7.5, 3.0, 1.0)) == ["rack"]  # lands behind it: through it
+    assert air.path_blockers((3.0, 0.8, 2.0), (3.0, 0.8, 0.5)) == ["desk"]  # straight down onto the desk
+    assert air.path_clear((3.0, 3.0, 2.0), (3.0, 3.0, 0.2))  # straight down onto the marking
+    assert air.blockers((5.0, 3.0), (7.5, 3.0), 1.0) == air.path_blockers((5.0, 3.0, 1.0), (7.5, 3.0, 1.0))
+
+
 def test_bad_flight_arguments_are_refused(air: Airspace) -> None:
     with pytest.raises(ValueError, match="radius"):
         air.blockers((1.0, 1.0), (2.0, 2.0), 1.0, radius=-0.1)
     with pytest.raises(ValueError, match="half height"):
+        air.blockers((1.0, 1.0), (2.0, 2.0), 1.0, half_height=-0.1)
+    with pytest.raises(ValueError, match="finite"):
         air.blockers((1.0, 1.0), (2.0, 2.0), math.nan)
+    with pytest.raises(ValueError, match=r"\(x, y, z\)"):
+        air.path_blockers((1.0, 1.0), (2.0, 2.0, 1.0))  # type: ignore[arg-type]
