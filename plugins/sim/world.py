@@ -167,7 +167,12 @@ class World:
         return int(p.createMultiBody(0, col, vis, list(centre), orn, physicsClientId=cid))
 
     def _body(
-        self, shape: Shape, pose: tuple[float, float, float, float], mass: float, rgba: list[float], visual: int = -1,
+        self,
+        shape: Shape,
+        pose: tuple[float, float, float, float],
+        mass: float,
+        rgba: list[float],
+        visual: int = -1,
         collides: bool = True,
     ) -> int:
         """A body of ``shape`` at the object ``pose``; ``visual`` (a visual shape id) replaces its plain look.

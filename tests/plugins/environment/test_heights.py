@@ -90,7 +90,7 @@ def test_a_geometry2d_without_height_still_obstructs_at_every_height(model: MapM
 
 def test_a_geometry2d_height_bounds_the_block(model: MapModel) -> None:
     step, sign = model.get("step"), model.get("sign")
-    assert (step.zmin, step.zmax) == (0.0, 0.3) and (sign.zmin, sign.zmax) == (0.6, pytest.approx(0.7))
+    assert (step.zmin, step.zmax) == (0.0, 0.3) and (sign.zmin, sign.zmax) == pytest.approx((0.6, 0.7))
     assert model.collisions(ROBOT, 1.0, 5.0) == ["step"]
     assert model.collisions(ROBOT, 4.5, 5.0) == []  # the 0.45 m robot passes under the sign at 0.6 m
     assert model.collisions(Footprint.round(0.18, height=0.8), 4.5, 5.0) == ["sign"]
@@ -125,13 +125,19 @@ def air(env: Environment) -> Airspace:
     return Airspace(env)
 
 
+def top(air: Airspace, points: list[tuple[float, float]]) -> tuple[float, str | None]:
+    """:meth:`Airspace.highest`, its height rounded to the millimetre."""
+    height, name = air.highest(points)
+    return round(height, 3), name
+
+
 def test_the_highest_solid_under_a_point_or_path(air: Airspace) -> None:
     assert air.highest([(3.0, 3.0)]) == (0.0, None)  # over the marking: bare floor
-    assert air.highest([(3.0, 0.8)]) == (pytest.approx(0.75), "desk")  # no height: the sim's 0.75 m block
-    assert air.highest([(1.0, 5.0)]) == (pytest.approx(0.3), "step")
+    assert top(air, [(3.0, 0.8)]) == (0.75, "desk")  # no height: the sim's 0.75 m block
+    assert top(air, [(1.0, 5.0)]) == (0.3, "step")
     assert air.highest([(5.0, 3.0), (7.5, 3.0)]) == (2.0, "rack")
     assert air.highest([(7.5, 2.75), (9.5, 2.75)]) == (4.0, "column")  # no height: the map's
-    assert air.highest([(8.0, 0.6)]) == (pytest.approx(1.2), "shelf")
+    assert top(air, [(8.0, 0.6)]) == (1.2, "shelf")
     assert air.highest([(8.0, 0.6)], below=0.5) == (0.0, None)  # the shelf board is above a 0.5 m flight
     assert air.highest([(5.0, 3.0)], radius=1.2) == (2.0, "rack")  # the body's radius reaches it
     assert air.highest([(9.5, 3.0), (11.0, 3.0)]) == (4.0, BOUNDS)

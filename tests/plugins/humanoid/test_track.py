@@ -120,10 +120,14 @@ def test_a_marking_lies_on_the_floor_and_a_2d_height_sets_the_centre(tmp_path: P
     objects = "".join(
         f'<Object name="{name}" tag="thing"><Pose x="1" y="{i}" z="{z}"/><Geometry2D{height}>'
         '<Circle radius="0.2"/></Geometry2D></Object>'
-        for i, (name, height, z) in enumerate([
-            ("pad", ' height="0"', 0.0), ("post", ' height="1.2"', 0.0), ("desk", "", 0.0),
-            ("tray", ' height="0"', 0.5),
-        ])
+        for i, (name, height, z) in enumerate(
+            [
+                ("pad", ' height="0"', 0.0),
+                ("post", ' height="1.2"', 0.0),
+                ("desk", "", 0.0),
+                ("tray", ' height="0"', 0.5),
+            ]
+        )
     )
     environment = tmp_path / "environment.xml"
     environment.write_text(
