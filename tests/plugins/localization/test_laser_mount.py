@@ -262,8 +262,9 @@ def test_scan_and_odom_inputs_are_read_as_the_standard_messages(environment: Pat
         plugin.process({"scan": {"ranges": [1.0, 2.0]}, "odom": drive.odom[1]}, Context(1, 0.2))
     with pytest.raises(ValueError, match="input 'odom' field 'pose' field 'yaw' must be a finite number"):
         plugin.process({"scan": drive.scans[1], "odom": {"pose": {"x": 0.0, "y": 0.0}}}, Context(1, 0.2))
+    assert plugin.process({"scan": drive.scans[1], "odom": None}, Context(1, 0.2)) is None  # not yet received
     with pytest.raises(ValueError, match="expects the odometry: input 'odom'"):
-        plugin.process({"scan": drive.scans[1], "odom": None}, Context(1, 0.2))  # not yet received
+        plugin.process({"scan": drive.scans[1]}, Context(1, 0.2))  # a service with no odometry Input at all
     with pytest.raises(ValueError, match="both 'scan' and 'ranges'"):
         plugin.process({"scan": drive.scans[1], "ranges": [1.0], "odom": drive.odom[1]}, Context(1, 0.2))
 
