@@ -32,7 +32,8 @@ bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map 
 out, read               the last raw value written (as ``hardware.loopback``)
 out, joint + grasp      a gripper: ``joint`` and ``mirror`` are its fingers (closing towards their
                         lower limit); an object both touch while closing is held to link ``grasp``
-                        until a command opens them or ``holdForce`` (N) is exceeded (D87, D187)
+                        until a command opens them or ``holdForce`` (N; default the fingers' own
+                        friction grip) is exceeded and it slips out (D87, D187, D296)
 ======================  ===========================================================================
 
 Time (decision D88): the world is a :class:`SimulationHook` of the channel's scope; each read or
@@ -77,7 +78,8 @@ _SPEC = Params(
     P("joints", "", "Space-separated joints read together (bus in)."),
     P("mirror", "", "A second joint driven like 'joint' (out channels)."),
     P("grasp", "", "Gripper channel: the link an object both fingers close on is held to (D87, D187)."),
-    P("holdForce", 30.0, "Force beyond which a held object slips out of the grasp.", unit="N", above=0.0),
+    P("holdForce", 0.0, "Force beyond which a held object slips out of the grasp (0: the fingers' friction grip, "
+      "2 x 0.75 x their joints' effort limit, D296).", unit="N", min=0.0),
     P("link", "base_link", "Link carrying the sensor."),
     P("sensor", "", "Sensor device.", choices=SENSORS),
     P("mode", "position", "Joint quantity.", choices=("position", "velocity", "effort")),
