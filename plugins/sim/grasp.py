@@ -155,6 +155,7 @@ class ChannelGrasp:
         self.gripper = Gripper(robot, left=joint, right=mirror, wrist=link,
                                hold_force=hold_force if hold_force > 0.0 else None)
         self.closing = False
+        self.slipped = False  # an object slipped out: nothing is caught until the fingers open
         self.opening_held = 0.0
         self.target = 0.0
         robot.world.hooks.append(self._after_advance)
@@ -169,9 +170,9 @@ class ChannelGrasp:
         """The channel drove the fingers to ``target`` (joint units)."""
         position = self._opening()
         if target < position - self.RELEASE_GAP:  # closing (not a servo step's rounding)
-            self.closing = True
+            self.closing = not self.slipped  # what slipped out is not caught again before they open
         elif target > position + self.RELEASE_GAP:  # opening: nothing is caught on the way
-            self.closing = False
+            self.closing = self.slipped = False
         self.target = target
         if self.gripper.held is not None:
             self._stall()
@@ -195,7 +196,7 @@ class ChannelGrasp:
                 LOG.info("t=%.2f: body %s slipped out of the fingers (%.3f m)", self.gripper.robot.world.time,
                          self.gripper.held, self.gripper.slip())
                 self.gripper.release()
-                self.closing = False  # caught again only by a new closing command
+                self.closing, self.slipped = False, True
                 for finger in self.gripper.fingers:
                     self.gripper.robot.command(finger, "position", self.target)
             elif self._opening() > self.opening_held + self.RELEASE_GAP:
