@@ -55,7 +55,7 @@ def _polygon_width(points: Sequence[tuple[float, float]]) -> float | None:
     of every pair of points, of the extent across it (a hull edge's is among them and is the least)."""
     best: float | None = None
     for i, (ax, ay) in enumerate(points):
-        for bx, by in points[i + 1:]:
+        for bx, by in points[i + 1 :]:
             length = math.hypot(bx - ax, by - ay)
             if length == 0.0:
                 continue
@@ -122,6 +122,11 @@ def fit_problems(record: BehaviorRecord, system: System | None) -> list[tuple[An
         return []  # the gripper plugin's own set-up and checks report its model
     if opening is None or width <= opening:
         return []
-    return [(param, f"parameter 'object' = {param.value!r}: the object is {width:.3f} m across at its "
-                    f"narrowest, wider than the full opening {opening:.3f} m of the gripper (plugin "
-                    f"{plugin.name!r}, {path.name}'s {' and '.join(fingers[:2])} at their upper limits)")]
+    return [
+        (
+            param,
+            f"parameter 'object' = {param.value!r}: the object is {width:.3f} m across at its "
+            f"narrowest, wider than the full opening {opening:.3f} m of the gripper (plugin "
+            f"{plugin.name!r}, {path.name}'s {' and '.join(fingers[:2])} at their upper limits)",
+        )
+    ]

@@ -16,7 +16,6 @@ from ckmconf.model import Param
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from ckmconf.model.missions import BehaviorOutput, Uses
 from plugins.behaviors.pick_place import PickObject, PlaceObject
-
 from plugins.sim.robots import Robot
 from plugins.sim.world import World
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
@@ -33,9 +32,15 @@ from tests.plugins.manipulation.manipulator_loop import (
 )
 from tests.plugins.sim.conftest import ROOM
 
-INSPECTION = Model("inspection_arm", ("turret_joint", "shoulder_joint", "elbow_joint", "wrist_pitch_joint"),
-                   "left_finger_joint", "right_finger_joint", "palm_link",
-                   str(CONFIGS / "examples" / "models" / "inspection_arm_poses.yml"), 0.0)
+INSPECTION = Model(
+    "inspection_arm",
+    ("turret_joint", "shoulder_joint", "elbow_joint", "wrist_pitch_joint"),
+    "left_finger_joint",
+    "right_finger_joint",
+    "palm_link",
+    str(CONFIGS / "examples" / "models" / "inspection_arm_poses.yml"),
+    0.0,
+)
 """hold_force 0: the grasp's own, the fingers' friction grip (D296)."""
 RED, BLUE = (0.9, 0.1, 0.1, 1.0), (0.1, 0.2, 0.9, 1.0)
 """The parcel's +x and -x end faces (in its own frame)."""
@@ -56,16 +61,21 @@ class InspectionLoop(ManipulatorLoop):
     def turn(self, angle: float, seconds: float = 4.0) -> None:
         """Turn the wrist to ``angle`` (rad) in ``seconds``, then let it settle for 1 s."""
         here = self.robot.joint_state(self.roll)[0]
-        self.roll_trajectory = {"joint_names": ["wrist_roll_joint"],
-                                "points": [{"positions": [here], "time_from_start": 0.0},
-                                           {"positions": [angle], "time_from_start": seconds}]}
+        self.roll_trajectory = {
+            "joint_names": ["wrist_roll_joint"],
+            "points": [
+                {"positions": [here], "time_from_start": 0.0},
+                {"positions": [angle], "time_from_start": seconds},
+            ],
+        }
         self.run(seconds + 1.0)
 
     def control(self) -> None:
         super().control()
         dt = CONTROL_STEPS * self.world.time_step
         [command] = self.roll_control.step_outputs(
-            {"setpoint": self.roll_trajectory, "measure": [self.robot.joint_state(self.roll)[0]]}, dt)
+            {"setpoint": self.roll_trajectory, "measure": [self.robot.joint_state(self.roll)[0]]}, dt
+        )
         self.robot.command(self.roll, "position", float(command))
 
 
@@ -86,28 +96,48 @@ def table(loop: ManipulatorLoop, centre: tuple[float, float, float], half: tuple
     """A static box (a work table) at a base-frame ``centre``, square to the robot."""
     cid = loop.world.client
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=cid)
-    return int(p.createMultiBody(0.0, shape, -1, to_world(loop.robot, centre), loop.robot.link_pose(-1)[1],
-                                 physicsClientId=cid))
+    return int(
+        p.createMultiBody(
+            0.0, shape, -1, to_world(loop.robot, centre), loop.robot.link_pose(-1)[1], physicsClientId=cid
+        )
+    )
 
 
-def parcel(loop: ManipulatorLoop, centre: tuple[float, float, float], half: float, mass: float,
-           yaw: float = 0.0) -> int:
+def parcel(
+    loop: ManipulatorLoop, centre: tuple[float, float, float], half: float, mass: float, yaw: float = 0.0
+) -> int:
     """A cube parcel of side ``2 half`` at a base-frame ``centre``, turned ``yaw`` from the robot's
     heading: grey, its +x end face red and its -x end face blue (thin visual plates, no collision)."""
     cid = loop.world.client
     box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half] * 3, physicsClientId=cid)
-    grey = p.createVisualShape(p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=[0.6, 0.6, 0.55, 1.0],
-                               physicsClientId=cid)
-    plate = [p.createVisualShape(p.GEOM_BOX, halfExtents=[0.002, half * 0.9, half * 0.9], rgbaColor=list(c),
-                                 physicsClientId=cid) for c in (RED, BLUE)]
+    grey = p.createVisualShape(p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=[0.6, 0.6, 0.55, 1.0], physicsClientId=cid)
+    plate = [
+        p.createVisualShape(
+            p.GEOM_BOX, halfExtents=[0.002, half * 0.9, half * 0.9], rgbaColor=list(c), physicsClientId=cid
+        )
+        for c in (RED, BLUE)
+    ]
     base_yaw = p.getEulerFromQuaternion(loop.robot.link_pose(-1)[1])[2]
-    body = int(p.createMultiBody(
-        mass, box, grey, to_world(loop.robot, centre), p.getQuaternionFromEuler([0.0, 0.0, base_yaw + yaw]),
-        linkMasses=[0.001, 0.001], linkCollisionShapeIndices=[-1, -1], linkVisualShapeIndices=plate,
-        linkPositions=[[half + 0.002, 0, 0], [-half - 0.002, 0, 0]], linkOrientations=[[0, 0, 0, 1]] * 2,
-        linkInertialFramePositions=[[0, 0, 0]] * 2, linkInertialFrameOrientations=[[0, 0, 0, 1]] * 2,
-        linkParentIndices=[0, 0], linkJointTypes=[p.JOINT_FIXED] * 2, linkJointAxis=[[0, 0, 1]] * 2,
-        physicsClientId=cid))
+    body = int(
+        p.createMultiBody(
+            mass,
+            box,
+            grey,
+            to_world(loop.robot, centre),
+            p.getQuaternionFromEuler([0.0, 0.0, base_yaw + yaw]),
+            linkMasses=[0.001, 0.001],
+            linkCollisionShapeIndices=[-1, -1],
+            linkVisualShapeIndices=plate,
+            linkPositions=[[half + 0.002, 0, 0], [-half - 0.002, 0, 0]],
+            linkOrientations=[[0, 0, 0, 1]] * 2,
+            linkInertialFramePositions=[[0, 0, 0]] * 2,
+            linkInertialFrameOrientations=[[0, 0, 0, 1]] * 2,
+            linkParentIndices=[0, 0],
+            linkJointTypes=[p.JOINT_FIXED] * 2,
+            linkJointAxis=[[0, 0, 1]] * 2,
+            physicsClientId=cid,
+        )
+    )
     p.changeDynamics(body, -1, lateralFriction=1.0, physicsClientId=cid)
     return body
 
@@ -156,14 +186,24 @@ def run_behavior(loop: ManipulatorLoop, kind: str, params: Mapping[str, str], li
         else:
             loop.command = value
 
-    record = BehaviorRecord(name=kind.split("-")[0].upper(), kind=kind, timeout=60.0,
-                            params=tuple(Param(name=k, value=v) for k, v in params.items()),
-                            uses=(Uses(service="Arm.Motion", as_="arm"), Uses(service="Arm.Gripper", as_="gripper")),
-                            outputs=(BehaviorOutput(name="arm_goal", topic="/arm/goal"),
-                                     BehaviorOutput(name="gripper_command", topic="/gripper/command")))
+    record = BehaviorRecord(
+        name=kind.split("-")[0].upper(),
+        kind=kind,
+        timeout=60.0,
+        params=tuple(Param(name=k, value=v) for k, v in params.items()),
+        uses=(Uses(service="Arm.Motion", as_="arm"), Uses(service="Arm.Gripper", as_="gripper")),
+        outputs=(
+            BehaviorOutput(name="arm_goal", topic="/arm/goal"),
+            BehaviorOutput(name="gripper_command", topic="/gripper/command"),
+        ),
+    )
     services = {"arm": LoopService(loop, "arm_result"), "gripper": LoopService(loop, "gripper_result")}
-    context = BehaviorContext(services=services, inputs={}, now=lambda: loop.world.time,
-                              outputs={n: functools.partial(publish, n) for n in ("arm_goal", "gripper_command")})
+    context = BehaviorContext(
+        services=services,
+        inputs={},
+        now=lambda: loop.world.time,
+        outputs={n: functools.partial(publish, n) for n in ("arm_goal", "gripper_command")},
+    )
     made = KINDS[kind](record, context)
     made.start()
     start = loop.world.time

@@ -11,8 +11,17 @@ from pathlib import Path
 import pytest
 
 import ckmconf
-from ckmconf.model.environment import Circle, EnvObject, Geometry2D, Geometry25D, Polygon, Pose, Prism, Rectangle
-from ckmconf.model.environment import Vertex
+from ckmconf.model.environment import (
+    Circle,
+    EnvObject,
+    Geometry2D,
+    Geometry25D,
+    Polygon,
+    Pose,
+    Prism,
+    Rectangle,
+    Vertex,
+)
 from plugins.behaviors.grip_fit import narrowest
 from plugins.sim.urdf import MODELS
 from plugins.urdf_model import jaw_opening
@@ -44,12 +53,12 @@ def test_an_object_that_is_no_object_of_the_map_is_refused(tmp_path: Path) -> No
     assert "parameter 'object' = 'palette' is no Object of the map (its Objects: ['pallet'])" in unknown
 
 
-def _object(*atoms: object) -> EnvObject:
+def _object(*atoms: Circle | Rectangle | Polygon) -> EnvObject:
     if len(atoms) == 1:
-        geometry: object = Geometry25D(prism=Prism(zmax=0.1, base=atoms[0]))
+        geometry: Geometry25D | Geometry2D = Geometry25D(prism=Prism(zmax=0.1, base=atoms[0]))
     else:
         geometry = Geometry2D(atoms=atoms)
-    return EnvObject(name="o", tag="box", pose=Pose(x=0.0, y=0.0), geometry=geometry)  # type: ignore[arg-type]
+    return EnvObject(name="o", tag="box", pose=Pose(x=0.0, y=0.0), geometry=geometry)
 
 
 def test_an_object_s_narrowest_width_is_its_shapes_own() -> None:
@@ -60,12 +69,15 @@ def test_an_object_s_narrowest_width_is_its_shapes_own() -> None:
     assert narrowest(_object(Rectangle(width=0.5, depth=0.5), Circle(radius=0.1))) == pytest.approx(0.2)
 
 
-@pytest.mark.parametrize(("model", "fingers", "opening"), [
-    ("turtlebot", ("gripper_joint", "gripper_right_joint"), 0.09),
-    ("station_arm", ("left_finger_joint", "right_finger_joint"), 0.40),
-    ("carrier", ("left_jaw_joint", "right_jaw_joint"), 0.42),
-    ("inspection_arm", ("left_finger_joint", "right_finger_joint"), 0.42),
-])
+@pytest.mark.parametrize(
+    ("model", "fingers", "opening"),
+    [
+        ("turtlebot", ("gripper_joint", "gripper_right_joint"), 0.09),
+        ("station_arm", ("left_finger_joint", "right_finger_joint"), 0.40),
+        ("carrier", ("left_jaw_joint", "right_jaw_joint"), 0.42),
+        ("inspection_arm", ("left_finger_joint", "right_finger_joint"), 0.42),
+    ],
+)
 def test_the_full_opening_is_the_urdf_s(model: str, fingers: tuple[str, str], opening: float) -> None:
     assert jaw_opening(MODELS / f"{model}.urdf", fingers) == pytest.approx(opening, abs=1e-6)
     assert jaw_opening(MODELS / f"{model}.urdf", fingers[:1]) is None  # one finger: no jaw to measure

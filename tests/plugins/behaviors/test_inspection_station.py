@@ -11,6 +11,7 @@ import math
 from collections.abc import Iterator
 
 import numpy as np
+import numpy.typing as npt
 import pybullet as p
 import pytest
 
@@ -21,8 +22,11 @@ from .inspection_cell import InspectionLoop, in_base, parcel, run_behavior, stat
 PICK = {"approach": "0.6 0 1.1 3.1416", "grasp": "0.6 0 0.9 3.1416", "lift": "0.6 0 1.15 3.1416"}
 PLACE_AT = (0.5, -0.45)
 """Where the parcel is asked to be set down (base frame, m): another spot of the table."""
-PLACE = {"above": f"{PLACE_AT[0]} {PLACE_AT[1]} 1.15 3.1416", "place": f"{PLACE_AT[0]} {PLACE_AT[1]} 0.9 3.1416",
-         "retreat": "home"}
+PLACE = {
+    "above": f"{PLACE_AT[0]} {PLACE_AT[1]} 1.15 3.1416",
+    "place": f"{PLACE_AT[0]} {PLACE_AT[1]} 0.9 3.1416",
+    "retreat": "home",
+}
 TABLE_TOP = 0.70
 
 
@@ -36,18 +40,21 @@ def cell() -> Iterator[tuple[InspectionLoop, int]]:
         yield loop, body
 
 
-def _colour(camera: Camera) -> np.ndarray:
+def _colour(camera: Camera) -> npt.NDArray[np.float64]:
     """The mean colour of the centre of a 160 x 120 frame (where the inspection point appears)."""
     frame = camera.render(160, 120)
-    return frame.rgb[40:80, 60:100].reshape(-1, 3).mean(axis=0)
+    centre: npt.NDArray[np.float64] = frame.rgb[40:80, 60:100].reshape(-1, 3).mean(axis=0)
+    return centre
 
 
-def _facing(loop: InspectionLoop, body: int) -> np.ndarray:
+def _facing(loop: InspectionLoop, body: int) -> npt.NDArray[np.float64]:
     """The parcel's own x axis (its red face's normal) in the station's base frame."""
-    rotation = np.array(p.getMatrixFromQuaternion(p.getBasePositionAndOrientation(
-        body, physicsClientId=loop.world.client)[1])).reshape(3, 3)
+    rotation = np.array(
+        p.getMatrixFromQuaternion(p.getBasePositionAndOrientation(body, physicsClientId=loop.world.client)[1])
+    ).reshape(3, 3)
     base = np.array(p.getMatrixFromQuaternion(loop.robot.link_pose(-1)[1])).reshape(3, 3)
-    return base.T @ rotation[:, 0]
+    facing: npt.NDArray[np.float64] = base.T @ rotation[:, 0]
+    return facing
 
 
 def test_the_station_picks_the_parcel_turns_it_before_its_camera_and_puts_it_down_where_asked(

@@ -30,7 +30,6 @@ from tests.plugins.controllers.vector_records import record
 from .conftest import ROOM
 
 CONTROL_STEPS, SERVICE_STEPS = 4, 12  # controllers at 60 Hz, the service at 20 Hz, on the 240 Hz physics
-WHEELS = {"left": "left_wheel_joint", "right": "right_wheel_joint", "wheel_radius": 0.08, "wheel_base": 0.50}
 PARCEL = 0.15  # half side (m): a 0.3 m cube
 AHEAD = 0.53  # its centre ahead of the base: between the open pads (0.38 to 0.68 m)
 
@@ -43,12 +42,26 @@ class Clamp:
         self.world, self.robot = world, robot
         loc = Loc(str(REPO / "configs" / "examples" / "sim_station.xml"), 1, 1, "/Plugin")
         params = {"model": "carrier", "joints": "left_jaw_joint"}
-        self.service = ParallelGripper(Plugin(name="clamp", kind="parallel-gripper", loc=loc,
-                                              params=tuple(Param(name=k, value=v) for k, v in params.items())))
+        self.service = ParallelGripper(
+            Plugin(
+                name="clamp",
+                kind="parallel-gripper",
+                loc=loc,
+                params=tuple(Param(name=k, value=v) for k, v in params.items()),
+            )
+        )
         self.service.setup()
-        self.control = JointTrajectory(record("joint-trajectory", 0.02, [("/setpoint", "setpoint"),
-                                                                         ("/measure", "measure")],
-                                              ["j0"], 50, joints="left_jaw_joint", interpolation="cubic"))
+        self.control = JointTrajectory(
+            record(
+                "joint-trajectory",
+                0.02,
+                [("/setpoint", "setpoint"), ("/measure", "measure")],
+                ["j0"],
+                50,
+                joints="left_jaw_joint",
+                interpolation="cubic",
+            )
+        )
         self.pads = (robot.joint("left_jaw_joint"), robot.joint("right_jaw_joint"))
         self.lift = robot.joint("lift_joint")
         self.grasp = ChannelGrasp(robot, "left_jaw_joint", "right_jaw_joint", "lift_link", 0.0)
@@ -63,8 +76,9 @@ class Clamp:
         for _ in range(round(seconds * 240 / SERVICE_STEPS)):
             for _ in range(SERVICE_STEPS // CONTROL_STEPS):
                 measure = [self.robot.joint_state(self.pads[0])[0]]
-                [pad] = self.control.step_outputs({"setpoint": self.trajectory, "measure": measure},
-                                                  CONTROL_STEPS * self.world.time_step)
+                [pad] = self.control.step_outputs(
+                    {"setpoint": self.trajectory, "measure": measure}, CONTROL_STEPS * self.world.time_step
+                )
                 for joint in self.pads:  # the channel's joint and its mirror, at the URDF's effort
                     self.robot.command(joint, "position", float(pad))
                 self.grasp.command(float(pad))
@@ -73,8 +87,9 @@ class Clamp:
                 if self.base is not None:
                     self.base.update()
             state = {"stamp": self.world.time, "name": [], "position": [self.robot.joint_state(self.pads[0])[0]]}
-            self.result = self.service.process({"command": self.command, "joint_states": state},
-                                               Context(self.frames, self.world.time, "carrier"))
+            self.result = self.service.process(
+                {"command": self.command, "joint_states": state}, Context(self.frames, self.world.time, "carrier")
+            )
             self.frames += 1
             if "trajectory" in self.result:
                 self.trajectory = self.result["trajectory"]
@@ -122,8 +137,9 @@ def test_the_clamp_opens_wide_enough_for_a_0_3_m_parcel_from_its_joint_limits(ca
     opened = carrier.grip({"id": 1, "action": "open"})
     assert opened["state"] == "reached"
     cid = carrier.world.client
-    gap = p.getClosestPoints(carrier.robot.body, carrier.robot.body, 1.0, carrier.pads[0], carrier.pads[1],
-                             physicsClientId=cid)
+    gap = p.getClosestPoints(
+        carrier.robot.body, carrier.robot.body, 1.0, carrier.pads[0], carrier.pads[1], physicsClientId=cid
+    )
     assert min(c[8] for c in gap) == pytest.approx(0.42, abs=0.01)  # inner faces 0.42 m apart
 
 
@@ -142,7 +158,9 @@ def test_the_carrier_lifts_a_0_3_m_parcel_and_carries_it_while_driving(carrier: 
     lidar = Lidar(clamp.robot, "laser_link", beams=181, fov=math.pi, range_max=8.0)
     assert lidar.scan()[90] > 4.0  # straight ahead it sees the far wall, over the lifted parcel
     offset = _where(clamp, parcel) - np.asarray(clamp.robot.link_pose(-1)[0])
-    clamp.base = DiffDriveBase(clamp.robot, **WHEELS)
+    clamp.base = DiffDriveBase(
+        clamp.robot, left="left_wheel_joint", right="right_wheel_joint", wheel_radius=0.08, wheel_base=0.50
+    )
     clamp.base.drive(0.5, 0.0, force=15.0)
     start = clamp.robot.planar_pose()
     while math.dist(clamp.robot.planar_pose()[:2], start[:2]) < 2.0:
