@@ -18,6 +18,7 @@ from ckmconf.errors import Loc
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.controllers.trajectory import JointTrajectory
+from plugins.hardware.simulation import ManualClock, PlantScope
 from plugins.manipulation.gripper import ParallelGripper
 from plugins.sim.grasp import ChannelGrasp
 from plugins.sim.robots import DiffDriveBase, Robot
@@ -28,6 +29,7 @@ from tests.conftest import REPO
 from tests.plugins.controllers.vector_records import record
 
 from .conftest import ROOM
+from .test_backend import channel, open_all
 
 CONTROL_STEPS, SERVICE_STEPS = 4, 12  # controllers at 60 Hz, the service at 20 Hz, on the 240 Hz physics
 PARCEL = 0.15  # half side (m): a 0.3 m cube
@@ -191,3 +193,42 @@ def test_a_parcel_heavier_than_the_clamp_s_grip_slips_out_as_the_lift_rises(carr
     assert clamp.robot.joint_state(clamp.lift)[0] > 0.1  # the lift rose
     assert clamp.grasp.held is None  # the parcel slipped out
     assert _where(clamp, parcel)[2] - resting[2] < 0.02  # and stayed on the floor
+
+
+def test_the_clamp_as_configured_holds_by_the_models_own_grip() -> None:
+    """The same clamp through ``hardware.sim`` channels (D296): ``joint``, ``mirror`` and ``grasp``
+    name the carrier's pads and carriage, no ``holdForce`` is given — the grip is the model's — and
+    the lift is an analog channel in position mode. Closed on the parcel and lifted, it holds it."""
+    clock = ManualClock()
+    clamp, lift = open_all(
+        PlantScope(clock, name="carrier-clamp"),
+        channel("clamp", "out", "analog", 1, body="carrier", pose="3.0 1.0 0", joint="left_jaw_joint",
+                mirror="right_jaw_joint", grasp="lift_link"),
+        channel("lift", "out", "analog", 1, body="carrier", joint="lift_joint"),
+    )  # fmt: skip
+    clamp.write(0.19)  # the pads' travel from closed, m: fully open
+    lift.write(0.0)
+    clock.advance(2.0)
+    clamp.write(0.19)
+    sim, device = clamp._require()  # type: ignore[attr-defined]
+    world, robot = sim.world, device.robot
+    assert device.grasp.gripper.hold_force == pytest.approx(225.0)
+    x, y, _ = robot.planar_pose()
+    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[PARCEL] * 3, physicsClientId=world.client)
+    parcel = int(p.createMultiBody(3.0, shape, -1, [x + AHEAD, y, PARCEL + 0.001], physicsClientId=world.client))
+    clock.advance(0.5)
+    clamp.write(0.19)
+    for _ in range(8):  # the actuator repeats its command
+        clamp.write(0.0)
+        clock.advance(0.5)
+    assert device.grasp.held == parcel
+    for _ in range(6):
+        lift.write(0.15)
+        clamp.write(0.0)
+        clock.advance(0.5)
+    assert _where_in(world.client, parcel)[2] == pytest.approx(PARCEL + 0.15, abs=0.01)
+    assert device.grasp.held == parcel
+
+
+def _where_in(client: int, body: int) -> tuple[float, ...]:
+    return tuple(p.getBasePositionAndOrientation(body, physicsClientId=client)[0])
