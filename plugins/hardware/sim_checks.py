@@ -1,7 +1,10 @@
-"""The checks of a ``hardware.sim`` channel against the rest of its system (decision D288): its
-robot's URDF (the model file, the links and joints its Params name) and where the robot is spawned
-(inside the map, clear of avoided areas, objects and the other robots). ``SimBackend.problems`` runs
-them when ``verify`` gives it the system; at run time the world loads the model anyway.
+"""The checks of a ``hardware.sim`` channel: against the device table (decision D295: its kind,
+direction, size, mode and Params as the row of :data:`plugins.sim.device_table.DEVICES` serving it
+allows, so the documented table and the checks cannot disagree) and against the rest of its system
+(decision D288): its robot's URDF (the model file, the links and joints its Params name) and where the
+robot is spawned (inside the map, clear of avoided areas, objects and the other robots).
+``SimBackend.problems`` runs the first always, the others when ``verify`` gives it the system; at run
+time the world loads the model anyway.
 """
 
 from __future__ import annotations
@@ -18,11 +21,58 @@ from ckmconf.model import Environment, HWChannel, System
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import BOUNDS, MapModel
 from plugins.environment_file import environment_of
+from plugins.sim.device_table import find, selector_of, unserved
 from plugins.sim.urdf import MODELS, Kinematics
 
+PWM_MODE = (
+    "a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
+    "or 'effort' (duty x the joint's effort limit); a position target needs kind 'analog'"
+)
 
-def system_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
-                    system: System) -> list[tuple[Any, str]]:
+
+def device_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]) -> list[tuple[str | None, Any, str]]:
+    """What the device table refuses in the channel (its Params read as ``v``, given as ``named``), as
+    ``(the Param it is about or None, the Param or the channel, message)``: no row for its kind,
+    direction and device, a size the device cannot give, a ``mode`` it does not take, a Param it does
+    not read, a Param it requires left out."""
+    if not selector_of(v):
+        return []  # SimBackend.problems asks for 'sensor' or 'joint'/'joints'
+    device = find(channel.kind, channel.direction, v)
+    if device is None:
+        return [(None, channel, unserved(channel.kind, channel.direction, v))]
+    found: list[tuple[str | None, Any, str]] = []
+    expected = device.size.count(v)
+    if expected is not None and channel.size != expected:
+        gives = f"{expected} value{'' if expected == 1 else 's'}"
+        found.append((None, channel, f"size is {channel.size}, its {device.name} device gives {gives}"))
+    if "mode" in named and v["mode"] not in device.modes:
+        if channel.kind == "pwm":
+            message = PWM_MODE
+        elif device.modes:
+            takes = ", ".join(device.modes)
+            message = f"Param 'mode' is {v['mode']!r}: the {device.name} device ({device.where}) takes {takes}"
+        else:
+            message = f"Param 'mode' chooses a joint quantity: the {device.name} device ({device.where}) takes none"
+        found.append(("mode", named["mode"], message))
+    for name, param in named.items():
+        if name not in device.params:
+            found.append(
+                (
+                    name,
+                    param,
+                    f"Param {name!r} is not read by the {device.name} device ({device.where}), "
+                    f"which reads {', '.join(p for p in device.params if p != 'body')}",
+                )
+            )
+    for name in device.required:
+        if name not in named:
+            found.append((name, channel, f"the {device.name} device ({device.where}) needs Param {name!r}"))
+    return found
+
+
+def system_problems(
+    channel: HWChannel, v: dict[str, Any], named: dict[str, Any], system: System
+) -> list[tuple[Any, str]]:
     """What is wrong with the channel (its Params read as ``v``, given as ``named``) in ``system``."""
     found: list[tuple[Any, str]] = []
     if v["body"]:  # a body's model may be named by another of its channels
@@ -60,8 +110,9 @@ def _model(path: str, mtime: float) -> Kinematics:
     return Kinematics(path)
 
 
-def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
-                    system: System) -> list[tuple[Any, str]]:
+def _model_problems(
+    channel: HWChannel, v: dict[str, Any], named: dict[str, Any], system: System
+) -> list[tuple[Any, str]]:
     """The robot model a channel names that does not exist, and the links and joints its Params name
     that the model does not have (each at its Param, offering the nearest names)."""
     path, giver = _model_file(channel, v, system)
@@ -71,8 +122,12 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
     if not path.is_file():
         shipped = ", ".join(sorted(m.stem for m in MODELS.glob("*.urdf")))
         also = f"; the shipped models: {shipped}" if giver is channel and not v["model"] else ""
-        return [(where, f"robot model {str(path)!r} does not exist (give Param 'model', a URDF relative to "
-                        f"this file{also})")]
+        return [
+            (
+                where,
+                f"robot model {str(path)!r} does not exist (give Param 'model', a URDF relative to this file{also})",
+            )
+        ]
     try:
         model = _model(str(path), path.stat().st_mtime)
     except (ValueError, OSError) as error:
@@ -82,8 +137,9 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
     def unknown(param: str, name: str, choices: Sequence[str], what: str) -> None:
         near = get_close_matches(name, choices, n=3)
         hint = f"; did you mean {', '.join(near)}?" if near else f" (its {what}s: {', '.join(choices)})"
-        found.append((named.get(param, channel), f"Param {param!r}: the model {path.name} has no {what} "
-                                                 f"{name!r}{hint}"))
+        found.append(
+            (named.get(param, channel), f"Param {param!r}: the model {path.name} has no {what} {name!r}{hint}")
+        )
 
     links, joints = list(model.links), list(model.joints)
     if v["sensor"] and v["link"] not in links:
@@ -153,7 +209,7 @@ def _reach(path: str, mtime: float) -> float | None:
         return None
     link = next((e for e in root.findall("link") if e.get("name") == model.root), None)
     reach: list[float] = []
-    for geometry in ([] if link is None else link.findall("collision/geometry")):
+    for geometry in [] if link is None else link.findall("collision/geometry"):
         for shape in geometry:
             try:
                 if shape.tag == "box":
@@ -191,6 +247,11 @@ def _overlap_problems(channel: HWChannel, v: dict[str, Any], param: Any, system:
             continue
         apart = math.hypot(x - ox, y - oy)
         if apart < mine + theirs:
-            found.append((param, f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
-                                 f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn"))
+            found.append(
+                (
+                    param,
+                    f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
+                    f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn",
+                )
+            )
     return found
