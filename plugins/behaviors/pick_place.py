@@ -10,7 +10,9 @@ service's pose file or a Cartesian target ``"x y z [pitch]"`` (m, rad, the robot
 Each goal carries a fresh id and only a status of that id ends its step, so a status left over from
 an earlier goal (of this behavior or another) never advances one. Progress is the share of steps
 done (eq. 5.1's behavior progress); a failure's detail names the step and the service's reason — an
-arm target refused as unreachable, a gripper closing on nothing, a stalled jaw (D266).
+arm target refused as unreachable, a gripper closing on nothing, a stalled jaw (D266). A pick naming
+the environment Object it picks (Param ``object``) is refused by ``verify`` when the object is wider
+than its gripper's full opening (:mod:`.grip_fit`, D296).
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from ckmconf.model import System
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
+from .grip_fit import fit_problems
 from .messages import _Goals, _state
 
 ARM_STEP = "A named pose of the arm service, or a target 'x y z [pitch]' (m, rad, base frame)."
@@ -138,7 +142,14 @@ class PickObject(_Manipulation):
           above=0.0, max=1.0),
         P("minHold", 0.0, "Least opening (share of the range) an object held must keep (0: any).", min=0.0,
           max=1.0),
+        P("object", "", "The environment Object picked (empty: not named): verify checks that it is one of the "
+          "map's and fits the full opening of the gripper service's jaw (D296)."),
     )
+
+    @classmethod
+    def problems(cls, record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+        """An ``object`` that is no Object of the map, or wider than the gripper's full opening."""
+        return fit_problems(record, system)
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)

@@ -61,7 +61,8 @@ _SPEC = Params(
     P("joints", "", "Space-separated joints read together (bus in)."),
     P("mirror", "", "A second joint driven like 'joint' (out channels)."),
     P("grasp", "", "Gripper channel: the link an object both fingers close on is held to (D87, D187)."),
-    P("holdForce", 30.0, "Force beyond which a held object slips out of the grasp.", unit="N", above=0.0),
+    P("holdForce", 0.0, "Force beyond which a held object slips out of the grasp (0: the fingers' friction grip, "
+      "2 x 0.75 x their joints' effort limit, D296).", unit="N", min=0.0),
     P("link", "base_link", "Link carrying the sensor."),
     P("sensor", "", "Sensor device.", choices=SENSORS),
     P("mode", "position", "Joint quantity.", choices=("position", "velocity", "effort")),

@@ -129,8 +129,8 @@ def _gripper(kind: str) -> Device:
         direction="out",
         selector="joint + grasp",
         summary="a gripper: `joint` and `mirror` are its fingers (closing towards their lower limit); an object "
-        "both touch while closing is held to link `grasp` until a command opens them or `holdForce` (N) is "
-        "exceeded (D87, D187)",
+        "both touch while closing is held to link `grasp` until a command opens them or `holdForce` (N; default "
+        "the fingers' friction grip, 2 x 0.75 x their effort limit) is exceeded and it slips out (D87, D187, D296)",
         values=_JOINT_TARGET,
         size=fixed(1),
         modes=("position",),

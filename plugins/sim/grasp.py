@@ -3,11 +3,19 @@ constraint between the wrist and the object is created only while both fingers t
 the constraint's force limit lets a too-heavy or snagged object slip out, and opening releases it.
 
 :class:`ChannelGrasp` gives a ``sim`` gripper channel (Param ``grasp``) that grasp: the channel
-drives the fingers, the grasp follows its commands and the world's steps (D187)."""
+drives the fingers, the grasp follows its commands and the world's steps (D187).
+
+Nothing here is one robot's (D296): the fingers, the link that holds and the forces are the
+model's or the caller's. Any movable body both fingers touch is caught, whatever its size (the jaw's
+opening, from the finger joints' limits, is what bounds it); the closing force is the finger joints'
+effort limit, and the hold force, unless given, the friction grip those fingers give,
+``2 × GRIP_FRICTION × effort``. A held object that moves ``SLIP_DISTANCE`` from where it was
+caught — too heavy for the hold force — has slipped out: the grasp lets it go."""
 
 from __future__ import annotations
 
 import logging
+import math
 
 import pybullet as p
 
@@ -15,24 +23,40 @@ from .robots import Robot
 
 LOG = logging.getLogger("ckm.sim.grasp")
 
+GRIP_FRICTION = 0.75
+"""Friction coefficient of a finger pad on what it holds (rubber on cardboard or plastic, 0.6-0.9):
+two fingers pressing with force F hold 2·μ·F before the object slips."""
+SLIP_DISTANCE = 0.02
+"""m a held object may move from where it was caught (relative to the holding link) before it has
+slipped out of the fingers."""
+
+
+def hold_force_of(robot: Robot, fingers: tuple[int, int]) -> float:
+    """The friction grip of two fingers pressing at their joints' effort limit (N): 2·μ·F."""
+    return 2.0 * GRIP_FRICTION * min(robot.max_effort(f) for f in fingers)
+
 
 class Gripper:
     """Two fingers (``left`` and its mirror ``right``, each joint its finger's travel from closed at
-    its lower limit) on the ``wrist`` link that holds what they grasp: the Turtlebot's by default;
-    any parallel jaw so made (the station arm's, D267) by its joint and link names."""
+    its lower limit) on the ``wrist`` link that holds what they grasp: any parallel jaw so made (the
+    Turtlebot's, the station arm's D267, the carrier's clamp D296) by its joint and link names.
+    ``force`` (N) closes the fingers (None: their joint's effort limit); ``hold_force`` (N) is the
+    constraint's limit (None: :func:`hold_force_of` the fingers)."""
 
     def __init__(
-        self, robot: Robot, *, left: str = "gripper_joint", right: str = "gripper_right_joint",
-        wrist: str = "arm_wrist_flex_link", force: float = 10.0, hold_force: float = 30.0,
+        self, robot: Robot, *, left: str, right: str, wrist: str, force: float | None = None,
+        hold_force: float | None = None,
     ) -> None:
         self.robot = robot
         self.fingers = (robot.joint(left), robot.joint(right))
         self.finger_links = self.fingers  # a joint's child link has the joint's index
         self.wrist = robot.link(wrist)
-        self.force, self.hold_force = force, hold_force
+        self.force = force if force is not None else robot.max_effort(self.fingers[0])
+        self.hold_force = hold_force if hold_force is not None else hold_force_of(robot, self.fingers)
         self.open_limit = float(p.getJointInfo(robot.body, self.fingers[0], physicsClientId=robot.world.client)[9])
         self.held: int | None = None
         self._constraint: int | None = None
+        self._caught_at: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the held body in the wrist frame
 
     def set_opening(self, opening: float) -> None:
         """Drive each finger to ``opening`` (m from its closed stop)."""
@@ -69,7 +93,7 @@ class Gripper:
         if body is None:
             return None
         cid = self.robot.world.client
-        wrist_pos, wrist_orn = self.robot.link_pose(self.wrist)
+        wrist_pos, wrist_orn = self._wrist_frame()
         obj_pos, obj_orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
         inv_pos, inv_orn = p.invertTransform(wrist_pos, wrist_orn)
         rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
@@ -79,7 +103,28 @@ class Gripper:
         )
         p.changeConstraint(self._constraint, maxForce=self.hold_force, physicsClientId=cid)
         self.held = body
+        self._caught_at = (float(rel_pos[0]), float(rel_pos[1]), float(rel_pos[2]))
         return body
+
+    def _wrist_frame(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The holding link's centre-of-mass frame: a constraint's parent frame is given in it, not
+        in the link's own frame (they differ by the link's inertial origin, D296)."""
+        cid = self.robot.world.client
+        if self.wrist < 0:
+            position, orientation = p.getBasePositionAndOrientation(self.robot.body, physicsClientId=cid)
+            return tuple(position), tuple(orientation)
+        state = p.getLinkState(self.robot.body, self.wrist, computeForwardKinematics=True, physicsClientId=cid)
+        return tuple(state[0]), tuple(state[1])
+
+    def slip(self) -> float:
+        """How far (m) the held body has moved from where it was caught, in the wrist's frame (0: none held)."""
+        if self.held is None:
+            return 0.0
+        wrist_pos, wrist_orn = self._wrist_frame()
+        obj_pos, _ = p.getBasePositionAndOrientation(self.held, physicsClientId=self.robot.world.client)
+        inv_pos, inv_orn = p.invertTransform(wrist_pos, wrist_orn)
+        here, _ = p.multiplyTransforms(inv_pos, inv_orn, obj_pos, (0.0, 0.0, 0.0, 1.0))
+        return math.dist(here, self._caught_at)
 
     def release(self) -> None:
         """Remove the grasp constraint."""
@@ -100,14 +145,17 @@ class ChannelGrasp:
     object both fingers touch while closing is caught (checked after each advance of the world).
     It is let go when the fingers have really opened — by ``RELEASE_GAP`` beyond where they
     stood on it — not on a command: a servo's quantised command to hold its position can round
-    a step up, and the object must not fall for that."""
+    a step up, and the object must not fall for that. A ``hold_force`` of 0 or less is the
+    fingers' own (:func:`hold_force_of`, D296); an object that slips out (too heavy for it) is let go."""
 
     RELEASE_GAP = 0.003
     """m the fingers must open beyond their opening on the object to let it go."""
 
     def __init__(self, robot: Robot, joint: str, mirror: str, link: str, hold_force: float) -> None:
-        self.gripper = Gripper(robot, left=joint, right=mirror, wrist=link, hold_force=hold_force)
+        self.gripper = Gripper(robot, left=joint, right=mirror, wrist=link,
+                               hold_force=hold_force if hold_force > 0.0 else None)
         self.closing = False
+        self.slipped = False  # an object slipped out: nothing is caught until the fingers open
         self.opening_held = 0.0
         self.target = 0.0
         robot.world.hooks.append(self._after_advance)
@@ -122,9 +170,9 @@ class ChannelGrasp:
         """The channel drove the fingers to ``target`` (joint units)."""
         position = self._opening()
         if target < position - self.RELEASE_GAP:  # closing (not a servo step's rounding)
-            self.closing = True
+            self.closing = not self.slipped  # what slipped out is not caught again before they open
         elif target > position + self.RELEASE_GAP:  # opening: nothing is caught on the way
-            self.closing = False
+            self.closing = self.slipped = False
         self.target = target
         if self.gripper.held is not None:
             self._stall()
@@ -143,6 +191,13 @@ class ChannelGrasp:
                          self.gripper.held)
                 self.gripper.release()
                 for finger in self.gripper.fingers:  # the stalled servos close on nothing, to their target
+                    self.gripper.robot.command(finger, "position", self.target)
+            elif self.gripper.slip() > SLIP_DISTANCE:  # heavier than the hold force holds (D296)
+                LOG.info("t=%.2f: body %s slipped out of the fingers (%.3f m)", self.gripper.robot.world.time,
+                         self.gripper.held, self.gripper.slip())
+                self.gripper.release()
+                self.closing, self.slipped = False, True
+                for finger in self.gripper.fingers:
                     self.gripper.robot.command(finger, "position", self.target)
             elif self._opening() > self.opening_held + self.RELEASE_GAP:
                 LOG.info("t=%.2f: let go of body %s (fingers opened to %.4f m)", self.gripper.robot.world.time,

@@ -186,8 +186,8 @@ def cell(request: pytest.FixtureRequest) -> Iterator[tuple[ManipulatorLoop, int,
             _box(loop, (0.29, 0.0, 0.17), (0.03, 0.03, 0.17), 0.0)
             body = _box(loop, (0.28, 0.0, 0.36), (0.02, 0.02, 0.02), 0.1)
             pick = {"approach": "0.22 0 0.36 1.5708", "grasp": "0.28 0 0.36 1.5708", "lift": "0.22 0 0.40 1.3"}
-            # the caught part sits 3 cm ahead of the tool point (the closing fingers push it): set down short
-            place = {"above": "0.25 0 0.38 1.5708", "place": "0.25 0 0.37 1.5708", "retreat": "0.20 0 0.37 1.5708"}
+            # the caught part stays where the fingers took it, at the tool point (D296): set down there
+            place = {"above": "0.26 0 0.38 1.5708", "place": "0.28 0 0.37 1.5708", "retreat": "0.20 0 0.37 1.5708"}
         else:  # a 0.3 m parcel on the work table, named poses and targets without pitch (D264)
             _box(loop, (0.55, 0.0, 0.35), (0.2, 0.25, 0.35), 0.0)
             body = _box(loop, (0.5, 0.0, 0.776), (0.1, 0.15, 0.075), 0.5)

@@ -190,16 +190,17 @@ def test_the_cylinder_picked_off_the_floor_is_placed_upright_on_the_drop_table(l
 def test_an_edge_grasp_shows_in_the_opening_and_the_low_hanging_cylinder_is_still_set_down(
     lab: Lab, system: System
 ) -> None:
-    """2 cm aside, beyond the fingers' 1 cm clearance, they close across the cylinder's edge: the
+    """2.5 cm aside, beyond the fingers' 1 cm clearance, they close across the cylinder's edge: the
     opening the status gives is under PICK_FLOOR's minHold (which fails the pick there, D251).
-    Lifted all the same, it hangs about 5 cm lower; PLACE still sets it upright on the table: the
-    arm stops short on it, and contact ends the place pose (resources.xml contactPoses)."""
+    Lifted all the same, it hangs lower; PLACE still sets it down on the table: the arm stops short
+    on it, and contact ends the place pose (resources.xml contactPoses). Held where the fingers caught
+    it, tilted (the grasp no longer pulls it straight, D296), it may stand or fall on its side there."""
     _drop_on_the_way_home(lab, system)
     lab.run(_steps(system, "STOW"))
     where = lab.world.pose(lab.cylinder)[0]
     x, y, _ = lab.robot.link_pose(-1)[0]
     heading = math.atan2(where[1] - y, where[0] - x)
-    back, aside = float(_param(system, "APPR_FLOOR", "standoff")) - 0.012, 0.02  # APPR's usual 1.2 cm overshoot
+    back, aside = float(_param(system, "APPR_FLOOR", "standoff")) - 0.012, 0.025  # APPR's usual 1.2 cm overshoot
     lab.move_base(where[0] - back * math.cos(heading) + aside * math.sin(heading),
                   where[1] - back * math.sin(heading) - aside * math.cos(heading), heading)
     lab.world.step(24)
@@ -215,7 +216,8 @@ def test_an_edge_grasp_shows_in_the_opening_and_the_low_hanging_cylinder_is_stil
     lab.run(rest)
     lab.loop.run(2.0)
     centre = lab.world.pose(lab.cylinder)[0]
-    assert centre[2] == pytest.approx(0.30 + 0.06, abs=0.01) and _tilt(lab.world, lab.cylinder) < 0.05
+    assert lab.loop.gripper.held is None
+    assert 0.30 + 0.035 - 0.01 < centre[2] < 0.30 + 0.06 + 0.01  # on the table top: upright or on its side
 
 
 def test_the_xtion_sees_an_object_on_the_floor_from_half_a_metre_not_from_the_grasp_distance(

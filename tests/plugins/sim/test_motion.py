@@ -54,7 +54,8 @@ def test_a_grasped_object_stays_in_the_gripper_while_the_base_drives_2_m(world: 
     tb = robot(world, "turtlebot", (3.5, 2.0, 0.0))
     add_box(world, (3.88, 2.0, 0.075), 0.075, [0.3, 0.3, 0.3, 1.0])  # a pedestal under the part
     part = add_box(world, (3.83, 2.0, 0.19), 0.02, [0.0, 0.6, 0.0, 1.0], mass=0.1)
-    arm, gripper = Arm(tb), Gripper(tb)
+    arm = Arm(tb)
+    gripper = Gripper(tb, left="gripper_joint", right="gripper_right_joint", wrist="arm_wrist_flex_link")
     gripper.open()
     for pose in ("pre-grasp", "grasp"):
         arm.go(pose)
