@@ -10,7 +10,8 @@ RGB recognition's model file so objects wear the textures it learnt. A camera's 
 geometry has no default (D284): ``fov``, and a lidar's range (the HWChannel's ``max``), are the
 sensor's own, never the lab's Xtion's or Hokuyo's.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
-``altimeter``, ``pose``) or by ``joint``/``joints``, and the channel's kind and direction:
+``altimeter``, ``pose``, ``flow``, ``position``, ``compass``), by ``joint``/``joints`` or by
+``actuator``, and the channel's kind and direction:
 
 ======================  ===========================================================================
 counter in, joint       wheel encoder speed, ticks/s (``ticksPerRev``, required), plus ``noise`` (s.d.)
@@ -29,6 +30,14 @@ stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in 
 analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
 bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
                         for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it
+bus in, flow            optical flow: ``link``'s velocity over the ground (vx, vy; m/s, heading frame:
+                        x ahead, y left; size 2), plus ``noise`` (s.d.)
+bus in, position        a position fix (UWB, GNSS, mocap): ``link``'s x, y, z (m) in the map (size 3),
+                        plus ``noise`` (s.d.); unlike ``pose``, a sensor a robot has
+analog in, compass      ``link``'s heading (yaw, rad, in (−π, π]), plus ``noise`` (s.d.)
+bus out, multirotor     ``actuator`` multirotor (size 4): a velocity set-point vx vy (m/s, heading
+                        frame), vz (m/s, up), yaw_rate (rad/s) flown by ``rotors`` (links), ``spin``,
+                        ``maxThrust`` (N per rotor, required) … (:mod:`plugins.sim.flight`, D293)
 out, read               the last raw value written (as ``hardware.loopback``)
 out, joint + grasp      a gripper: ``joint`` and ``mirror`` are its fingers (closing towards their
                         lower limit); an object both touch while closing is held to link ``grasp``
@@ -55,17 +64,21 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ckmconf.loader import load
 from ckmconf.model import HWChannel, Node, System
 from plugins.sim.client import RemoteDevice, server_address
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
+from plugins.sim.flight import Airframe
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
-from .sim_checks import system_problems
+from .sim_checks import multirotor_problems, system_problems
 from .simulation import PlantScope, scope_for
 
-SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose")
+SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose", "flow", "position", "compass")
+ACTUATORS = ("", "multirotor")
 _SPEC = Params(
     P("body", "", "Robot the channel belongs to (model plugins/sim/models/<body>.urdf)."),
     P("model", "", "URDF of the robot, relative to the configuration file (default: from body)."),
@@ -112,6 +125,20 @@ _SPEC = Params(
     ),
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
+    P("actuator", "", "Actuator device of an out channel other than a joint (multirotor: D293).", choices=ACTUATORS),
+    P("rotors", "", "Multirotor: its rotor links, space-separated (3 or more; positions and axes from the URDF)."),
+    P("spin", "", "Multirotor: one +1 or -1 per rotor, its reaction torque's sense (+1: counter-clockwise "
+                  "seen from above, the propeller turning clockwise)."),
+    P("maxThrust", None, "Multirotor: the most thrust one rotor gives (required: the motor's own).", type=float,
+      unit="N", above=0.0),
+    P("thrustLag", 0.05, "Multirotor: the rotors' first-order time constant.", unit="s", min=0.0),
+    P("maxTilt", 0.6, "Multirotor: the most the controller tilts the body.", unit="rad", above=0.0, below=1.5),
+    P("maxSpeed", 5.0, "Multirotor: the fastest horizontal set-point accepted.", unit="m/s", above=0.0),
+    P("maxClimb", 3.0, "Multirotor: the fastest climb or descent set-point accepted.", unit="m/s", above=0.0),
+    P("maxYawRate", 2.0, "Multirotor: the fastest yaw-rate set-point accepted.", unit="rad/s", above=0.0),
+    P("drag", 0.3, "Multirotor: linear drag of the body.", unit="N/(m/s)", min=0.0),
+    P("yawMoment", 0.016, "Multirotor: a rotor's reaction torque per newton of its thrust.", unit="N·m/N",
+      above=0.0),
     P(
         "latency",
         0.0,
@@ -156,10 +183,12 @@ class SimBackend(Backend):
 
         if not v["body"]:
             problem(None, "Param 'body' (the robot) is required")
-        if not (v["sensor"] or v["joint"] or v["joints"]):
-            problem(None, "give Param 'sensor' or 'joint'/'joints' to choose the device")
-        if channel.direction == "out" and not v["joint"]:
+        if not (v["sensor"] or v["joint"] or v["joints"] or v["actuator"]):
+            problem(None, "give Param 'sensor', 'joint'/'joints' or 'actuator' to choose the device")
+        if channel.direction == "out" and not v["joint"] and not v["actuator"]:
             problem(None, "an out channel drives a joint: give Param 'joint'")
+        if v["actuator"]:
+            multirotor_problems(channel, v, problem)
         if v["latency"] and v["sensor"] not in ("rgb", "depth"):
             problem("latency", f"Param 'latency' is a camera's (sensor rgb or depth), not {v['sensor'] or 'a joint'}'s")
         if v["grasp"] and (channel.direction != "out" or v["mode"] != "position" or not v["mirror"]):
@@ -210,6 +239,9 @@ class SimBackend(Backend):
             "contact": 1,
             "altimeter": 1,
             "pose": 3,
+            "flow": 2,
+            "position": 3,
+            "compass": 1,
         }.get(sensor)
         if v["joints"]:
             expected = len(v["joints"].split())
@@ -237,7 +269,8 @@ class SimBackend(Backend):
         self._device: ChannelDevice | None = None
         self.device: Any = None  # in-process: the simulated device itself (a Camera, a Lidar, joints…)
         self.remote: RemoteDevice | None = None  # client mode: the device in the world server
-        self.last = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
+        self.last: Value = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
+        self.airframe = Airframe.from_values(v, self.owner) if v["actuator"] == "multirotor" else None
 
     def _path(self, text: str) -> str:
         return str((self.base_dir / text).resolve()) if text else ""
@@ -308,6 +341,17 @@ class SimBackend(Backend):
         """Drive the device (joint target, wheel duty…) with one raw value, at the clock's time."""
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel")
+        if self.airframe is not None:  # a multirotor's set-point, refused here whole if bad (D293)
+            setpoint = list(self.airframe.setpoint(np.asarray(value, dtype=float).ravel().tolist(), self.owner))
+            if self.remote is not None:
+                self.remote.write(setpoint)
+            else:
+                sim, device = self._require()
+                with sim.lock:
+                    sim.sync()
+                    device.write(setpoint)
+            self.last = tuple(setpoint)
+            return
         raw = float(value[0] if isinstance(value, tuple) else value)
         if self.remote is not None:
             self.remote.write(raw)
@@ -334,3 +378,4 @@ class SimBackend(Backend):
         if self.remote is not None:
             self.remote.close()
         self.sim, self._device, self.device, self.remote = None, None, None, None
+

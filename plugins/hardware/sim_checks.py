@@ -1,6 +1,7 @@
 """The checks of a ``hardware.sim`` channel against the rest of its system (decision D288): its
-robot's URDF (the model file, the links and joints its Params name) and where the robot is spawned
-(inside the map, clear of avoided areas, objects and the other robots). ``SimBackend.problems`` runs
+robot's URDF (the model file, the links and joints its Params name; a multirotor's rotor links and
+whether its rotors lift its mass, D293) and where the robot is spawned (inside the map, clear of
+avoided areas, objects and the other robots). ``SimBackend.problems`` runs
 them when ``verify`` gives it the system; at run time the world loads the model anyway.
 """
 
@@ -8,7 +9,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from difflib import get_close_matches
 from functools import lru_cache
 from pathlib import Path
@@ -18,6 +19,7 @@ from ckmconf.model import Environment, HWChannel, System
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import BOUNDS, MapModel
 from plugins.environment_file import environment_of
+from plugins.sim.flight import GRAVITY
 from plugins.sim.urdf import MODELS, Kinematics
 
 
@@ -96,7 +98,29 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
     for joint in v["joints"].split():
         if joint not in joints:
             unknown("joints", joint, joints, "joint")
+    if v["actuator"] == "multirotor":
+        rotors = v["rotors"].split()
+        for rotor in rotors:
+            if rotor not in links:
+                unknown("rotors", rotor, links, "link")
+        mass = _mass(str(path), path.stat().st_mtime)
+        if rotors and v["maxThrust"] is not None and len(rotors) * v["maxThrust"] <= mass * GRAVITY:
+            found.append((named.get("maxThrust", channel), f"thrust {len(rotors)} × {v['maxThrust']:g} N cannot lift "
+                                                           f"{mass:.3g} kg ({mass * GRAVITY:.1f} N), the mass of "
+                                                           f"{path.name}"))
     return found
+
+
+@lru_cache(maxsize=32)  # keyed by the file's modification time: an edited URDF is read again
+def _mass(path: str, mtime: float) -> float:
+    """The robot's mass (kg): every link's ``<inertial><mass>`` summed, as the simulator loads it."""
+    total = 0.0
+    for mass in ET.parse(path).getroot().findall("link/inertial/mass"):
+        try:
+            total += float(mass.get("value", "0"))
+        except ValueError:
+            continue
+    return total
 
 
 def _world_of(channel: HWChannel, v: dict[str, Any], system: System) -> Environment | None:
@@ -194,3 +218,24 @@ def _overlap_problems(channel: HWChannel, v: dict[str, Any], param: Any, system:
             found.append((param, f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
                                  f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn"))
     return found
+
+
+def multirotor_problems(channel: HWChannel, v: dict[str, Any], problem: Callable[[str | None, str], None]) -> None:
+    """What keeps an ``actuator="multirotor"`` channel from flying (D293): its kind, direction and size
+    (bus out, 4: vx vy vz yaw_rate), its rotors, one spin per rotor, its motors' thrust."""
+    if channel.kind != "bus" or channel.direction != "out" or channel.size != 4:
+        problem(None, f"a multirotor channel is kind 'bus', direction 'out', size 4 (vx vy vz yaw_rate); this one "
+                      f"is {channel.kind} {channel.direction}, size {channel.size}")
+    if v["joint"] or v["joints"] or v["sensor"]:
+        problem("actuator", "Param 'actuator' chooses the device: no 'joint', 'joints' or 'sensor' beside it")
+    rotors = v["rotors"].split()
+    if len(rotors) < 3:
+        problem("rotors" if v["rotors"] else None,
+                f"a multirotor needs Param 'rotors', its rotor links (3 or more), not {len(rotors)}")
+    spins = v["spin"].split()
+    if not all(s in ("1", "+1", "-1", "1.0", "-1.0") for s in spins) or len(spins) != len(rotors):
+        problem("spin" if v["spin"] else None,
+                f"Param 'spin' needs one +1 or -1 per rotor ({len(rotors)} rotors), not {v['spin']!r}")
+    if v["maxThrust"] is None:
+        problem(None, "a multirotor needs Param 'maxThrust', the most thrust one rotor gives (N; no default: "
+                      "it is the motor and propeller's own)")

@@ -119,7 +119,7 @@ class Multirotor:
         to_base = np.array(p.getMatrixFromQuaternion(base_orientation)).reshape(3, 3).T
 
         def local(world: Sequence[float]) -> Array:
-            return to_base @ (np.asarray(world) - np.asarray(base_position))
+            return np.asarray(to_base @ (np.asarray(world) - np.asarray(base_position)), dtype=float)
 
         # where the mass is, in the base's frame: the centre of mass and the inertia about it
         masses, centres, inertia = [], [], np.zeros((3, 3))
@@ -170,9 +170,10 @@ class Multirotor:
         p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         robot.world.before_step.append(self.push)
 
-    def command(self, values: Sequence[float]) -> None:
-        """Fly the set-point (vx, vy, vz, yaw_rate) from now on; ValueError if it is not one."""
-        self.setpoint = self.frame.setpoint(values, self.owner)
+    def command(self, values: Sequence[float], owner: str = "") -> None:
+        """Fly the set-point (vx, vy, vz, yaw_rate) from now on; ValueError naming ``owner`` (default:
+        the first channel's) if it is not one."""
+        self.setpoint = self.frame.setpoint(values, owner or self.owner)
 
     def detach(self) -> None:
         """Stop pushing the body (the rotors are off from the next step)."""
@@ -252,17 +253,17 @@ class Multirotor:
         """Per-rotor thrusts giving ``collective`` and ``torque``; when a rotor would leave [0, maxThrust],
         yaw yields first, then the collective, so roll and pitch keep the robot upright."""
         top = self.frame.max_thrust
-        share = self.mixer[:, 0]  # each rotor's part of one newton of collective thrust
+        share: Array = self.mixer[:, 0]  # each rotor's part of one newton of collective thrust
         tilting = self.mixer[:, 1:3] @ torque[:2]
         turning = self.mixer[:, 3] * torque[2]
         if share.min() <= 1e-9:  # a rotor that does not lift: no collective range to search
-            return np.clip(collective * share + tilting + turning, 0.0, top)
+            return np.asarray(np.clip(collective * share + tilting + turning, 0.0, top), dtype=float)
         low = max(-tilting / share)  # the collective range that keeps every rotor in bounds
         high = min((top - tilting) / share)
         if low > high:  # even roll and pitch alone do not fit
-            return np.clip(collective * share + tilting, 0.0, top)
+            return np.asarray(np.clip(collective * share + tilting, 0.0, top), dtype=float)
         level = min(max(collective, low), high) * share + tilting
         # as much of the yaw as fits beside them (a rotor's yaw moment is a few % of its thrust)
         room = np.where(turning > 0, top - level, level)
         part = np.divide(room, np.abs(turning), out=np.ones_like(room), where=np.abs(turning) > 1e-12)
-        return np.asarray(level + min(1.0, max(0.0, float(part.min()))) * turning)
+        return np.asarray(level + min(1.0, max(0.0, float(part.min()))) * turning, dtype=float)
