@@ -131,7 +131,8 @@ _SPEC = Params(
                   "seen from above, the propeller turning clockwise)."),
     P("maxThrust", None, "Multirotor: the most thrust one rotor gives (required: the motor's own).", type=float,
       unit="N", above=0.0),
-    P("thrustLag", 0.05, "Multirotor: the rotors' first-order time constant.", unit="s", min=0.0),
+    P("thrustLag", 0.05, "Multirotor: the rotors' first-order time constant (slower than 0.2 s cannot hold "
+                         "the attitude).", unit="s", min=0.0, max=0.2),
     P("maxTilt", 0.6, "Multirotor: the most the controller tilts the body.", unit="rad", above=0.0, below=1.5),
     P("maxSpeed", 5.0, "Multirotor: the fastest horizontal set-point accepted.", unit="m/s", above=0.0),
     P("maxClimb", 3.0, "Multirotor: the fastest climb or descent set-point accepted.", unit="m/s", above=0.0),

@@ -6,7 +6,8 @@ set-point**, as PX4's offboard velocity control or MAVROS ``setpoint_velocity`` 
 counter-clockwise). :class:`Multirotor` flies it, at every physics step
 (:attr:`plugins.sim.world.World.before_step`, since pybullet's external forces last one step):
 
-1. velocity error → desired acceleration (PI; the integral absorbs drag and model error);
+1. velocity error → desired acceleration (P, with the weight and the drag fed forward: the controller
+   knows the model's mass and drag exactly, so it needs no integral, whose slow mode drifts a hover);
 2. desired acceleration → thrust vector m·(a + g) + drag, its tilt limited to ``maxTilt``;
 3. thrust vector and the yaw target (the yaw rate integrated) → the desired attitude; the collective
    thrust is its projection on the body's z axis; attitude PD on SO(3) (Lee et al. 2010) → torques;
@@ -38,13 +39,13 @@ GRAVITY = 9.81
 # The controller's gains (1/s, 1/s²): the velocity loops are slower than the attitude loop, which
 # is kept slower than the rotors (ATTITUDE_BANDWIDTH × thrustLag), so their lag does not shake it.
 VELOCITY_GAIN = np.array([2.0, 2.0, 4.0])
-VELOCITY_INTEGRAL = np.array([0.6, 0.6, 2.0])
-INTEGRAL_ACCEL = 3.0  # m/s²: the integral's share of the asked acceleration is bounded (no wind-up)
 ATTITUDE_RATE = 12.0  # rad/s, the attitude loop's natural frequency with quick rotors
-ATTITUDE_BANDWIDTH = 0.5  # the attitude loop's frequency × thrustLag stays below this
+ATTITUDE_BANDWIDTH = 1.0  # the attitude loop's frequency × thrustLag stays below this
 ATTITUDE_DAMPING = 0.8
 YAW_RATE = 4.0  # rad/s: yaw's loop is slower, its moment (the rotors' drag) a few % of their thrust's
-UP_CONTACT = 0.7  # a contact whose normal is this close to vertical is ground under the robot
+LIFTED = 0.2  # s: landed, but off the ground this long (not a bounce): it flies again
+UP_CONTACT = 0.7
+MAX_LAG = 0.2  # s: slower rotors cannot hold a multirotor's attitude (real ones: 0.02–0.1 s)  # a contact whose normal is this close to vertical is ground under the robot
 
 
 @dataclass(frozen=True)
@@ -54,7 +55,7 @@ class Airframe:
     rotors: tuple[str, ...]
     spin: tuple[float, ...]  # +1: the rotor's reaction turns the body counter-clockwise seen from above
     max_thrust: float  # N per rotor: the motor and propeller's own, no default
-    thrust_lag: float = 0.05  # s, the rotor's first-order time constant
+    thrust_lag: float = 0.05  # s, the rotor's first-order time constant (at most MAX_LAG)
     max_tilt: float = 0.6  # rad
     max_speed: float = 5.0  # m/s, horizontal
     max_climb: float = 3.0  # m/s, up or down
@@ -139,12 +140,13 @@ class Multirotor:
             r = c - self.centre
             inertia += m * (r @ r * np.eye(3) - np.outer(r, r))
         self.inertia = inertia
-        # each rotor's position (from the base's origin) and axis in the base's frame, from the model
+        # each rotor's position and axis in the base's frame, from the model: where its thrust acts (its
+        # link's inertial frame, which pybullet pushes in LINK_FRAME; a URDF's rotor has it at its origin)
         self.offsets, self.axes = [], []
         for link in self.links:
             state = p.getLinkState(body, link, computeForwardKinematics=True, physicsClientId=cid)
-            self.offsets.append(local(state[4]))
-            self.axes.append(to_base @ np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)[:, 2])
+            self.offsets.append(local(state[0]))
+            self.axes.append(to_base @ np.array(p.getMatrixFromQuaternion(state[1])).reshape(3, 3)[:, 2])
         spin = np.asarray(frame.spin)
         columns = []
         for offset, axis, s in zip(self.offsets, self.axes, spin, strict=True):
@@ -160,7 +162,7 @@ class Multirotor:
         self.target = np.zeros(len(self.links))
         self.setpoint = (0.0, 0.0, 0.0, 0.0)
         self.landed = False
-        self._integral = np.zeros(3)
+        self._airborne = 0  # steps since the robot last stood on something
         self._yaw: float | None = None  # the yaw held, the yaw rate integrated
         rate = min(ATTITUDE_RATE, ATTITUDE_BANDWIDTH / frame.thrust_lag) if frame.thrust_lag > 0 else ATTITUDE_RATE
         natural = np.array([rate, rate, min(rate, YAW_RATE)])
@@ -194,30 +196,30 @@ class Multirotor:
         velocity = np.asarray(linear)
         yaw = math.atan2(rotation[1, 0], rotation[0, 0])
         vx, vy, vz, yaw_rate = self.setpoint
-        if vz > 0.0:
+        on_ground = self._on_ground()
+        self._airborne = 0 if on_ground else self._airborne + 1
+        if vz > 0.0 or self._airborne * dt > LIFTED:  # taking off, or lifted (pushed off a ledge): fly
             self.landed = False
-        elif not self.landed and self._on_ground():
+        elif not self.landed and on_ground:
             self.landed = True
         if self.landed:  # motors idle, the controller's memory cleared for the next take-off
             self.target[:] = 0.0
-            self._integral[:] = 0.0
             self._yaw = yaw
         else:
             self.target = self._control(rotation, velocity, np.asarray(angular), yaw, (vx, vy, vz, yaw_rate), dt)
         lag = 1.0 - math.exp(-dt / frame.thrust_lag) if frame.thrust_lag > 0 else 1.0
         self.thrust = np.clip(self.thrust + lag * (self.target - self.thrust), 0.0, frame.max_thrust)
-        origin = np.asarray(position) + rotation @ (-self.centre)  # the base's frame origin, in the world
         reaction = np.zeros(3)
-        for link, offset, axis, thrust, s in zip(self.links, self.offsets, self.axes, self.thrust, frame.spin,
-                                                 strict=True):
-            direction = rotation @ axis
-            p.applyExternalForce(body, link, (thrust * direction).tolist(), (origin + rotation @ offset).tolist(),
-                                 p.WORLD_FRAME, physicsClientId=cid)
-            reaction += s * frame.yaw_moment * thrust * direction
+        for link, axis, thrust, s in zip(self.links, self.axes, self.thrust, frame.spin, strict=True):
+            # in the link's own frame: a world position would be one step stale inside pybullet, a moment
+            # arm of v·dt that pitches a flying robot up
+            p.applyExternalForce(body, link, [0.0, 0.0, float(thrust)], [0.0, 0.0, 0.0], p.LINK_FRAME,
+                                 physicsClientId=cid)
+            reaction += s * frame.yaw_moment * thrust * (rotation @ axis)
         p.applyExternalTorque(body, -1, reaction.tolist(), p.WORLD_FRAME, physicsClientId=cid)
         if frame.drag > 0.0:
-            p.applyExternalForce(body, -1, (-frame.drag * velocity).tolist(), list(position), p.WORLD_FRAME,
-                                 physicsClientId=cid)
+            drag = rotation.T @ (-frame.drag * velocity)  # at the base's centre of mass, in its frame (as above)
+            p.applyExternalForce(body, -1, drag.tolist(), [0.0, 0.0, 0.0], p.LINK_FRAME, physicsClientId=cid)
 
     def _control(self, rotation: Array, velocity: Array, angular: Array, yaw: float,
                  setpoint: tuple[float, float, float, float], dt: float) -> Array:
@@ -227,9 +229,7 @@ class Multirotor:
         c, s = math.cos(yaw), math.sin(yaw)
         wanted = np.array([c * vx - s * vy, s * vx + c * vy, vz])  # the heading frame → the world
         error = wanted - velocity
-        self._integral = np.clip(self._integral + error * dt, -INTEGRAL_ACCEL / VELOCITY_INTEGRAL,
-                                 INTEGRAL_ACCEL / VELOCITY_INTEGRAL)
-        accel = self._velocity_gain * error + VELOCITY_INTEGRAL * self._integral
+        accel = self._velocity_gain * error
         force = self.mass * (accel + np.array([0.0, 0.0, GRAVITY])) + frame.drag * velocity
         force[2] = max(force[2], 0.1 * self.mass * GRAVITY)  # never ask to be pulled down: keep it upright
         lateral, reach = math.hypot(force[0], force[1]), force[2] * math.tan(frame.max_tilt)

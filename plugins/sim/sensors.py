@@ -187,8 +187,8 @@ class GroundSensor:
     """What a UAV measures of where it is and how it moves (D293), each value with Gaussian ``noise``
     (s.d., in its unit), of ``link``:
 
-    - :meth:`flow`: the velocity over the ground (vx, vy, m/s) in the link's heading frame (x ahead, y
-      left), as an optical-flow sensor with its range finder gives it (PX4Flow, PMW3901);
+    - :meth:`flow`: the link's velocity over the ground (vx, vy, m/s) in the robot's heading frame (x
+      ahead, y left), as an optical-flow sensor with its range finder gives it (PX4Flow, PMW3901);
     - :meth:`position`: x, y, z (m) in the map frame, a fix as UWB, GNSS or motion capture gives it;
     - :meth:`compass`: the heading (yaw, rad, counter-clockwise from the map's x axis, in (−π, π]).
     """
@@ -203,8 +203,8 @@ class GroundSensor:
         return tuple(float(v) for v in values)
 
     def flow(self) -> tuple[float, ...]:
-        """(vx, vy) over the ground in the heading frame."""
-        _, _, yaw = self.robot.planar_pose(self.link)
+        """(vx, vy) over the ground in the heading frame (the robot's, whatever way the link's frame turns)."""
+        _, _, yaw = self.robot.planar_pose(-1)
         vx, vy, _ = _link_velocity(self.robot, self.link)
         c, s = math.cos(yaw), math.sin(yaw)
         return self._noisy(np.array([c * vx + s * vy, -s * vx + c * vy]))
