@@ -30,7 +30,7 @@ stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in 
 analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
 bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
                         for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it
-bus in, flow            optical flow: ``link``'s velocity over the ground (vx, vy; m/s, heading frame:
+bus in, flow            optical flow: ``link``'s velocity over the ground (vx, vy; m/s, the robot's heading frame:
                         x ahead, y left; size 2), plus ``noise`` (s.d.)
 bus in, position        a position fix (UWB, GNSS, mocap): ``link``'s x, y, z (m) in the map (size 3),
                         plus ``noise`` (s.d.); unlike ``pose``, a sensor a robot has

@@ -44,8 +44,7 @@ ATTITUDE_BANDWIDTH = 1.0  # the attitude loop's frequency × thrustLag stays bel
 ATTITUDE_DAMPING = 0.8
 YAW_RATE = 4.0  # rad/s: yaw's loop is slower, its moment (the rotors' drag) a few % of their thrust's
 LIFTED = 0.2  # s: landed, but off the ground this long (not a bounce): it flies again
-UP_CONTACT = 0.7
-MAX_LAG = 0.2  # s: slower rotors cannot hold a multirotor's attitude (real ones: 0.02–0.1 s)  # a contact whose normal is this close to vertical is ground under the robot
+UP_CONTACT = 0.7  # a contact whose normal is this close to vertical is ground under the robot
 
 
 @dataclass(frozen=True)
@@ -55,7 +54,7 @@ class Airframe:
     rotors: tuple[str, ...]
     spin: tuple[float, ...]  # +1: the rotor's reaction turns the body counter-clockwise seen from above
     max_thrust: float  # N per rotor: the motor and propeller's own, no default
-    thrust_lag: float = 0.05  # s, the rotor's first-order time constant (at most MAX_LAG)
+    thrust_lag: float = 0.05  # s, the rotor's time constant (hardware.sim: at most 0.2 s, slower loses the attitude)
     max_tilt: float = 0.6  # rad
     max_speed: float = 5.0  # m/s, horizontal
     max_climb: float = 3.0  # m/s, up or down
@@ -74,7 +73,9 @@ class Airframe:
         except ValueError:
             raise ValueError(f"{owner}: Param 'spin' is {v.get('spin')!r}, not one +1 or -1 per rotor") from None
         if len(spin) != len(rotors) or any(s not in (1.0, -1.0) for s in spin):
-            raise ValueError(f"{owner}: Param 'spin' needs one +1 or -1 per rotor ({len(rotors)}), got {v.get('spin')!r}")
+            raise ValueError(
+                f"{owner}: Param 'spin' needs one +1 or -1 per rotor ({len(rotors)}), got {v.get('spin')!r}"
+            )
         if v.get("maxThrust") is None:
             raise ValueError(f"{owner}: a multirotor needs Param 'maxThrust' (N per rotor: the motor's own)")
 
@@ -82,8 +83,16 @@ class Airframe:
             return float(v[name])  # type: ignore[arg-type]
 
         return cls(
-            rotors, spin, number("maxThrust"), number("thrustLag"), number("maxTilt"), number("maxSpeed"),
-            number("maxClimb"), number("maxYawRate"), number("drag"), number("yawMoment"),
+            rotors,
+            spin,
+            number("maxThrust"),
+            number("thrustLag"),
+            number("maxTilt"),
+            number("maxSpeed"),
+            number("maxClimb"),
+            number("maxYawRate"),
+            number("drag"),
+            number("yawMoment"),
         )
 
     def setpoint(self, values: Sequence[float], owner: str) -> tuple[float, float, float, float]:
@@ -154,8 +163,10 @@ class Multirotor:
             columns.append([axis[2], *moment])
         allocation = np.array(columns).T  # (collective, roll, pitch, yaw) per newton of each rotor
         if np.linalg.matrix_rank(allocation, tol=1e-6) < 4:
-            raise ValueError(f"{owner}: rotors {' '.join(frame.rotors)} with spin {frame.spin} cannot control "
-                             "the collective thrust, roll, pitch and yaw independently")
+            raise ValueError(
+                f"{owner}: rotors {' '.join(frame.rotors)} with spin {frame.spin} cannot control "
+                "the collective thrust, roll, pitch and yaw independently"
+            )
         self.mixer = np.linalg.pinv(allocation)
         self.thrust = np.zeros(len(self.links))
         """Each rotor's thrust now (N), in the order of ``rotors``."""
@@ -190,7 +201,7 @@ class Multirotor:
         """One physics step of the flight controller and the rotors (called before ``stepSimulation``)."""
         cid, body, frame = self.robot.world.client, self.robot.body, self.frame
         dt = self.robot.world.time_step
-        position, orientation = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+        _, orientation = p.getBasePositionAndOrientation(body, physicsClientId=cid)
         linear, angular = p.getBaseVelocity(body, physicsClientId=cid)
         rotation = np.array(p.getMatrixFromQuaternion(orientation)).reshape(3, 3)
         velocity = np.asarray(linear)
@@ -213,16 +224,24 @@ class Multirotor:
         for link, axis, thrust, s in zip(self.links, self.axes, self.thrust, frame.spin, strict=True):
             # in the link's own frame: a world position would be one step stale inside pybullet, a moment
             # arm of v·dt that pitches a flying robot up
-            p.applyExternalForce(body, link, [0.0, 0.0, float(thrust)], [0.0, 0.0, 0.0], p.LINK_FRAME,
-                                 physicsClientId=cid)
+            p.applyExternalForce(
+                body, link, [0.0, 0.0, float(thrust)], [0.0, 0.0, 0.0], p.LINK_FRAME, physicsClientId=cid
+            )
             reaction += s * frame.yaw_moment * thrust * (rotation @ axis)
         p.applyExternalTorque(body, -1, reaction.tolist(), p.WORLD_FRAME, physicsClientId=cid)
         if frame.drag > 0.0:
             drag = rotation.T @ (-frame.drag * velocity)  # at the base's centre of mass, in its frame (as above)
             p.applyExternalForce(body, -1, drag.tolist(), [0.0, 0.0, 0.0], p.LINK_FRAME, physicsClientId=cid)
 
-    def _control(self, rotation: Array, velocity: Array, angular: Array, yaw: float,
-                 setpoint: tuple[float, float, float, float], dt: float) -> Array:
+    def _control(
+        self,
+        rotation: Array,
+        velocity: Array,
+        angular: Array,
+        yaw: float,
+        setpoint: tuple[float, float, float, float],
+        dt: float,
+    ) -> Array:
         """The rotors' thrust commands for one step of flight."""
         frame = self.frame
         vx, vy, vz, yaw_rate = setpoint

@@ -214,13 +214,13 @@ def test_a_bad_set_point_is_refused_naming_the_channel() -> None:
         (0.5, "takes 4 values"),
     ):
         with pytest.raises(ValueError, match=re.escape(why)) as refused:
-            flight.fly.write(bad)  # type: ignore[arg-type]
+            flight.fly.write(bad)
         assert "sim channel 'fly'" in str(refused.value)
     assert flight.flyer.setpoint == (0.0, 0.0, 1.0, 0.0)  # still flying the last good one
     assert flight.fly.read() == (0.0, 0.0, 1.0, 0.0)
     device = flight.fly._device  # the world server's path: the device refuses what no backend checked
     assert device is not None
-    with pytest.raises(ValueError, match="sim channel 'fly'.*not finite"):
+    with pytest.raises(ValueError, match=r"sim channel 'fly'.*not finite"):
         device.write([0.0, math.nan, 0.0, 0.0])
 
 
@@ -324,7 +324,7 @@ def test_a_multirotor_flies_through_the_world_server(tmp_path: Path, monkeypatch
                 assert isinstance(value, tuple)
                 height = value[2]
             assert height - ground[2] >= 0.5
-            with pytest.raises(ValueError, match="sim channel 'quad_velocity'.*not finite"):
+            with pytest.raises(ValueError, match=r"sim channel 'quad_velocity'.*not finite"):
                 fly.write((0.0, 0.0, math.nan, 0.0))
             fly.write((0.0, 0.0, -1.0, 0.0))
         finally:
