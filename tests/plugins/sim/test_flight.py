@@ -23,6 +23,7 @@ from plugins.sim.client import ENV_ADDRESS, ENV_KEY
 from plugins.sim.devices import SimWorld
 from plugins.sim.flight import GRAVITY, Multirotor
 from plugins.sim.session import ServerProcess
+from runtime.kernel.interfaces import ParamError
 from tests.conftest import REPO
 
 EXAMPLE = REPO / "configs" / "examples" / "sim_multirotor.xml"
@@ -222,6 +223,21 @@ def test_a_bad_set_point_is_refused_naming_the_channel() -> None:
     assert device is not None
     with pytest.raises(ValueError, match=r"sim channel 'fly'.*not finite"):
         device.write([0.0, math.nan, 0.0, 0.0])
+
+
+def test_a_multirotor_channel_that_cannot_fly_is_refused_before_setup() -> None:
+    """What ckm-validate reports at its line (corpus sim_multirotor_*.xml), the backend refuses alone too."""
+    quad = {"body": "quadrotor", "actuator": "multirotor", **AIRFRAMES["quadrotor"]}
+    for size, direction, params, why in (
+        (3, "out", quad, "size 4 (vx vy vz yaw_rate); this one is bus out, size 3"),
+        (4, "in", quad, "this one is bus in, size 4"),
+        (4, "out", {**quad, "spin": "1 -1"}, "Param 'spin' needs one +1 or -1 per rotor (4 rotors)"),
+        (4, "out", {k: v for k, v in quad.items() if k != "maxThrust"}, "needs Param 'maxThrust'"),
+        (4, "out", {**quad, "rotors": "rotor_fl rotor_fr"}, "its rotor links (3 or more), not 2"),
+        (4, "out", {**quad, "sensor": "imu"}, "no 'joint', 'joints' or 'sensor' beside it"),
+    ):
+        with pytest.raises(ParamError, match=re.escape(why)):
+            SimBackend(record("fly", direction, "bus", size, **params))
 
 
 def test_the_same_commands_fly_the_same_path() -> None:
