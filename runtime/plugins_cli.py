@@ -3,12 +3,17 @@
 - ``ckm-plugins list [--long] [--json]``: one line per kind (``CATEGORY.KIND`` and its summary;
   ``--long``: with its Params and ports);
 - ``ckm-plugins show KIND…``: a kind's description, Params (type, default, unit, range, doc) and
-  ports, then the rest of its class's and its module's documentation; ``KIND`` is ``CATEGORY.KIND``
-  or a kind name registered in one category only;
+  ports, then the rest of its class's and its module's documentation and its reference (below);
+  ``KIND`` is ``CATEGORY.KIND`` or a kind name registered in one category only;
 - ``ckm-plugins markdown [--package NAME]``: the reference page ``docs/plugins.md`` is generated
   from (``--package ckm``: only the kinds this distribution registers);
 - ``ckm-plugins interfaces [--markdown]``: the standard service interfaces, each with the kinds that
   implement it and the behavior kinds that use it (``docs/interfaces.md`` is ``--markdown``).
+
+A kind's reference: a kind class may define a classmethod ``reference(form)`` returning a text
+generated from its own data (``form`` "text" for ``show``, "markdown" for the page), such as
+``hardware.sim``'s device table (D295); ``show`` prints it after the documentation, the page after
+the kind's ports.
 
 Exit codes: 0, or 1 when a kind is unknown or cannot be imported (one line on stderr, no traceback).
 """
@@ -29,8 +34,10 @@ from .verification.interfaces import STANDARD, Interface, Port, provided_by, use
 from .verification.manifest import Params, Ports, params_of, ports_of
 
 _NAMES = re.compile(r"^``[\w.-]+``(?:\s*/\s*``[\w.-]+``)*:\s*")
-_SEE_MODULE = re.compile(r"\s*\((?:see )?(?:the )?module doc(?:string)?\)"
-                         r"|,? (?:see )?the module doc(?:string)?|;\s*see the module doc(?:string)?")
+_SEE_MODULE = re.compile(
+    r"\s*\((?:see )?(?:the )?module doc(?:string)?\)"
+    r"|,? (?:see )?the module doc(?:string)?|;\s*see the module doc(?:string)?"
+)
 """A summary's pointer to the module docstring, which ``show`` prints in full below it."""
 _TITLES = {
     "hardware": "Hardware backends (`HWChannel/@backend`)",
@@ -55,6 +62,12 @@ def details(cls: type[Any]) -> str:
     module = sys.modules.get(cls.__module__)
     about = inspect.getdoc(module) if module is not None else None
     return "\n\n".join(part.strip() for part in (*rest, about or "") if part.strip())
+
+
+def reference(cls: type[Any], form: str) -> str:
+    """A kind's generated reference in ``form`` ("text" or "markdown"); "" when it has none."""
+    made = getattr(cls, "reference", None)
+    return str(made(form)).strip() if callable(made) else ""
 
 
 def _params_rows(params: Params) -> list[dict[str, str]]:
@@ -92,14 +105,17 @@ def describe(registry: Registry, category: str, kind: str) -> dict[str, Any]:
         "package": registry.origin(category, kind),
         "summary": summary(cls),
         "details": details(cls),
+        "reference": reference(cls, "text"),
         "params": _params_rows(params_of(cls)),
         "inputs": dict(ports.inputs),
         "outputs": dict(ports.outputs),
         "sizes": list(ports.sizes),
         "provides": provided_by(cls),
         "writes": {name: list(fields) for name, fields in writes_of(cls).items()},
-        "uses": [{"alias": u.alias, "interface": u.interface, "optional": u.optional, "doc": u.doc}
-                 for u in (uses_of(cls) or ())],
+        "uses": [
+            {"alias": u.alias, "interface": u.interface, "optional": u.optional, "doc": u.doc}
+            for u in (uses_of(cls) or ())
+        ],
     }
 
 
@@ -140,8 +156,9 @@ def _show(info: dict[str, Any], full: bool = False) -> str:
     lines += [f"  {line}" for line in _ports_text(ports)]
     lines += [f"  {line}" for line in _uses_text(info)]
     text = "\n".join(line for line in lines if line)
-    if full and info.get("details"):
-        text += "\n\n" + "\n".join(f"  {line}".rstrip() for line in info["details"].splitlines())
+    for part in ("details", "reference") if full else ():
+        if info.get(part):
+            text += "\n\n" + "\n".join(f"  {line}".rstrip() for line in info[part].splitlines())
     return text
 
 
@@ -179,8 +196,11 @@ def markdown(registry: Registry, package: str | None = None) -> str:
                     out.append("| " + " | ".join(_cell(c) for c in cells) + " |")
             else:
                 out.append("No Params.")
-            out += ["", "Ports: " + "; ".join(_ports_text(ports_of(registry.find(category, kind) or object))) + "."]
+            cls = registry.find(category, kind) or object
+            out += ["", "Ports: " + "; ".join(_ports_text(ports_of(cls))) + "."]
             out += [f"\n{line[0].upper()}{line[1:]}." for line in _uses_text(info)]
+            generated = reference(cls, "markdown")
+            out += ["", generated] if generated else []
     return "\n".join(out) + "\n"
 
 
@@ -215,7 +235,7 @@ def _port_fields(interface: Interface, label: str, port: Port, writers: Mapping[
         out.append(f"- a goal carries {_codes(port.fields)}")
     for message in port.messages:
         adaptation = ADAPTATIONS.get(message)
-        for name, why in (adaptation.dropped.items() if adaptation is not None else ()):
+        for name, why in adaptation.dropped.items() if adaptation is not None else ():
             if name in every:
                 out.append(f"- on `{message}`, `{name}` is not carried: {why}")
     return [f"{label} `{port.name}`:", "", *out, ""] if out else []
@@ -224,23 +244,42 @@ def _port_fields(interface: Interface, label: str, port: Port, writers: Mapping[
 def _interface_section(interface: Interface, kinds: list[str], behaviors: list[str], registry: Registry) -> list[str]:
     out = ["", f"## `{interface.name}`", "", interface.summary, ""]
     out += ["| port | name | message types | what it carries |", "| --- | --- | --- | --- |"]
-    for label, ports in (("Input", interface.inputs), ("Output", interface.outputs),
-                         ("Parameter", interface.parameters), ("QualityMeasure", interface.measures)):
+    for label, ports in (
+        ("Input", interface.inputs),
+        ("Output", interface.outputs),
+        ("Parameter", interface.parameters),
+        ("QualityMeasure", interface.measures),
+    ):
         out += [f"| {label} | `{port.name}` | {_codes(port.messages) or '—'} | {_cell(port.doc)} |" for port in ports]
     writers = {kind: registry.find("plugin", kind.removeprefix("plugin.")) for kind in kinds}
-    fields = [line for label, ports in (("Input", interface.inputs), ("Output", interface.outputs))
-              for port in ports for line in _port_fields(interface, label, port, writers)]
+    fields = [
+        line
+        for label, ports in (("Input", interface.inputs), ("Output", interface.outputs))
+        for port in ports
+        for line in _port_fields(interface, label, port, writers)
+    ]
     names = {p.name for p in interface.outputs}
-    further = [f"- `{kind}` Output `{name}`: {_codes(written)}" for kind, cls in writers.items()
-               for name, written in writes_of(cls).items() if name not in names]
+    further = [
+        f"- `{kind}` Output `{name}`: {_codes(written)}"
+        for kind, cls in writers.items()
+        for name, written in writes_of(cls).items()
+        if name not in names
+    ]
     if further:
         fields += ["Further Outputs of its kinds (not the interface's):", "", *further, ""]
     if fields:
         out += ["", "Fields (`a.b` nested, `a[].b` in each element of a list), kind by kind:", "", *fields[:-1]]
     if interface.goals:
         out += ["", f"Goals: {interface.goals}"]
-    out += ["", "Implemented by: " + (", ".join(f"`{k}`" for k in kinds) or "no kind of this distribution "
-                                      "(a `<Service interface=…>` of your own, or a ROS kernel resource)") + "."]
+    out += [
+        "",
+        "Implemented by: "
+        + (
+            ", ".join(f"`{k}`" for k in kinds)
+            or "no kind of this distribution (a `<Service interface=…>` of your own, or a ROS kernel resource)"
+        )
+        + ".",
+    ]
     out += ["", "Used by: " + (", ".join(f"`{b}`" for b in behaviors) or "no behavior kind yet") + "."]
     return out
 
@@ -253,10 +292,10 @@ def interfaces_markdown(registry: Registry, package: str | None = None) -> str:
         "Generated by `ckm-plugins interfaces --markdown` from `runtime/verification/interfaces.py`; "
         "`tests/runtime/test_plugins_cli.py` keeps it current.",
         "",
-        "A `<Service>` is of an interface when it says so (`interface=\"navigation\"`) or when the output "
+        'A `<Service>` is of an interface when it says so (`interface="navigation"`) or when the output '
         "plugin of its profiles implements it; it must then have the interface's Inputs, Outputs, "
         "Parameters and quality measures by these names (their topics are the system's own). A behavior "
-        "kind reads the services it needs under fixed aliases (`<Uses service=\"…\" as=\"nav\"/>`); "
+        'kind reads the services it needs under fixed aliases (`<Uses service="…" as="nav"/>`); '
         "`ckm-validate` refuses, at its line, a required alias missing, an alias bound to a service of "
         "another interface or of none, and a service of an interface missing one of its ports. Further "
         "`<Uses>` (services a behavior only configures or asks a quality of, for eq. 5.1) are accepted.",
@@ -296,9 +335,16 @@ def _print_interfaces(registry: Registry, package: str | None, as_markdown: bool
         return
     for interface in STANDARD.values():
         kinds, behaviors = _implementers(registry, interface.name, package)
-        ports = [f"{label} {p.name}" for label, group in (("in", interface.inputs), ("out", interface.outputs),
-                                                          ("param", interface.parameters),
-                                                          ("measure", interface.measures)) for p in group]
+        ports = [
+            f"{label} {p.name}"
+            for label, group in (
+                ("in", interface.inputs),
+                ("out", interface.outputs),
+                ("param", interface.parameters),
+                ("measure", interface.measures),
+            )
+            for p in group
+        ]
         print(f"{interface.name}: {interface.summary}")
         print(f"  ports: {', '.join(ports)}")
         print(f"  kinds: {', '.join(kinds) or 'none'}")

@@ -36,7 +36,7 @@ class Dock(_Goals):
     USES = Uses(Use("base", "base-drive", "drives to the docking pose"))
 
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
-        P("pose", REQUIRED, "Map pose to end at: 'x y yaw' (m, m, rad).", type=str),
+        P("pose", REQUIRED, "Map pose to end at: 'x y yaw' (m, m, rad).", type=str, numbers=(3,), form="'x y yaw'"),
     )
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
 

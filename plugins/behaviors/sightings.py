@@ -33,7 +33,7 @@ SIGHTING_PARAMS = (
                    "(empty: any object)."),
     P("minReliability", 0.5, "Least reliability a sighting must have.", min=0.0, max=1.0),
     P("sensorPose", "0 0 0", "Where the detector's sensor sits on the robot, 'x y yaw' (m, m, rad): places a "
-                             "sighting that is not in the map frame."),
+                             "sighting that is not in the map frame.", numbers=(3,), form="'x y yaw'"),
 )
 
 

@@ -10,39 +10,13 @@ RGB recognition's model file so objects wear the textures it learnt. A camera's 
 geometry has no default (D284): ``fov``, and a lidar's range (the HWChannel's ``max``), are the
 sensor's own, never the lab's Xtion's or Hokuyo's.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
-``altimeter``, ``pose``, ``flow``, ``position``, ``compass``), by ``joint``/``joints`` or by
-``actuator``, and the channel's kind and direction:
-
-======================  ===========================================================================
-counter in, joint       wheel encoder speed, ticks/s (``ticksPerRev``, required), plus ``noise`` (s.d.)
-pwm out, joint          duty × ``maxVelocity`` (``mode`` velocity) or × max effort (``mode`` effort)
-analog/bus in, joint    joint position (``mode`` velocity/effort: those), raw = value / scale + offset
-bus in, joints          a tuple of the named joints' positions, each as above
-analog/bus out, joint   joint target (``mode``), value = (raw − offset) × scale; ``mirror``: a second
-                        joint driven alike (the gripper's other finger); ``initial``: the raw value the
-                        joint stands at when the robot is spawned (a servo's power-on position)
-digital in, contact     1 while ``link`` touches an obstacle within ``arc`` (rad, centred ahead) of its
-                        heading (a bumper: the Kobuki's three cover the front half, π; D236)
-stream in, lidar        ``size`` ranges (m) over ``fov`` (required) from ``link``, from ``rangeMin`` up to the
-                        HWChannel's ``max`` (required: the lidar's range)
-stream in, rgb/depth    one frame ``width``×``height`` (RGB bytes, or depth in mm) flattened row-major, over
-                        ``fov`` (required: the camera's horizontal field of view)
-analog in, imu/alt.     (wx, wy, wz, ax, ay, az) of ``link`` (size 6) / the link's height (m)
-bus in, pose            the true planar pose (x, y, yaw) of ``link`` in the map (size 3): ground truth
-                        for reports and benchmarks, as Gazebo's p3d plugin gives; no robot has it
-bus in, flow            optical flow: ``link``'s velocity over the ground (vx, vy; m/s, the robot's heading frame:
-                        x ahead, y left; size 2), plus ``noise`` (s.d.)
-bus in, position        a position fix (UWB, GNSS, mocap): ``link``'s x, y, z (m) in the map (size 3),
-                        plus ``noise`` (s.d.); unlike ``pose``, a sensor a robot has
-analog in, compass      ``link``'s heading (yaw, rad, in (−π, π]), plus ``noise`` (s.d.)
-bus out, multirotor     ``actuator`` multirotor (size 4): a velocity set-point vx vy (m/s, heading
-                        frame), vz (m/s, up), yaw_rate (rad/s) flown by ``rotors`` (links), ``spin``,
-                        ``maxThrust`` (N per rotor, required) … (:mod:`plugins.sim.flight`, D293)
-out, read               the last raw value written (as ``hardware.loopback``)
-out, joint + grasp      a gripper: ``joint`` and ``mirror`` are its fingers (closing towards their
-                        lower limit); an object both touch while closing is held to link ``grasp``
-                        until a command opens them or ``holdForce`` (N) is exceeded (D87, D187)
-======================  ===========================================================================
+``altimeter``, ``pose``, ``flow``, ``position``, ``compass``), by ``joint``/``joints`` (with ``grasp``:
+a gripper) or by ``actuator`` (``multirotor``: a velocity set-point flown by the robot's rotors,
+:mod:`plugins.sim.flight`, D293), and the channel's kind and direction. Every device — kind ×
+direction, the values in order with their units, the size, the ``mode``s it accepts and its Params —
+is a row of :data:`plugins.sim.device_table.DEVICES` (D295): ``SimBackend.problems`` (so ``verify``)
+refuses a channel no row allows, and ``ckm-plugins show hardware.sim`` prints the table after this
+text (:meth:`SimBackend.reference`).
 
 Time (decision D88): the world is a :class:`SimulationHook` of the channel's scope; each read or
 write first steps the physics, in fixed steps, up to the scope clock's time — real time under
@@ -57,6 +31,7 @@ partition sees the same robots. Without it the world is in-process, as above.
 
 from __future__ import annotations
 
+import re
 import threading
 import weakref
 from collections.abc import Callable, Sequence
@@ -68,13 +43,14 @@ import numpy as np
 
 from ckmconf.loader import load
 from ckmconf.model import HWChannel, Node, System
+from plugins.sim import device_table
 from plugins.sim.client import RemoteDevice, server_address
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
 from plugins.sim.flight import Airframe
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
-from .sim_checks import multirotor_problems, system_problems
+from .sim_checks import device_problems, multirotor_problems, system_problems
 from .simulation import PlantScope, scope_for
 
 SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose", "flow", "position", "compass")
@@ -82,7 +58,8 @@ ACTUATORS = ("", "multirotor")
 _SPEC = Params(
     P("body", "", "Robot the channel belongs to (model plugins/sim/models/<body>.urdf)."),
     P("model", "", "URDF of the robot, relative to the configuration file (default: from body)."),
-    P("pose", "", "Initial pose of the robot: 'x y yaw' (m, m, rad); default the map's centre."),
+    P("pose", "", "Initial pose of the robot: 'x y yaw' (m, m, rad); default the map's centre.", numbers=(3,),
+      form="'x y yaw'"),
     P("world", "", "Configuration file whose <Environment> is built (default: the channel's own)."),
     P("textures", "", "RGB recognition model file whose textures paint the objects it names."),
     P("seed", 0, "Seed of the world and of this channel's noise."),
@@ -168,6 +145,11 @@ class SimBackend(Backend):
     PORTS = Ports(outputs={"*": NUMBERS})
 
     @classmethod
+    def reference(cls, form: str) -> str:
+        """The device table (D295) for ``ckm-plugins``: ``form`` "text" (``show``) or "markdown" (docs/plugins.md)."""
+        return device_table.markdown() if form == "markdown" else device_table.text()
+
+    @classmethod
     def problems(cls, channel: HWChannel, system: System | None = None) -> list[tuple[Any, str]]:
         """What is wrong across the channel's Params (each alone is checked by its manifest entry), as
         ``(the Param or the channel, message)``: ``verify`` reports each at its ``FILE:LINE:COL`` before
@@ -186,18 +168,10 @@ class SimBackend(Backend):
             problem(None, "Param 'body' (the robot) is required")
         if not (v["sensor"] or v["joint"] or v["joints"] or v["actuator"]):
             problem(None, "give Param 'sensor', 'joint'/'joints' or 'actuator' to choose the device")
-        if channel.direction == "out" and not v["joint"] and not v["actuator"]:
-            problem(None, "an out channel drives a joint: give Param 'joint'")
         if v["actuator"]:
-            multirotor_problems(channel, v, problem)
+            multirotor_problems(v, problem)
         if v["latency"] and v["sensor"] not in ("rgb", "depth"):
             problem("latency", f"Param 'latency' is a camera's (sensor rgb or depth), not {v['sensor'] or 'a joint'}'s")
-        if v["grasp"] and (channel.direction != "out" or v["mode"] != "position" or not v["mirror"]):
-            problem(
-                "grasp",
-                "Param 'grasp' makes a gripper: only for an out channel in mode 'position' whose "
-                "'joint' and 'mirror' are its two fingers",
-            )
         if v["initial"]:
             if channel.direction != "out" or v["mode"] != "position":
                 problem("initial", "Param 'initial' places a joint: only for an out channel in mode 'position'")
@@ -213,10 +187,6 @@ class SimBackend(Backend):
             )
         if system is not None:  # the robot's URDF and its spawn: against the rest of the system
             found.extend(system_problems(channel, v, named, system))
-        given_mode = named.get("mode")
-        if channel.kind == "pwm" and given_mode is not None and v["mode"] == "position":
-            problem("mode", "a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
-                            "or 'effort' (duty x the joint's effort limit); a position target needs kind 'analog'")
         sensor = v["sensor"]
         # A camera's or a lidar's geometry is its own: no default, so no user's sensor silently gets
         # the lab's Xtion or Hokuyo (issue M, D284).
@@ -233,21 +203,12 @@ class SimBackend(Backend):
                 "a lidar needs its range: the HWChannel's max (m), the farthest distance it measures "
                 "(no default: it is the lidar's own)",
             )
-        expected = {
-            "rgb": v["width"] * v["height"] * 3,
-            "depth": v["width"] * v["height"],
-            "imu": 6,
-            "contact": 1,
-            "altimeter": 1,
-            "pose": 3,
-            "flow": 2,
-            "position": 3,
-            "compass": 1,
-        }.get(sensor)
-        if v["joints"]:
-            expected = len(v["joints"].split())
-        if expected is not None and channel.size != expected:
-            problem(None, f"size is {channel.size}, its {sensor or 'joints'} device gives {expected} values")
+        # The device table's checks (D295), each Param reported once: a specific message above wins.
+        told = {name for name, param in named.items() if any(target is param for target, _ in found)}
+        told |= set(re.findall(r"Param '(\w+)'", " ".join(message for _, message in found)))
+        found.extend(
+            (target, message) for param, target, message in device_problems(channel, v, named) if param not in told
+        )
         return found
 
     def __init__(self, channel: HWChannel, *, scope: PlantScope | None = None) -> None:

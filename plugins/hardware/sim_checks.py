@@ -1,8 +1,11 @@
-"""The checks of a ``hardware.sim`` channel against the rest of its system (decision D288): its
-robot's URDF (the model file, the links and joints its Params name; a multirotor's rotor links and
-whether its rotors lift its mass, D293) and where the robot is spawned (inside the map, clear of
-avoided areas, objects and the other robots). ``SimBackend.problems`` runs
-them when ``verify`` gives it the system; at run time the world loads the model anyway.
+"""The checks of a ``hardware.sim`` channel: against the device table (decision D295: its kind,
+direction, size, mode and Params as the row of :data:`plugins.sim.device_table.DEVICES` serving it
+allows, so the documented table and the checks cannot disagree) and against the rest of its system
+(decision D288): its robot's URDF (the model file, the links and joints its Params name; a
+multirotor's rotor links and whether its rotors lift its mass, D293) and where the robot is spawned
+(inside the map, clear of avoided areas, objects and the other robots). ``SimBackend.problems`` runs
+the first always, the others when ``verify`` gives it the system; at run time the world loads the
+model anyway.
 """
 
 from __future__ import annotations
@@ -19,12 +22,59 @@ from ckmconf.model import Environment, HWChannel, System
 from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import BOUNDS, MapModel
 from plugins.environment_file import environment_of
+from plugins.sim.device_table import find, selector_of, unserved
 from plugins.sim.flight import GRAVITY
 from plugins.sim.urdf import MODELS, Kinematics
 
+PWM_MODE = (
+    "a pwm channel drives its joint by a duty cycle: mode 'velocity' (duty x maxVelocity) "
+    "or 'effort' (duty x the joint's effort limit); a position target needs kind 'analog'"
+)
 
-def system_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
-                    system: System) -> list[tuple[Any, str]]:
+
+def device_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]) -> list[tuple[str | None, Any, str]]:
+    """What the device table refuses in the channel (its Params read as ``v``, given as ``named``), as
+    ``(the Param it is about or None, the Param or the channel, message)``: no row for its kind,
+    direction and device, a size the device cannot give, a ``mode`` it does not take, a Param it does
+    not read, a Param it requires left out."""
+    if not selector_of(v):
+        return []  # SimBackend.problems asks for 'sensor' or 'joint'/'joints'
+    device = find(channel.kind, channel.direction, v)
+    if device is None:
+        return [(None, channel, unserved(channel.kind, channel.direction, v))]
+    found: list[tuple[str | None, Any, str]] = []
+    expected = device.size.count(v)
+    if expected is not None and channel.size != expected:
+        gives = f"{expected} value{'' if expected == 1 else 's'}"
+        found.append((None, channel, f"size is {channel.size}, its {device.name} device gives {gives}"))
+    if "mode" in named and v["mode"] not in device.modes:
+        if channel.kind == "pwm":
+            message = PWM_MODE
+        elif device.modes:
+            takes = ", ".join(device.modes)
+            message = f"Param 'mode' is {v['mode']!r}: the {device.name} device ({device.where}) takes {takes}"
+        else:
+            message = f"Param 'mode' chooses a joint quantity: the {device.name} device ({device.where}) takes none"
+        found.append(("mode", named["mode"], message))
+    for name, param in named.items():
+        if name not in device.params:
+            found.append(
+                (
+                    name,
+                    param,
+                    f"Param {name!r} is not read by the {device.name} device ({device.where}), "
+                    f"which reads {', '.join(p for p in device.params if p != 'body')}",
+                )
+            )
+    for name in device.required:
+        if name not in named:
+            found.append((name, channel, f"the {device.name} device ({device.where}) needs Param {name!r}"))
+    return found
+
+
+def system_problems(
+    channel: HWChannel, v: dict[str, Any], named: dict[str, Any], system: System
+) -> list[tuple[Any, str]]:
     """What is wrong with the channel (its Params read as ``v``, given as ``named``) in ``system``."""
     found: list[tuple[Any, str]] = []
     if v["body"]:  # a body's model may be named by another of its channels
@@ -62,8 +112,9 @@ def _model(path: str, mtime: float) -> Kinematics:
     return Kinematics(path)
 
 
-def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any],
-                    system: System) -> list[tuple[Any, str]]:
+def _model_problems(
+    channel: HWChannel, v: dict[str, Any], named: dict[str, Any], system: System
+) -> list[tuple[Any, str]]:
     """The robot model a channel names that does not exist, and the links and joints its Params name
     that the model does not have (each at its Param, offering the nearest names)."""
     path, giver = _model_file(channel, v, system)
@@ -73,8 +124,12 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
     if not path.is_file():
         shipped = ", ".join(sorted(m.stem for m in MODELS.glob("*.urdf")))
         also = f"; the shipped models: {shipped}" if giver is channel and not v["model"] else ""
-        return [(where, f"robot model {str(path)!r} does not exist (give Param 'model', a URDF relative to "
-                        f"this file{also})")]
+        return [
+            (
+                where,
+                f"robot model {str(path)!r} does not exist (give Param 'model', a URDF relative to this file{also})",
+            )
+        ]
     try:
         model = _model(str(path), path.stat().st_mtime)
     except (ValueError, OSError) as error:
@@ -84,8 +139,9 @@ def _model_problems(channel: HWChannel, v: dict[str, Any], named: dict[str, Any]
     def unknown(param: str, name: str, choices: Sequence[str], what: str) -> None:
         near = get_close_matches(name, choices, n=3)
         hint = f"; did you mean {', '.join(near)}?" if near else f" (its {what}s: {', '.join(choices)})"
-        found.append((named.get(param, channel), f"Param {param!r}: the model {path.name} has no {what} "
-                                                 f"{name!r}{hint}"))
+        found.append(
+            (named.get(param, channel), f"Param {param!r}: the model {path.name} has no {what} {name!r}{hint}")
+        )
 
     links, joints = list(model.links), list(model.joints)
     if v["sensor"] and v["link"] not in links:
@@ -177,7 +233,7 @@ def _reach(path: str, mtime: float) -> float | None:
         return None
     link = next((e for e in root.findall("link") if e.get("name") == model.root), None)
     reach: list[float] = []
-    for geometry in ([] if link is None else link.findall("collision/geometry")):
+    for geometry in [] if link is None else link.findall("collision/geometry"):
         for shape in geometry:
             try:
                 if shape.tag == "box":
@@ -215,27 +271,22 @@ def _overlap_problems(channel: HWChannel, v: dict[str, Any], param: Any, system:
             continue
         apart = math.hypot(x - ox, y - oy)
         if apart < mine + theirs:
-            found.append((param, f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
-                                 f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn"))
+            found.append(
+                (
+                    param,
+                    f"Param 'pose' places {v['body']!r} {apart:.2f} m from {body!r}: their bases "
+                    f"({mine:.2f} m and {theirs:.2f} m from their centres) overlap at spawn",
+                )
+            )
     return found
 
 
-def multirotor_problems(channel: HWChannel, v: dict[str, Any], problem: Callable[[str | None, str], None]) -> None:
-    """What keeps an ``actuator="multirotor"`` channel from flying (D293): its kind, direction and size
-    (bus out, 4: vx vy vz yaw_rate), its rotors, one spin per rotor, its motors' thrust."""
-    if channel.kind != "bus" or channel.direction != "out" or channel.size != 4:
-        problem(None, f"a multirotor channel is kind 'bus', direction 'out', size 4 (vx vy vz yaw_rate); this one "
-                      f"is {channel.kind} {channel.direction}, size {channel.size}")
-    if v["joint"] or v["joints"] or v["sensor"]:
-        problem("actuator", "Param 'actuator' chooses the device: no 'joint', 'joints' or 'sensor' beside it")
+def multirotor_problems(v: dict[str, Any], problem: Callable[[str | None, str], None]) -> None:
+    """What keeps an ``actuator="multirotor"`` channel from flying beyond what its device row checks
+    (kind, direction, size, required Params; D293): 3 rotors or more, one spin of ±1 per rotor."""
     rotors = v["rotors"].split()
-    if len(rotors) < 3:
-        problem("rotors" if v["rotors"] else None,
-                f"a multirotor needs Param 'rotors', its rotor links (3 or more), not {len(rotors)}")
+    if v["rotors"] and len(rotors) < 3:
+        problem("rotors", f"Param 'rotors': a multirotor needs 3 rotor links or more, not {len(rotors)}")
     spins = v["spin"].split()
-    if not all(s in ("1", "+1", "-1", "1.0", "-1.0") for s in spins) or len(spins) != len(rotors):
-        problem("spin" if v["spin"] else None,
-                f"Param 'spin' needs one +1 or -1 per rotor ({len(rotors)} rotors), not {v['spin']!r}")
-    if v["maxThrust"] is None:
-        problem(None, "a multirotor needs Param 'maxThrust', the most thrust one rotor gives (N; no default: "
-                      "it is the motor and propeller's own)")
+    if v["spin"] and (not all(s in ("1", "+1", "-1", "1.0", "-1.0") for s in spins) or len(spins) != len(rotors)):
+        problem("spin", f"Param 'spin' needs one +1 or -1 per rotor ({len(rotors)} rotors), not {v['spin']!r}")

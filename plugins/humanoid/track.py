@@ -62,7 +62,7 @@ class PanTiltTrack(ProcessingPlugin):
         P("panJoint", REQUIRED, "The pan joint of the model.", type=str),
         P("tiltJoint", REQUIRED, "The tilt joint of the model.", type=str),
         P("camera", REQUIRED, "The camera's optical frame link (z forward, x right, y down).", type=str),
-        P("pose", "0 0 0", "The robot's pose in the map: 'x y yaw'.", unit="m m rad"),
+        P("pose", "0 0 0", "The robot's pose in the map: 'x y yaw'.", unit="m m rad", numbers=(3,), form="'x y yaw'"),
         P("baseHeight", 0.0, "Height of the robot's base frame above the map floor.", unit="m"),
         P("fov", REQUIRED, "Horizontal field of view of the camera.", unit="rad", type=float, above=0.0,
           below=math.pi),

@@ -109,6 +109,7 @@ class Localization(ProcessingPlugin):
             "The laser's mount 'x y yaw' in the robot frame (m, m, rad): the URDF's laser "
             "joint. Beams are re-expressed from the robot's centre, so the estimate is the base's pose.",
             type=str,
+            numbers=(3,), form="'x y yaw'",
         ),
         P("laserHeight", REQUIRED, "Height of the scan plane above the floor: the map's objects it cuts (as "
           "amcl-navigation's).", type=float, unit="m", above=0.0),
@@ -134,7 +135,8 @@ class Localization(ProcessingPlugin):
             unit="m",
             above=0.0,
         ),
-        P("initial_pose", "", "'x y yaw' of the robot to start around, empty for global localization."),
+        P("initial_pose", "", "'x y yaw' of the robot to start around, empty for global localization.",
+          numbers=(3,), form="'x y yaw'"),
         P("kld", False, "MCL only: KLD sampling of the particle count."),
         P("seed", 0, "Random seed of the filter.", min=0),
     )
@@ -242,10 +244,16 @@ class Localization(ProcessingPlugin):
             raise ValueError(f"{self.owner}: ranges must be a non-empty vector of numbers")
         return raw_beams(ranges, fov, max_range)
 
-    def process(self, data: Any, context: Context) -> dict[str, Any]:
-        """One filter update for the frame's odometry and scan; the PoseEstimate of the robot's centre."""
+    def process(self, data: Any, context: Context) -> dict[str, Any] | None:
+        """One filter update for the frame's odometry and scan; the PoseEstimate of the robot's centre.
+        None (nothing published) while the frame's odometry or scan has not arrived yet."""
         if not isinstance(data, Mapping):
             raise ValueError(f"{self.owner} expects a mapping: 'scan' and 'odom', or 'odometry' and 'ranges'")
+        names = set(map(str, data))
+        expected = names & {"odom", "odometry"} and names & {"scan", "ranges"}
+        if expected and any(all(data.get(n) is None for n in pair if n in names)
+                            for pair in (("odom", "odometry"), ("scan", "ranges"))):
+            return None
         odometry = self._odometry(data)
         sweep = self._sweep(data)
         ranges, bearings = robot_beams(sweep, self.laser, self.params["beams"])

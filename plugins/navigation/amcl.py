@@ -98,11 +98,12 @@ class AmclNavigation(NavigationCourse, ProcessingPlugin):
         P("beams", 60, "Beams of each scan used by the filter, evenly spread.", min=3),
         P("resolution", 0.05, "Cell size of the localization grid.", unit="m", above=0.0),
         P("laserPose", REQUIRED, "The laser's mount 'x y yaw' in the robot frame (m, m, rad): the URDF's laser "
-          "joint.", type=str),
+          "joint.", type=str, numbers=(3,), form="'x y yaw'"),
         P("laserHeight", REQUIRED, "Height of the scan plane above the floor: the map obstacles it cuts.", unit="m",
           type=float, min=0.0),
         P("initialPose", "", "Start: 'x y yaw' or an Area name (its centroid); empty: global localization."),
-        P("initialSpread", "0.3 0.2", "Standard deviations 'metres radians' of the initial particles."),
+        P("initialSpread", "0.3 0.2", "Standard deviations 'metres radians' of the initial particles.",
+          numbers=(2,), form="'metres radians'"),
         P("goal", "", "Goal until the service Parameter 'goal' sets one: 'x y yaw', an Area's name or an "
           "Object's name."),
         P("objectStandoff", 0.1, "Gap left between the robot's footprint and a map Object given as goal.", unit="m",

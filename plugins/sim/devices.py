@@ -25,6 +25,7 @@ from ckmconf.model import Environment
 from plugins.hardware.simulation import Clock, SimulationHook
 from plugins.processing.textures import read_model
 
+from .device_table import find, unserved
 from .flight import Airframe, Multirotor
 from .grasp import ChannelGrasp
 from .robots import Robot
@@ -135,7 +136,8 @@ class SimWorld(SimulationHook):
 
 
 class ChannelDevice:
-    """One channel's device in ``sim`` (see :mod:`plugins.hardware.sim` for what each kind does)."""
+    """One channel's device in ``sim``: a row of :data:`plugins.sim.device_table.DEVICES` (what each
+    kind × direction × device reads or writes); a combination no row names is refused."""
 
     def __init__(self, sim: SimWorld, spec: Spec) -> None:
         self.sim, self.spec = sim, spec
@@ -160,6 +162,9 @@ class ChannelDevice:
 
     def _make(self) -> Any:
         v, sensor, robot = self.spec.values, self.spec.values.get("sensor", ""), self.robot
+        chosen = sensor or v.get("joint") or v.get("joints") or v.get("actuator")
+        if chosen and find(self.spec.kind, self.spec.direction, v) is None:
+            raise ValueError(f"sim channel {self.spec.name!r}: {unserved(self.spec.kind, self.spec.direction, v)}")
         if sensor in ("lidar", "rgb", "depth") and v.get("fov") is None:  # the backend refuses it first (D284)
             raise ValueError(f"sim channel {self.spec.name!r}: a {sensor} channel needs its field of view, Param 'fov'")
         if sensor == "lidar":

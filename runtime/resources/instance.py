@@ -235,6 +235,8 @@ class Instance:
         """Record the measures of a fresh result (``stamp``: its acquisition time, wall clock;
         ``latency``: its processing time), then publish it: a quality message sent after the
         result carries its measures (D249)."""
+        if value is None:  # the kind has nothing yet (an input it needs has not arrived): no publication
+            return
         ports = self.outputs
         if len(ports) == 1:
             items = [(next(iter(ports.values())), value)]

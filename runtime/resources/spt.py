@@ -88,7 +88,10 @@ class ProcessingPlugin(abc.ABC):
 
     @abc.abstractmethod
     def process(self, data: Any, context: Context) -> Any:
-        """The result for ``data`` (the parent's result, or the frame for a root); must not modify ``data``."""
+        """The result for ``data`` (the parent's result, or the frame for a root); must not modify ``data``.
+
+        An output plugin returns None when it has nothing to publish for this frame (a service of
+        several inputs whose needed one has not arrived yet): its service then publishes nothing."""
 
     def stop(self) -> None:
         """Release what ``setup()`` opened."""

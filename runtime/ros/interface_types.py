@@ -4,12 +4,13 @@ The standard service kinds write CKM's planar conventions: a top-level ``stamp``
 poses ``{x, y, yaw}``, twists ``{linear, angular}``, a 3×3 (x, y, yaw) ``covariance`` and a
 ``dispersion`` (m). A topic typed with the ROS 2 standard type of their interface port
 (docs/interfaces.md: ``sensor_msgs/msg/LaserScan``, ``nav_msgs/msg/Odometry``,
-``geometry_msgs/msg/PoseWithCovarianceStamped``) gets, on the wire and in the recording, that
-message filled from them (:func:`to_standard`, applied by ``ConfigRosTypes.payload``):
+``geometry_msgs/msg/PoseWithCovarianceStamped``, ``geometry_msgs/msg/PoseStamped``) gets, on the wire and
+in the recording, that message filled from them (:func:`to_standard`, applied by ``ConfigRosTypes.payload``):
 
 - ``stamp`` → ``header.stamp``, ``frame`` → ``header.frame_id`` for any type with a ``header`` and no
   field of the name (a ``stamp`` of the type's own is left to it);
-- a planar pose → ``position {x, y, 0}`` and the yaw's quaternion ``orientation``;
+- a planar pose → ``position {x, y, 0}`` (a flying body's ``z`` as it is) and the yaw's quaternion
+  ``orientation``;
 - a 3×3 (x, y, yaw) covariance → the 6×6 of ROS (rows and columns x, y, yaw at 0, 1, 5); with none
   written, the dispersion d as σx² = σy² = d²/2 (its RMS distance, REP 103's metres);
 - a twist ``{linear, angular}`` → ``linear.x`` and ``angular.z``.
@@ -33,9 +34,10 @@ _INDEX = (0, 1, 5)  # x, y, yaw in ROS's (x, y, z, roll, pitch, yaw)
 
 
 def planar(pose: Mapping[str, Any]) -> dict[str, Any]:
-    """A ``geometry_msgs/Pose`` of a planar pose ``{x, y, yaw}``."""
+    """A ``geometry_msgs/Pose`` of a pose ``{x, y, yaw}`` (and ``z``, a flying body's height; else 0)."""
     half = float(pose.get("yaw") or 0.0) / 2
-    return {"position": {"x": float(pose.get("x") or 0.0), "y": float(pose.get("y") or 0.0), "z": 0.0},
+    return {"position": {"x": float(pose.get("x") or 0.0), "y": float(pose.get("y") or 0.0),
+                         "z": float(pose.get("z") or 0.0)},
             "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(half), "w": math.cos(half)}}
 
 
@@ -92,6 +94,10 @@ def _pose_with_covariance(value: Mapping[str, Any]) -> dict[str, Any]:
             "pose": {"pose": planar(pose), "covariance": covariance6(covariance, value.get("dispersion"))}}
 
 
+def _pose_stamped(value: Mapping[str, Any]) -> dict[str, Any]:
+    return {"header": _header(value), "pose": planar(_planar_pose(value) or {})}
+
+
 @dataclass(frozen=True)
 class Adaptation:
     """How CKM's planar results become one ROS 2 standard type.
@@ -123,6 +129,7 @@ ADAPTATIONS: dict[str, Adaptation] = {
                    {"dispersion": f"with a covariance written, {_QUALITY} (without one, the covariance holds "
                                   "it as σx² = σy² = d²/2)", "reliability": _QUALITY,
                     "filter": "the filter the service's Params chose"}),
+        Adaptation("geometry_msgs/msg/PoseStamped", _pose_stamped, _PLANAR | {"pose.z", "x", "y", "z", "yaw"}),
     )
 }
 """The standard types whose CKM form is not a field-for-field match, by ROS type."""

@@ -87,6 +87,7 @@ _STATUS = ("stamp", "id", "group", "pose", "state", "active", "error", "holding"
 _ESTIMATE = ("stamp", "pose.x", "pose.y", "pose.yaw", "covariance", "dispersion")
 LASER_SCAN, ODOMETRY = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry"
 POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE_STAMPED, TWIST = "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/Twist"
 CKM = "ckm_interfaces/msg/"
 """The package of the message types CKM ships (ckmconf/ros/ckm_interfaces, D278)."""
 
@@ -205,6 +206,33 @@ STANDARD: dict[str, Interface] = {
                                   "rad); geometry_msgs/PoseWithCovarianceStamped carries all but the `dispersion` "
                                   "(the service's own quality measure)", (POSE,),
                           ("x", "y", "yaw", "covariance", "dispersion")),),
+        ),
+        Interface(
+            "flight",
+            "A multirotor flown to goals (take off, go to, land, hold) by velocity set-points.",
+            inputs=(
+                Port("goal", "a goal `{id, action: takeoff | goto | land | hold, frame: map | robot, x, y, z (m), "
+                             "yaw (rad; NaN keeps the heading)}`: a takeoff climbs `z` above where it stands, a "
+                             "goto flies to (x, y, z) (z above the floor on the map), a land descends where it "
+                             "is until it rests; the behaviors' `flight_goal` Output is this topic",
+                     (f"{CKM}FlightGoal",), ("id", "action", "frame", "x", "y", "z", "yaw")),
+                Port("position", "a position fix `{x, y, z}` on the map (UWB, motion capture, the simulator's "
+                                 "`position` sensor; a PointStamped) or a pose message (PoseStamped, Odometry)",
+                     ("geometry_msgs/msg/PointStamped", POSE_STAMPED, ODOMETRY), ("x", "y", "z")),
+            ),
+            outputs=(
+                Port("cmd_vel", "the velocity set-point `{linear: {x: ahead, y: left, z: up}, angular: {z}}` in "
+                                "the heading frame (m/s, rad/s), for the airframe's velocity loop",
+                     (TWIST,), ("linear.x", "linear.y", "linear.z", "angular.z")),
+                Port("status", "`{stamp, id, action, state: active | arrived | landed | failed, remaining (m), "
+                               "altitude (m), reason}` of the newest goal; `reason` says why it failed (a bad "
+                               "goal, a goto while landed, no position fix, its deadline passed)",
+                     (f"{CKM}FlightStatus",), ("stamp", "id", "action", "state", "remaining", "altitude", "reason")),
+                Port("pose", "the estimate `{stamp, frame: map, pose: {x, y, z, yaw}}` (m, rad)",
+                     (POSE_STAMPED,), ("stamp", "frame", "pose.x", "pose.y", "pose.z", "pose.yaw")),
+            ),
+            parameters=(Port("speed", "the top horizontal speed (m/s)"),),
+            goals=_ID_GOALS,
         ),
         Interface(
             "map-sharing",

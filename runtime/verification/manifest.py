@@ -86,6 +86,9 @@ class P:
     :data:`ENVIRONMENT_FILE` one that holds an ``<Environment>`` (an empty value: none given).
     ``place`` marks a place on the map: a pose ``"x y yaw"`` or the name of an Area or Object of the
     system's ``<Environment>`` (checked when the system has one; an empty value: none given).
+    ``numbers`` gives the counts of whitespace-separated finite numbers a string value may hold
+    (``(3,)`` for ``"x y yaw"``), ``form`` how messages show them (``"'x y yaw'"``); an empty value
+    of a parameter that is not required passes.
     """
 
     name: str
@@ -101,6 +104,8 @@ class P:
     entries: Entries | None = None
     file: str = ""
     place: bool = False
+    numbers: tuple[int, ...] = ()
+    form: str = ""
 
     def __post_init__(self) -> None:
         if self.type is None:
@@ -125,6 +130,8 @@ class P:
             return "one of " + ", ".join(str(c) for c in self.choices)
         if self.entries is not None:
             return self.entries.syntax()
+        if self.numbers:
+            return " or ".join(str(n) for n in self.numbers) + " numbers"
         low = high = ""
         if self.min is not None or self.above is not None:
             low = f"[{_number(self.min)}" if self.min is not None else f"({_number(self.above or 0.0)}"
@@ -168,7 +175,19 @@ class P:
         if problem:
             shown = repr(value) if isinstance(value, str) else str(value)
             raise ParamError(f"parameter {self.name!r} = {shown} {problem}")
+        if self.numbers and isinstance(value, str) and (value.strip() or self.required):
+            self._check_numbers(value)
         return value
+
+    def _check_numbers(self, text: str) -> None:
+        counts = " or ".join(str(n) for n in self.numbers)
+        try:
+            values = [float(v) for v in text.split()]
+        except ValueError:
+            values = []
+        if len(values) not in self.numbers or not all(math.isfinite(v) for v in values):
+            shape = f"{self.form} ({counts} finite numbers)" if self.form else f"{counts} finite numbers"
+            raise ParamError(f"parameter {self.name!r} = {text!r} is not {shape}")
 
     def out_of_range(self, value: Any) -> str:
         """Why ``value`` is outside the declared range, as the end of a sentence ("" when inside)."""

@@ -8,6 +8,8 @@ import sys
 
 import pytest
 
+from plugins.sim import device_table
+from plugins.sim.device_table import DEVICES
 from runtime.plugins_cli import main, markdown
 from runtime.registry import Registry
 from runtime.verification.manifest import params_of
@@ -65,15 +67,47 @@ def test_show_prints_params_and_ports(capsys: pytest.CaptureFixture[str]) -> Non
 
 
 def test_show_prints_the_kind_s_whole_documentation_and_list_a_clean_summary(
-        capsys: pytest.CaptureFixture[str]) -> None:
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     """issue N: the sim device table is reachable from the command line, not only from the source."""
     assert main(["show", "hardware.sim"], builtin()) == 0
     out = capsys.readouterr().out
     assert "  A channel served by a device of a simulated robot.\n" in out  # no "see the module docstring"
-    assert "stream in, lidar" in out and "analog in, imu/alt." in out  # the module's device table
+    assert "stream in, sensor=lidar: a planar lidar" in out  # the device table (D295), after the module's text
+    assert "      values: wx [rad/s], wy [rad/s], wz [rad/s], ax [m/s²], ay [m/s²], az [m/s²]\n" in out
     assert main(["list"], builtin()) == 0
     listing = capsys.readouterr().out
     assert "module docstring" not in listing and "module doc)" not in listing
+
+
+def test_show_hardware_sim_prints_every_device_of_the_table(capsys: pytest.CaptureFixture[str]) -> None:
+    """issue N point 1: every kind x direction x device with its values in order and their units, its
+    size, modes and Params, as plugins/sim/device_table.py holds them."""
+    assert main(["show", "hardware.sim"], builtin()) == 0
+    out = capsys.readouterr().out
+    for device in DEVICES:
+        block = out.split(f"\n  {device.where}: ", 1)
+        assert len(block) == 2, f"{device.where} is not in ckm-plugins show hardware.sim"
+        values = block[1].split("\n", 2)[1]
+        assert values.startswith("      values: " + ", ".join(f"{name} [{unit}]" for name, unit in device.values))
+        assert all(f"{name} (required)" in block[1].split("\n\n", 1)[0] for name in device.required)
+    assert "  pwm out, joint: a motor: duty" in out and "size: 1; mode: effort | velocity (none given: effort)" in out
+    assert "  bus in, sensor=pose: the true planar pose" in out and "values: x [m], y [m], yaw [rad]" in out
+    assert "  stream in, sensor=depth:" in out and "values: depth [mm], per pixel" in out
+
+
+def test_the_markdown_page_holds_the_device_table() -> None:
+    page = markdown(builtin(), "ckm")
+    assert device_table.markdown() in page.split("### `hardware.sim`", 1)[1].split("\n### ", 1)[0]
+
+
+def test_docs_simulation_md_device_table_is_current() -> None:
+    """The device table of docs/simulation.md is generated: a row changed, regenerate it with the change."""
+    page = (REPO / "docs" / "simulation.md").read_text(encoding="utf-8")
+    assert page == device_table.regenerated(page), (
+        "docs/simulation.md's device table is stale: run .venv/bin/python -m plugins.sim.device_table "
+        "docs/simulation.md"
+    )
 
 
 def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
@@ -93,7 +127,7 @@ def test_show_json(capsys: pytest.CaptureFixture[str]) -> None:
         (
             "controller.pdi",
             "ckm-plugins: no controller kind 'pdi' (registered: back-off, constant, diff-drive, diff-drive-odometry,"
-            " friction-feedforward, gpc, joint-trajectory, pan-tilt-position, pid, ramp-stop, relay)",
+            " friction-feedforward, gpc, joint-trajectory, pan-tilt-position, pid, ramp-stop, relay, twist-axes)",
         ),
     ],
 )

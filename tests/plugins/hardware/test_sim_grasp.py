@@ -71,15 +71,26 @@ def test_without_grasp_nothing_is_held() -> None:
 @pytest.mark.parametrize(
     ("direction", "params", "message"),
     [
-        ("in", {"joint": "gripper_joint", "mirror": "gripper_right_joint"}, "only for an out channel"),
-        ("out", {"joint": "gripper_joint"}, "whose 'joint' and 'mirror' are its two fingers"),
-        ("out", {"joint": "gripper_joint", "mirror": "gripper_right_joint", "mode": "velocity"}, "mode 'position'"),
+        # The device table's messages (D295): a gripper is an out device, has two fingers, holds a position.
+        (
+            "in",
+            {"joint": "gripper_joint", "mirror": "gripper_right_joint"},
+            "a bus in channel cannot be the joint \\+ grasp device: it is served as analog out or bus out",
+        ),
+        ("out", {"joint": "gripper_joint"}, r"the gripper device \(bus out, joint \+ grasp\) needs Param 'mirror'"),
+        (
+            "out",
+            {"joint": "gripper_joint", "mirror": "gripper_right_joint", "mode": "velocity"},
+            r"Param 'mode' is 'velocity': the gripper device \(bus out, joint \+ grasp\) takes position",
+        ),
     ],
 )
 def test_a_bad_grasp_is_refused_naming_the_channel(direction: str, params: dict[str, str], message: str) -> None:
     with pytest.raises(ParamError, match=message) as caught:
-        open_all(PlantScope(ManualClock(), name="grasp-bad"),
-                 channel("gripper", direction, "bus", 1, body="turtlebot", grasp="arm_wrist_flex_link", **params))
+        open_all(
+            PlantScope(ManualClock(), name="grasp-bad"),
+            channel("gripper", direction, "bus", 1, body="turtlebot", grasp="arm_wrist_flex_link", **params),
+        )
     assert "sim channel 'gripper'" in str(caught.value)
 
 

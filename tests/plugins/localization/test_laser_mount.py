@@ -171,6 +171,7 @@ def _errors(plugin: Localization, drive: Drive, frames: Sequence[Mapping[str, An
     errors = []
     for k, frame in enumerate(frames):
         message = plugin.process(frame, Context(k, 0.2 * k))
+        assert message is not None
         errors.append(math.hypot(message["x"] - drive.truth[k, 0], message["y"] - drive.truth[k, 1]))
     plugin.stop()
     return np.array(errors)
@@ -255,6 +256,7 @@ def test_scan_and_odom_inputs_are_read_as_the_standard_messages(environment: Pat
     plugin = Localization(_record("mcl", "0.10 0 0", environment))
     plugin.setup()
     message = plugin.process({"scan": drive.scans[0], "odom": drive.odom[0]}, Context(0, 0.0))
+    assert message is not None
     assert set(message) == {"x", "y", "yaw", "covariance", "dispersion", "filter", "reliability"}
     with pytest.raises(ValueError, match="input 'scan' is not a LaserScan"):
         plugin.process({"scan": {"ranges": [1.0, 2.0]}, "odom": drive.odom[1]}, Context(1, 0.2))

@@ -91,8 +91,20 @@ def test_initial_pose_starts_tracking_there(lab_run: Run) -> None:
     plugin = Localization(_resource("mcl", initial_pose=f"{x} {y} {yaw}").plugins[0])
     plugin.setup()
     message = plugin.process({"odometry": lab_run.odometry[0], "ranges": lab_run.scans[0]}, Context(0, 0.0))
+    assert message is not None
     assert np.hypot(message["x"] - x, message["y"] - y) < 0.3
     assert message["dispersion"] < 1.0
     with pytest.raises(ValueError, match="odometry"):
         plugin.process({"ranges": lab_run.scans[0]}, Context(1, 0.1))
+    plugin.stop()
+
+
+def test_a_frame_before_the_first_scan_or_odometry_publishes_nothing_and_is_no_error(lab_run: Run) -> None:
+    plugin = Localization(_resource("mcl").plugins[0])
+    plugin.setup()
+    assert plugin.process({"odometry": lab_run.odometry[0], "ranges": None}, Context(0, 0.0)) is None
+    assert plugin.process({"odometry": None, "ranges": lab_run.scans[0]}, Context(1, 0.1)) is None
+    assert plugin.process({"scan": None, "odom": None}, Context(2, 0.2)) is None
+    message = plugin.process({"odometry": lab_run.odometry[0], "ranges": lab_run.scans[0]}, Context(3, 0.3))
+    assert message is not None and set(message) >= {"x", "y", "yaw"}
     plugin.stop()

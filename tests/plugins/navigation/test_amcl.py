@@ -196,7 +196,7 @@ def test_bad_input_is_refused_naming_it(file: Path, inputs: dict[str, Any], mess
 
 
 def test_bad_params_and_a_missing_environment_are_refused(file: Path) -> None:
-    with pytest.raises(ParamError, match=r"'laserPose' = '0\.1 0' is not 3 numbers"):
+    with pytest.raises(ParamError, match=r"'laserPose' = '0\.1 0' is not 'x y yaw' \(3 finite numbers\)"):
         navigation(file, laserPose="0.1 0")
     with pytest.raises(ParamError, match="filter"):
         navigation(file, filter="ekf")

@@ -122,3 +122,20 @@ def test_a_woken_instance_counts_no_rest_as_a_period(tmp_path: Path, pair: tuple
         assert instance.measures.count["period"] == periods
         instance.deliver({"fused": 4}, 160.25, 160.25)
         assert instance.measures.last["period"] == 0.25 and instance.measures.count["period"] == periods + 1
+
+
+def test_a_result_of_none_publishes_nothing_and_observes_no_measure(tmp_path: Path,
+                                                                    pair: tuple[Transport, Transport]) -> None:
+    """A kind with nothing yet (an input it needs not arrived) returns None: nothing goes on its Output."""
+    server, remote = pair
+    with SmartResourceRuntime(fusion(tmp_path, lazy=False), server, registry=registry()) as runtime:
+        instance = next(iter(runtime.streams["merge"].instances.values()))
+        received: list[Any] = []
+        remote.subscribe(TopicQoS("/fused", "ckm/service-data", history=64), lambda s: received.append(s.value))
+        assert server.wait_for_subscribers("/fused", 1, 10)
+        published = instance.published
+        instance.deliver(None, 100.0, 100.0)
+        assert instance.published == published and "deadline" not in instance.measures.count
+        instance.deliver({"fused": 1}, 100.5, 100.5)
+        assert until(lambda: len(received) == 1)
+        assert received[0] is not None and instance.published == published + 1
