@@ -81,7 +81,9 @@ def validate(source: SourceFile) -> list[ConfigError]:
                 ConfigError(source.path, 1, 1, "/", f"more problems follow; the first {MAX_PROBLEMS} are shown")
             )
             break
-        errors.append(_translate(source, error))
+        translated = _translate(source, error)
+        if str(translated) not in {str(e) for e in errors}:  # a word for a number fails each facet: one line
+            errors.append(translated)
     return errors or _libxml2_errors(source, checker)  # never pass a file libxml2 refused
 
 

@@ -10,7 +10,7 @@ from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.validation import explain_validity
 
 from ..model import Environment, EnvObject, Polygon, Prism, System
-from ..model.environment import Region
+from ..model.environment import Geometry2D, Region, Semantic
 from .report import Reporter, missing
 
 
@@ -37,6 +37,10 @@ def check_environment(system: System, report: Reporter) -> None:
         shape = shapes[region.name]
         if shape is not None and not outline.buffer(1e-9).contains(shape):
             report.error(region, f"{region.TAG} {region.name!r} reaches outside the map bounds")
+    for avoided in env.avoided:
+        if avoided.height is not None and avoided.height > bounds.height + 1e-9:
+            tall = f"{avoided.height:g} m tall, above the map height ({bounds.height:g} m)"
+            report.error(avoided, f"AvoidedArea {avoided.name!r} is {tall}", "height")
     missions = [m.name for m in system.missions]
     for entry in env.semantics:
         if entry.dynamic == "static" and entry.max_speed:
@@ -103,6 +107,8 @@ def _check_object(
         if shape is not None and shape.contains(where):
             report.error(obj.pose, f"object {obj.name!r} stands inside the avoided area {avoided.name!r}")
     geometry = obj.geometry
+    if isinstance(geometry, Geometry2D) and geometry.height is not None:
+        _check_flat_height(obj, geometry, env, semantic, report)
     prisms: tuple[Prism, ...] = ()
     atoms = getattr(geometry, "atoms", ())
     if hasattr(geometry, "prism"):
@@ -122,6 +128,22 @@ def _check_object(
                 report.error(
                     atom, f"the polygon of object {obj.name!r} is not a simple polygon with 3 or more vertices"
                 )
+
+
+def _check_flat_height(
+    obj: EnvObject, geometry: Geometry2D, env: Environment, semantic: Semantic | None, report: Reporter
+) -> None:
+    """A ``<Geometry2D height>`` (D294): under the map height; a marking (0) nobody can pick."""
+    top = obj.pose.z + (geometry.height or 0.0)
+    if top > env.map.height + 1e-9:
+        report.error(geometry, f"the object reaches {top:g} m, above the map height ({env.map.height:g} m)", "height")
+    if geometry.marking and semantic is not None and any(a.action == "pick" for a in semantic.affordances):
+        report.error(
+            geometry,
+            f"object {obj.name!r} is a flat marking (height 0) but its tag {obj.tag!r} affords pick: "
+            "a marking has nothing to grasp (give it a height)",
+            "height",
+        )
 
 
 def _check_zoom(env: Environment, report: Reporter) -> None:

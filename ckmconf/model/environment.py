@@ -7,6 +7,9 @@ from typing import Literal
 
 from ..binding import Record, attr, child, children
 
+FOOTPRINT_HEIGHT = 0.75
+"""Height (m) of a ``<Geometry2D>`` without ``height``: the block the simulated world stands it as (a desk, D85)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class Vertex(Record):
@@ -52,9 +55,14 @@ class Area(Region):
 
 @dataclass(frozen=True, kw_only=True)
 class AvoidedArea(Region):
-    """<AvoidedArea>: a place robots cannot enter (a column, a wall)."""
+    """<AvoidedArea>: a place robots cannot enter (a column, a wall); ``height`` m tall (None: the map's, D294)."""
 
     TAG = "AvoidedArea"
+    height: float | None = attr(default=None)
+
+    def top(self, map_height: float) -> float:
+        """How tall the area stands (m): its ``height``, else the map's (the sim extrudes it so far)."""
+        return map_height if self.height is None else self.height
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -149,10 +157,25 @@ class Prism(Record):
 
 @dataclass(frozen=True, kw_only=True)
 class Geometry2D(Record):
-    """<Geometry2D>: one or more 2D atomic elements."""
+    """<Geometry2D>: one or more 2D atomic elements, ``height`` m tall (D294).
+
+    ``height`` absent: a :data:`FOOTPRINT_HEIGHT` block in the simulated world (the planner's map keeps it
+    an obstacle at every height, §6.1.1.1); ``0``: a marking, drawn on the floor and nobody's obstacle.
+    """
 
     TAG = "Geometry2D"
+    height: float | None = attr(default=None)
     atoms: tuple[Atom2D, ...] = children()
+
+    @property
+    def marking(self) -> bool:
+        """Whether the geometry is flat (``height="0"``): a landing pad, a dock marking."""
+        return self.height == 0
+
+    @property
+    def solid_height(self) -> float:
+        """How tall the object stands in the world (m): its ``height``, else :data:`FOOTPRINT_HEIGHT`."""
+        return FOOTPRINT_HEIGHT if self.height is None else self.height
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -154,9 +154,15 @@ class SimMapView(QGraphicsView):
                     _polygon(avoided.points()), thin, QBrush(QColor("#7b7d7d"), Qt.BrushStyle.BDiagPattern)
                 )
             colours = {t.name: t.color for t in env.textures}
+            marking_pen = QPen(QColor("#555555"), 1, Qt.PenStyle.DashLine)
+            marking_pen.setCosmetic(True)
             for obj in env.objects:
-                item = scene.addPath(_footprint(obj), thin, QBrush(QColor(colours.get(obj.texture or "", "#bbbbbb"))))
-                item.setToolTip(f"{obj.name} ({obj.tag})")
+                fill = QColor(colours.get(obj.texture or "", "#bbbbbb"))
+                flat = isinstance(obj.geometry, Geometry2D) and obj.geometry.marking
+                if flat:  # a marking (D294): drawn on the floor, nobody's obstacle: pale, dashed
+                    fill.setAlphaF(0.45)
+                item = scene.addPath(_footprint(obj), marking_pen if flat else thin, QBrush(fill))
+                item.setToolTip(f"{obj.name} ({obj.tag}{', a marking' if flat else ''})")
         self.particles = QGraphicsPathItem()
         self.particles.setBrush(QBrush(QColor(211, 47, 47, 160)))
         self.particles.setPen(QPen(Qt.PenStyle.NoPen))

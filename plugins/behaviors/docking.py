@@ -1,4 +1,8 @@
-"""DOCK (ours, docs/decisions.md D196): the base to a known map pose.
+"""Docking behaviors. ``dock-robot`` and ``undock-robot`` send one goal to a ``docking`` service
+(docs/interfaces.md) and follow its id, as Nav2's DockRobot and UndockRobot nodes do; ``dock`` below
+is the lab's simpler DOCK, a single base-drive move.
+
+DOCK (ours, docs/decisions.md D196): the base to a known map pose.
 
 ObjectPlace (Fig. 7.12) puts the object down on the drop table; the navigation arrives within its
 tolerance (0.15 m) of a goal kept clear of the table's planning margin, so the arm's place pose
@@ -67,3 +71,58 @@ class Dock(_Goals):
         return BehaviorStatus(progress=1.0 if state == "done" else _share_done(status) if state else 0.0,
                               done=state == "done", failed=state == "failed",
                               detail=_failed("the docking move failed", status) if state == "failed" else "")
+
+
+DOCKING = Uses(Use("dock", "docking", "docks the base and reports the goal's status"))
+
+
+class DockRobot(_Goals):
+    """Docks at the dock named ``dock`` (one the docking service knows) or at the map pose ``pose``."""
+
+    USES = DOCKING
+    PARAMS: ClassVar[Mapping[str, Any]] = Params(
+        P("dock", "", "The dock's name among the docking service's docks (or give 'pose').", type=str),
+        P("pose", "", "The docked pose on the map, 'x y yaw' (m, m, rad), for a dock the service does not name.",
+          type=str, numbers=(3,), form="'x y yaw'"),
+    )
+    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    action, until = "dock", "docked"
+
+    def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
+        super().__init__(record, context)
+        if self.action == "dock" and bool(self.params["dock"]) == bool(self.params["pose"]):
+            raise ParamError(f"{self.owner}: give the dock's name ('dock') or its docked pose ('pose'), one of them")
+
+    def start(self) -> None:
+        """Forget the last goal; the goal is sent at the first step."""
+        super().start()
+        self.goal_id: int | None = None
+
+    def _goal(self) -> dict[str, Any]:
+        if self.params["pose"]:
+            x, y, yaw = _map_pose(str(self.params["pose"]), self.owner)
+            return {"action": "dock", "dock": "", "x": x, "y": y, "yaw": yaw}
+        return {"action": "dock", "dock": str(self.params["dock"]), "x": 0.0, "y": 0.0, "yaw": 0.0}
+
+    def step(self) -> BehaviorStatus:
+        """Send the goal once, then follow its status by id; progress by the approach's stage."""
+        if self.goal_id is None:
+            goal = self._goal()
+            self.context.log(self.action, **{k: v for k, v in goal.items() if k != "action"})
+            self.goal_id = self._send("dock_goal", goal)
+        status = self.service("dock").output("status")
+        state = _state(status, self.goal_id)
+        progress = {"staging": 0.3, "docking": 0.7, "undocking": 0.5}.get(state or "", 0.0)
+        return BehaviorStatus(progress=1.0 if state == self.until else progress, done=state == self.until,
+                              failed=state == "failed",
+                              detail=_failed(f"the {self.action}ing failed", status) if state == "failed" else "")
+
+
+class UndockRobot(DockRobot):
+    """Backs out of the dock it stands at, the docking service's staging distance."""
+
+    PARAMS: ClassVar[Mapping[str, Any]] = Params()
+    action, until = "undock", "undocked"
+
+    def _goal(self) -> dict[str, Any]:
+        return {"action": "undock", "dock": "", "x": 0.0, "y": 0.0, "yaw": 0.0}

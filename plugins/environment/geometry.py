@@ -4,7 +4,8 @@ An object's geometry is built from atomic elements given in the object's own fra
 (``<Circle>``, ``<Rectangle>``, ``<Polygon>``) and 2.5D prisms (a 2D atom extruded from ``zmin``
 to ``zmax``). Placed at the object's ``<Pose>``, each atom becomes a :class:`Part`: a floor
 polygon in the map frame and the height range it occupies (unbounded for a 2D atom, which is
-"projected onto the floor" and obstructs at every height).
+"projected onto the floor" and obstructs at every height, unless its ``<Geometry2D height>`` bounds
+it: a block that tall, or at ``0`` a flat marking that obstructs nothing, D294).
 """
 
 from __future__ import annotations
@@ -39,12 +40,18 @@ class Part:
     """One atomic element of an object, placed in the map frame (§6.1.1.1).
 
     ``zmin``/``zmax`` are absolute heights in metres; a 2D atom spans every height
-    (``-inf``..``inf``).
+    (``-inf``..``inf``) unless its ``<Geometry2D height>`` is given; a marking's part is flat
+    (``zmin == zmax``).
     """
 
     local: BaseGeometry
     zmin: float
     zmax: float
+
+    @property
+    def solid(self) -> bool:
+        """Whether the part has a thickness: a flat one (a marking, D294) is seen, never run into."""
+        return self.zmax > self.zmin
 
 
 def atom_shape(atom: Atom2D) -> BaseGeometry:
@@ -63,7 +70,8 @@ def atom_shape(atom: Atom2D) -> BaseGeometry:
 def object_parts(geometry: Geometry, pose_z: float) -> tuple[Dimension, tuple[Part, ...]]:
     """The parts of a ``<Geometry2D>``, ``<Geometry25D>`` or ``<Geometry3D>`` (object frame, absolute z)."""
     if isinstance(geometry, Geometry2D):
-        return "2D", tuple(Part(atom_shape(a), -math.inf, math.inf) for a in geometry.atoms)
+        low, high = (-math.inf, math.inf) if geometry.height is None else (pose_z, pose_z + geometry.height)
+        return "2D", tuple(Part(atom_shape(a), low, high) for a in geometry.atoms)
     if isinstance(geometry, Geometry25D):
         prisms: tuple[Prism, ...] = (geometry.prism,)
         dimension: Dimension = "2.5D"

@@ -268,12 +268,13 @@ class MapModel:
         """The edges a planar sensor at ``height`` sees, ``k × 4`` rows ``x1 y1 x2 y2`` (for ray casting).
 
         The map's outline, the avoided areas and the outlines of the object parts that span
-        ``height`` (a laser at 0.3 m sees table legs, not the top); mobile objects only if asked.
+        ``height`` (a laser at 0.3 m sees table legs, not the top; nothing sees a flat marking); mobile
+        objects only if asked.
         """
         shapes: list[BaseGeometry] = [self.outline, *self.avoided.values()]
         for obj in self.objects.values():
             if include_mobile or not self.semantics.is_mobile(obj.tag):
-                shapes += [floor for floor, zmin, zmax in obj.placed_parts() if zmin <= height <= zmax]
+                shapes += [floor for floor, zmin, zmax in obj.placed_parts() if zmin <= height <= zmax and zmax > zmin]
         rings = []
         for shape in shapes:
             for polygon in getattr(shape, "geoms", [shape]):

@@ -54,8 +54,9 @@ class MapObject:
         return unary_union(placed) if placed else Point(self.x, self.y)
 
     def obstacle(self, height: float = math.inf) -> BaseGeometry | None:
-        """The floor footprint of the parts a robot of ``height`` runs into (those starting below it)."""
-        low = [p.local for p in self.parts if p.zmin < height and p.zmax > 0]
+        """The floor footprint of the parts a robot of ``height`` runs into (those starting below it; a
+        flat marking's part is none)."""
+        low = [p.local for p in self.parts if p.solid and p.zmin < height and p.zmax > 0]
         if len(low) == len(self.parts):
             return self.shape
         return self._placed(low) if low else None
@@ -66,12 +67,14 @@ class MapObject:
 
     @property
     def zmin(self) -> float:
-        """The lowest height (m) of the parts (§6.1.1.1): ``-inf`` with a 2D atom, the ``<Pose>`` z with none."""
+        """The lowest height (m) of the parts (§6.1.1.1): ``-inf`` with a 2D atom of no height, the ``<Pose>`` z
+        with none."""
         return min((p.zmin for p in self.parts), default=self.z)
 
     @property
     def zmax(self) -> float:
-        """The highest height (m) of the parts (§6.1.1.1): ``inf`` with a 2D atom, the ``<Pose>`` z with none."""
+        """The highest height (m) of the parts (§6.1.1.1): ``inf`` with a 2D atom of no height, the ``<Pose>`` z
+        with none."""
         return max((p.zmax for p in self.parts), default=self.z)
 
 

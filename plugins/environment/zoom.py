@@ -137,7 +137,7 @@ class ZoomMap:
         if self.settings.mode == "2D" or len(rows) == 0:
             return rows
         z = self.model.z_ranges[rows]
-        kept: np.ndarray = rows[(z[:, 0] < self.settings.height) & (z[:, 1] > 0)]
+        kept: np.ndarray = rows[(z[:, 0] < self.settings.height) & (z[:, 1] >= 0)]  # >=: a marking on the floor
         return kept
 
     def recentre(self, x: float, y: float, now: float, reason: str = "start") -> Recentring:

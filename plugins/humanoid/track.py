@@ -48,7 +48,6 @@ from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, REQUIRED, E
 from .head import HeadModel, map_frame, on_plane
 
 MODELS = Path(__file__).resolve().parents[1] / "sim" / "models"
-FOOTPRINT_HEIGHT = 0.75  # a 2D-only Object's height, as the simulated world extrudes it
 
 
 class PanTiltTrack(ProcessingPlugin):
@@ -123,8 +122,8 @@ class PanTiltTrack(ProcessingPlugin):
             known = {}
             for obj in environment.objects:
                 geometry = obj.geometry
-                if isinstance(geometry, Geometry2D):
-                    low, high = 0.0, FOOTPRINT_HEIGHT
+                if isinstance(geometry, Geometry2D):  # as tall as the simulated world stands it (a marking: 0)
+                    low, high = 0.0, geometry.solid_height
                 else:
                     prisms = geometry.prisms if isinstance(geometry, Geometry3D) else (geometry.prism,)
                     low, high = min(q.zmin for q in prisms), max(q.zmax for q in prisms)

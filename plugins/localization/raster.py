@@ -1,8 +1,9 @@
 """Occupancy grid and distance field of a 2D map at laser height (thesis §6.1 records, §6.2 localization).
 
 Built from the ``<Environment>`` records (schemas/environment.xsd): the map bounds become a wall,
-avoided areas are obstacles, and every object atom that the scan plane crosses (a 2D footprint, or
-a prism with ``zmin <= scan_height <= zmax``) is placed at the object's pose. Shapely rasterises the
+avoided areas are obstacles, and every object atom that the scan plane crosses (a 2D footprint of no
+height, one whose ``height`` reaches the plane, or a prism with ``zmin <= scan_height <= zmax``; never
+a flat marking, D294) is placed at the object's pose. Shapely rasterises the
 shapes on the cell centres; OpenCV's exact Euclidean distance transform gives each cell the distance to
 the nearest occupied cell, which both the ray caster (sphere tracing) and the likelihood-field
 sensor models read.
@@ -53,12 +54,15 @@ def object_shapes(obj: EnvObject, scan_height: float) -> list[BaseGeometry]:
     """The atoms of ``<Object>`` ``obj`` that the scan plane at ``scan_height`` (m) cuts, in the map frame."""
     geometry = obj.geometry
     atoms: list[Atom2D] = []
+    z = obj.pose.z  # heights are measured from the object's <Pose> z, as the simulated world places them
     if isinstance(geometry, Geometry2D):
-        atoms = list(geometry.atoms)
+        # no height: projected onto the floor, a wall at every height (§6.1.1.1); a marking (0) is no wall
+        if geometry.height is None or (geometry.height > 0 and z <= scan_height <= z + geometry.height):
+            atoms = list(geometry.atoms)
     else:
         prisms = (geometry.prism,) if isinstance(geometry, Geometry25D) else geometry.prisms
         if isinstance(geometry, Geometry3D | Geometry25D):
-            atoms = [p.base for p in prisms if p.zmin <= scan_height <= p.zmax]
+            atoms = [p.base for p in prisms if z + p.zmin <= scan_height <= z + p.zmax]
     shapes = []
     for atom in atoms:
         turned = affinity.rotate(atom_polygon(atom), obj.pose.yaw, origin=(0, 0), use_radians=True)

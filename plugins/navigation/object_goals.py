@@ -5,7 +5,9 @@ A goal naming an ``<Object>`` of the Environment means "go up to it": the robot'
 comes from, facing the object's centre. When that side is taken by another obstacle, the nearest
 free side is chosen (turning the approach by steps of ``STEP`` either way). The object itself is then
 no obstacle of the plan (:meth:`plugins.navigation.routes.Routes.aim_at`), and scan points on it
-(:func:`on_object`) do not block the path's last leg.
+(:func:`on_object`) do not block the path's last leg. A flat marking (``<Geometry2D height="0">``, a
+landing pad, a dock marking: nobody's obstacle, D294) is driven onto: the goal is its centre, keeping
+the heading the robot comes with.
 """
 
 from __future__ import annotations
@@ -57,6 +59,10 @@ def standoff_pose(model: MapModel, obj: MapObject, here: Point, clearance: float
     centre = (float(obj.shape.centroid.x), float(obj.shape.centroid.y))
     dx, dy = here[0] - centre[0], here[1] - centre[1]
     own = math.atan2(dy, dx) if math.hypot(dx, dy) > 1e-9 else 0.0
+    if obj.obstacle() is None:  # a marking: onto it, facing the way the robot comes
+        hits = [name for name in model.collisions(footprint, *centre) if name != obj.name]
+        if not hits:
+            return centre[0], centre[1], math.atan2(-dy, -dx)
     blockers: set[str] = set()
     for k in range(int(math.pi / STEP) + 1):
         for heading in dict.fromkeys((own + k * STEP, own - k * STEP)):

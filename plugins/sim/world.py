@@ -4,9 +4,12 @@
   world's ``physicsClientId`` so one process can hold several worlds (tests, one per scope).
 - A fixed time step (default 1/240 s) and ``deterministicOverlappingPairs``: the same seed and
   the same commands give the same sensor data.
-- Map bounds → floor and four walls; ``<AvoidedArea>`` → obstacles the map's height tall;
-  ``<Object>`` prisms → static bodies, except objects whose semantic tag affords ``pick``, which
-  are dynamic (they can be grasped and carried); a 2D-only object stands ``FOOTPRINT_HEIGHT`` tall.
+- Map bounds → floor and four walls; ``<AvoidedArea>`` → obstacles its ``height`` tall (the map's
+  when absent); ``<Object>`` prisms → static bodies, except objects whose semantic tag affords
+  ``pick``, which are dynamic (they can be grasped and carried); a 2D-only object stands its
+  ``<Geometry2D height>`` tall (``FOOTPRINT_HEIGHT`` of ``ckmconf.model.environment``, 0.75 m, when
+  absent), and at ``height="0"`` is a marking: a visual-only slab ``MARKING_THICKNESS`` thick that
+  the cameras see and nothing hits (D294).
 - A textured 2.5D cylinder or box wears a texture skin (:mod:`plugins.sim.skins`, D145) as its
   visual shape: its print upright at its own aspect, which the RGB recognition knows; its collision
   shape is the plain prism's.
@@ -41,8 +44,8 @@ from .textures import texture_file, texture_spec
 
 MODELS = Path(__file__).with_name("models")
 """The robot models (URDF) shipped with the package."""
-FOOTPRINT_HEIGHT = 0.75
-"""Height (m) a ``<Geometry2D>`` object is extruded to: a desk, a chair."""
+MARKING_THICKNESS = 0.004
+"""Thickness (m) of a marking's slab (``<Geometry2D height="0">``): above the floor, so a camera sees its top."""
 DENSITY = 300.0
 """Density (kg/m³) of the movable objects: a 12 cm cylinder of radius 3.5 cm weighs 0.14 kg."""
 WALL = 0.1
@@ -95,12 +98,18 @@ def _polygon_shape(points: Sequence[tuple[float, float]], zmin: float, zmax: flo
 
 
 def _prisms(obj: EnvObject) -> list[Prism]:
+    """The object's prisms as the world builds them: a 2D footprint extruded to its height (a marking: a slab)."""
     geometry = obj.geometry
     if isinstance(geometry, Geometry3D):
         return list(geometry.prisms)
     if isinstance(geometry, Geometry2D):
-        return [Prism(zmin=0.0, zmax=FOOTPRINT_HEIGHT, base=atom) for atom in geometry.atoms]
+        top = MARKING_THICKNESS if geometry.marking else geometry.solid_height
+        return [Prism(zmin=0.0, zmax=top, base=atom) for atom in geometry.atoms]
     return [geometry.prism]
+
+
+def _is_marking(obj: EnvObject) -> bool:
+    return isinstance(obj.geometry, Geometry2D) and obj.geometry.marking
 
 
 class World:
@@ -161,9 +170,18 @@ class World:
         return int(p.createMultiBody(0, col, vis, list(centre), orn, physicsClientId=cid))
 
     def _body(
-        self, shape: Shape, pose: tuple[float, float, float, float], mass: float, rgba: list[float], visual: int = -1
+        self,
+        shape: Shape,
+        pose: tuple[float, float, float, float],
+        mass: float,
+        rgba: list[float],
+        visual: int = -1,
+        collides: bool = True,
     ) -> int:
-        """A body of ``shape`` at the object ``pose``; ``visual`` (a visual shape id) replaces its plain look."""
+        """A body of ``shape`` at the object ``pose``; ``visual`` (a visual shape id) replaces its plain look.
+
+        ``collides=False``: a visual-only body (a marking) that rays, robots and objects pass through.
+        """
         cid = self.client
         x, y, z, yaw = pose
         c, s = math.cos(yaw), math.sin(yaw)
@@ -171,7 +189,7 @@ class World:
         position = [x + c * ox - s * oy, y + s * ox + c * oy, z + oz]
         orn = p.getQuaternionFromEuler([0, 0, yaw + shape.yaw])
         args = dict(shape.kwargs)
-        col = p.createCollisionShape(shape.kind, physicsClientId=cid, **args)
+        col = p.createCollisionShape(shape.kind, physicsClientId=cid, **args) if collides else -1
         if shape.kind == p.GEOM_CYLINDER:
             args["length"] = args.pop("height")
         if shape.kind == p.GEOM_MESH:  # a visual mesh needs triangles: fan the two caps and the sides
@@ -194,7 +212,7 @@ class World:
         ):
             self._static_box(centre, half, grey)
         for area in environment.avoided:
-            shape = _polygon_shape(area.points(), 0.0, height)
+            shape = _polygon_shape(area.points(), 0.0, area.top(height))
             self.objects[area.name] = self._body(shape, (0.0, 0.0, 0.0, 0.0), 0.0, grey)
         movable = {s.tag for s in environment.semantics if any(a.action == "pick" for a in s.affordances)}
         colours = {t.name: _rgba(t.color) for t in environment.textures}
@@ -213,6 +231,8 @@ class World:
             texture = p.loadTexture(str(texture_file(spec)), physicsClientId=cid)
             rgba = [1.0, 1.0, 1.0, 1.0]
         pose = (obj.pose.x, obj.pose.y, obj.pose.z, obj.pose.yaw)
+        solid = not _is_marking(obj)
+        movable = movable and solid  # a marking is never carried (ckm-validate refuses a pickable one)
         first = -1
         for prism in _prisms(obj):
             shape = prism_shape(prism)
@@ -221,7 +241,7 @@ class World:
             if spec is not None and isinstance(obj.geometry, Geometry25D):
                 skin = skin_mesh(prism, spec, -half, half)
             visual = visual_shape(cid, skin) if skin is not None else -1
-            body = self._body(shape, pose, DENSITY * shape.volume if movable else 0.0, rgba, visual)
+            body = self._body(shape, pose, DENSITY * shape.volume if movable else 0.0, rgba, visual, solid)
             if texture >= 0:
                 p.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=rgba, physicsClientId=cid)
             if skin is not None and spec is not None:

@@ -1,8 +1,9 @@
 """The pictures of the HTML run report (:mod:`.html_report`) as PNG bytes, drawn with matplotlib.
 
 - :func:`map_png`: Fig. 7.16 — the ``<Environment>`` of the configuration (schemas/environment.xsd,
-  §6.1: map bounds as walls, areas, avoided areas, object footprints) drawn from the ``ckmconf``
-  records, with the trajectories, the zoom-map areas and where the target was recognised.
+  §6.1: map bounds as walls, areas, avoided areas, object footprints, a flat marking (D294) as a pale
+  dashed outline) drawn from the ``ckmconf`` records, with the trajectories, the zoom-map areas and
+  where the target was recognised.
 - :func:`reliability_png`: Fig. 7.19 — the target's recognition reliability against time (every
   recognition topic) and against its distance to the robot (the fused result).
 - :func:`image_png`: a camera frame (Fig. 7.22, 7.24).
@@ -61,16 +62,25 @@ def _atoms(obj: EnvObject) -> list[CircleRecord | RectangleRecord | PolygonRecor
     return []
 
 
+def is_marking(obj: EnvObject) -> bool:
+    """Whether the object is a flat marking (``<Geometry2D height="0">``, D294): drawn, but nobody's obstacle."""
+    return isinstance(obj.geometry, Geometry2D) and obj.geometry.marking
+
+
 def _footprint(obj: EnvObject, atom: CircleRecord | RectangleRecord | PolygonRecord, color: str) -> Circle | Polygon:
+    # a marking: a pale fill in a dashed outline, under the obstacles (a robot's track crosses it)
+    style = {"facecolor": color, "edgecolor": "black", "lw": 0.5, "zorder": 1.5}
+    if is_marking(obj):
+        style = {"facecolor": color, "edgecolor": "#555555", "lw": 0.8, "ls": "--", "alpha": 0.45, "zorder": 1.2}
     if isinstance(atom, CircleRecord):
-        return Circle(_placed(obj, atom.x, atom.y), atom.radius, facecolor=color, edgecolor="black", lw=0.5)
+        return Circle(_placed(obj, atom.x, atom.y), atom.radius, **style)
     if isinstance(atom, RectangleRecord):
         c, s = math.cos(atom.yaw), math.sin(atom.yaw)
         corners = [(sx * atom.width / 2, sy * atom.depth / 2) for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         points = [_placed(obj, atom.x + c * u - s * v, atom.y + s * u + c * v) for u, v in corners]
     else:
         points = [_placed(obj, v.x, v.y) for v in atom.vertices]
-    return Polygon(points, closed=True, facecolor=color, edgecolor="black", lw=0.5)
+    return Polygon(points, closed=True, **style)
 
 
 def draw_environment(ax: Axes, env: Environment, base: Path | None = None) -> None:

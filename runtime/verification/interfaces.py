@@ -208,6 +208,29 @@ STANDARD: dict[str, Interface] = {
                           ("x", "y", "yaw", "covariance", "dispersion")),),
         ),
         Interface(
+            "docking",
+            "A base docked at a known dock (a charger, a station) and undocked from it.",
+            inputs=(
+                Port("goal", "a goal `{id, action: dock | undock, dock: a dock's name, or empty with its docked "
+                             "pose x, y, yaw on the map}`; the behaviors' `dock_goal` Output is this topic",
+                     (f"{CKM}DockGoal",), ("id", "action", "dock", "x", "y", "yaw")),
+                Port("pose", "the base's pose estimate on the map (a navigation or localization `pose`)",
+                     (POSE, f"{CKM}PoseEstimate", POSE_STAMPED), ("pose.x", "pose.y", "pose.yaw")),
+                Port("move_status", "the base-drive service's `move_status`, for the moves the docking service "
+                                    "sends on its `move_goal` Output", (f"{CKM}MoveStatus",),
+                     ("id", "state", "reason")),
+            ),
+            outputs=(
+                Port("move_goal", "relative moves `{id, frame: robot, x, y, yaw}` for the base-drive service's "
+                                  "`move_goal` Input", (f"{CKM}MoveGoal",), ("id", "frame", "x", "y", "yaw")),
+                Port("status", "`{stamp, id, action, state: staging | docking | docked | undocking | undocked | "
+                               "failed, attempt, reason}` of the newest goal; `reason` says why an approach "
+                               "failed (a move, no contact, too far off the dock)",
+                     (f"{CKM}DockStatus",), ("stamp", "id", "action", "state", "attempt", "reason")),
+            ),
+            goals=_ID_GOALS,
+        ),
+        Interface(
             "flight",
             "A multirotor flown to goals (take off, go to, land, hold) by velocity set-points.",
             inputs=(

@@ -264,3 +264,22 @@ def test_ros_typed_topics_are_found_as_the_configuration_s_own_types_are() -> No
     feeds = feeds_of(system)
     assert feeds.cameras == ("/camera/depth/image_raw", "/camera/rgb/image_raw")
     assert [r.name for r in feeds.robots] == ["turtlebot"]
+
+
+def test_a_marking_is_drawn_pale_and_dashed(qtbot: QtBot, tmp_path: Path) -> None:
+    """D294: a ``<Geometry2D height="0">`` is drawn as a marking, an object of no height as before."""
+    path = tmp_path / "room.xml"
+    path.write_text(
+        '<Part xmlns="urn:ckm:1" version="1.0"><Environment name="e"><Map xmin="0" ymin="0" xmax="4" ymax="2"/>'
+        '<Semantic tag="thing"/>'
+        '<Object name="pad" tag="thing"><Pose x="1" y="1"/><Geometry2D height="0"><Circle radius="0.3"/></Geometry2D>'
+        '</Object><Object name="desk" tag="thing"><Pose x="3" y="1"/><Geometry2D><Circle radius="0.3"/></Geometry2D>'
+        "</Object></Environment></Part>"
+    )
+    view = SimMapView()
+    qtbot.addWidget(view)
+    view.show_environment(ckmconf.load(path).environment, ())
+    drawn = {i.toolTip(): i for i in view.scene().items() if isinstance(i, QGraphicsPathItem) and i.toolTip()}
+    pad, desk = drawn["pad (thing, a marking)"], drawn["desk (thing)"]
+    assert pad.pen().style() == Qt.PenStyle.DashLine and pad.brush().color().alphaF() < 0.5
+    assert desk.pen().style() == Qt.PenStyle.SolidLine and desk.brush().color().alphaF() == 1.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -109,6 +110,34 @@ def test_object_heights_come_from_the_environment_model() -> None:
         assert made.heights["cylinder_red_stripes"] == pytest.approx(0.36)  # on the 0.30 m workbench, 0.12 m tall
         assert made.heights["workbench"] == pytest.approx(0.15)
         assert made.heights["box_cereal"] == 0.4  # the Param wins
+    finally:
+        made.stop()
+
+
+def test_a_marking_lies_on_the_floor_and_a_2d_height_sets_the_centre(tmp_path: Path) -> None:
+    """D294: a ``<Geometry2D height="0">`` marking's centre is on the floor, a 1.2 m one's 0.6 m up, and
+    one of no height is the simulated world's 0.75 m block."""
+    objects = "".join(
+        f'<Object name="{name}" tag="thing"><Pose x="1" y="{i}" z="{z}"/><Geometry2D{height}>'
+        '<Circle radius="0.2"/></Geometry2D></Object>'
+        for i, (name, height, z) in enumerate(
+            [
+                ("pad", ' height="0"', 0.0),
+                ("post", ' height="1.2"', 0.0),
+                ("desk", "", 0.0),
+                ("tray", ' height="0"', 0.5),
+            ]
+        )
+    )
+    environment = tmp_path / "environment.xml"
+    environment.write_text(
+        '<Part xmlns="urn:ckm:1" version="1.0"><Environment name="e"><Map xmin="0" ymin="-1" xmax="5" ymax="5"/>'
+        f'<Semantic tag="thing"/>{objects}</Environment></Part>'
+    )
+    made: PanTiltTrack = plugin(PanTiltTrack, "pan-tilt-track", environment=str(environment))
+    made.setup()
+    try:
+        assert made.heights == {"pad": 0.0, "post": pytest.approx(0.6), "desk": pytest.approx(0.375), "tray": 0.5}
     finally:
         made.stop()
 
