@@ -229,12 +229,12 @@ def test_a_multirotor_channel_that_cannot_fly_is_refused_before_setup() -> None:
     """What ckm-validate reports at its line (corpus sim_multirotor_*.xml), the backend refuses alone too."""
     quad = {"body": "quadrotor", "actuator": "multirotor", **AIRFRAMES["quadrotor"]}
     for size, direction, params, why in (
-        (3, "out", quad, "size 4 (vx vy vz yaw_rate); this one is bus out, size 3"),
-        (4, "in", quad, "this one is bus in, size 4"),
+        (3, "out", quad, "size is 3, its multirotor device gives 4 values"),
+        (4, "in", quad, "a bus in channel cannot be the actuator=multirotor device: it is served as bus out"),
         (4, "out", {**quad, "spin": "1 -1"}, "Param 'spin' needs one +1 or -1 per rotor (4 rotors)"),
         (4, "out", {k: v for k, v in quad.items() if k != "maxThrust"}, "needs Param 'maxThrust'"),
-        (4, "out", {**quad, "rotors": "rotor_fl rotor_fr"}, "its rotor links (3 or more), not 2"),
-        (4, "out", {**quad, "sensor": "imu"}, "no 'joint', 'joints' or 'sensor' beside it"),
+        (4, "out", {**quad, "rotors": "rotor_fl rotor_fr", "spin": "1 -1"}, "needs 3 rotor links or more, not 2"),
+        (4, "out", {**quad, "joint": "rotor_fl_joint"}, "Param 'joint' is not read by the multirotor device"),
     ):
         with pytest.raises(ParamError, match=re.escape(why)):
             SimBackend(record("fly", direction, "bus", size, **params))
