@@ -46,7 +46,7 @@ from ckmconf.model import HWChannel, Node, System
 from plugins.sim import device_table
 from plugins.sim.client import RemoteDevice, server_address
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
-from plugins.sim.flight import Airframe
+from plugins.sim.flight import AXES, Airframe
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
@@ -103,6 +103,8 @@ _SPEC = Params(
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
     P("actuator", "", "Actuator device of an out channel other than a joint (multirotor: D293).", choices=ACTUATORS),
+    P("axis", "", "Multirotor: the one set-point value a size-1 channel drives (an Actuator's), the others "
+                  "kept: vx, vy, vz or yaw_rate.", choices=("", *AXES)),
     P("rotors", "", "Multirotor: its rotor links, space-separated (3 or more; positions and axes from the URDF)."),
     P("spin", "", "Multirotor: one +1 or -1 per rotor, its reaction torque's sense (+1: counter-clockwise "
                   "seen from above, the propeller turning clockwise)."),
@@ -303,16 +305,8 @@ class SimBackend(Backend):
         """Drive the device (joint target, wheel duty…) with one raw value, at the clock's time."""
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel")
-        if self.airframe is not None:  # a multirotor's set-point, refused here whole if bad (D293)
-            setpoint = list(self.airframe.setpoint(np.asarray(value, dtype=float).ravel().tolist(), self.owner))
-            if self.remote is not None:
-                self.remote.write(setpoint)
-            else:
-                sim, device = self._require()
-                with sim.lock:
-                    sim.sync()
-                    device.write(setpoint)
-            self.last = tuple(setpoint)
+        if self.airframe is not None:
+            self._fly(self.airframe, value)
             return
         raw = float(value[0] if isinstance(value, tuple) else value)
         if self.remote is not None:
@@ -324,6 +318,30 @@ class SimBackend(Backend):
         with sim.lock:
             sim.sync()
             device.write(raw)
+
+    def _fly(self, airframe: Airframe, value: Value) -> None:
+        """A multirotor's set-point (D293), or one value of it (``axis``), refused here if bad; the device
+        checks it again (with the other axes' values) wherever it runs."""
+        given = np.asarray(value, dtype=float).ravel().tolist()
+        axis = self.values["axis"]
+        setpoint: float | list[float]
+        if axis:
+            if len(given) != 1:
+                raise ValueError(f"{self.owner} drives the multirotor's {axis}: one value, got {len(given)}")
+            alone = [0.0] * len(AXES)
+            alone[AXES.index(axis)] = given[0]
+            airframe.setpoint(alone, self.owner)
+            setpoint = float(given[0])
+        else:
+            setpoint = list(airframe.setpoint(given, self.owner))
+        if self.remote is not None:
+            self.remote.write(setpoint)
+        else:
+            sim, device = self._require()
+            with sim.lock:
+                sim.sync()
+                device.write(setpoint)
+        self.last = setpoint if isinstance(setpoint, float) else tuple(setpoint)
 
     @classmethod
     def run_session(

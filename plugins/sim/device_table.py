@@ -72,7 +72,7 @@ class Device:
     def name(self) -> str:
         """What messages call the device: its sensor or actuator, ``joint``, ``joints`` or ``gripper``."""
         if self.selector.startswith(("sensor=", "actuator=")):
-            return self.selector.partition("=")[2]
+            return self.selector.partition("=")[2].replace(" + ", " ")
         return "gripper" if self.selector == "joint + grasp" else self.selector
 
     @property
@@ -136,6 +136,24 @@ def _gripper(kind: str) -> Device:
         modes=("position",),
         required=("joint", "mirror", "grasp"),
         optional=("mode", "scale", "offset", "holdForce", "initial"),
+    )
+
+
+MULTIROTOR = ("actuator", "rotors", "spin", "maxThrust")
+AIRFRAME = ("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment")
+
+
+def _axis(kind: str) -> Device:
+    return Device(
+        kind=kind,
+        direction="out",
+        selector="actuator=multirotor + axis",
+        summary="one value of a multirotor's velocity set-point (`axis`: vx, vy, vz or yaw_rate), the others "
+        "kept: one CKM Actuator per axis; every channel of the robot gives the same rotor Params (D293)",
+        values=(("the axis' set-point", "m/s, or rad/s for yaw_rate"),),
+        size=fixed(1),
+        required=(*MULTIROTOR, "axis"),
+        optional=AIRFRAME,
     )
 
 
@@ -298,9 +316,11 @@ DEVICES: tuple[Device, ...] = (
         "ground while vz ≤ 0 (plugins/sim/flight.py, D293)",
         values=(("vx", "m/s, ahead"), ("vy", "m/s, left"), ("vz", "m/s, up"), ("yaw_rate", "rad/s")),
         size=fixed(4),
-        required=("actuator", "rotors", "spin", "maxThrust"),
-        optional=("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment"),
+        required=MULTIROTOR,
+        optional=AIRFRAME,
     ),
+    _axis("analog"),
+    _axis("bus"),
 )
 """Every device ``hardware.sim`` serves, one row per kind × direction × device."""
 
@@ -314,7 +334,7 @@ def selector_of(values: Mapping[str, Any]) -> str:
     if values.get("sensor"):
         return f"sensor={values['sensor']}"
     if values.get("actuator"):
-        return f"actuator={values['actuator']}"
+        return f"actuator={values['actuator']}" + (" + axis" if values.get("axis") else "")
     if values.get("joints"):
         return "joints"
     if values.get("joint"):

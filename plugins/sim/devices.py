@@ -203,12 +203,12 @@ class ChannelDevice:
         owner = f"sim channel {self.spec.name!r}"
         frame = Airframe.from_values(self.spec.values, owner)
         flying = self.sim.flyers.get(self.robot.name)
-        if flying is not None and flying.frame == frame:
-            return flying
-        if flying is not None:  # another airframe for the same robot: its rotors are replaced
-            flying.detach()
-        made = self.sim.flyers[self.robot.name] = Multirotor(self.robot, frame, owner)
-        return made
+        if flying is None:
+            flying = self.sim.flyers[self.robot.name] = Multirotor(self.robot, frame, owner)
+        elif flying.frame != frame:  # one robot, one set of rotors: its axis channels say the same
+            raise ValueError(f"{owner}: robot {self.robot.name!r} is flown by {flying.owner} with another "
+                             f"airframe ({flying.frame}); give every channel of it the same rotor Params")
+        return flying
 
     def _joint_value(self, joint: int) -> float:
         v = self.spec.values
@@ -264,7 +264,11 @@ class ChannelDevice:
         if self.spec.direction != "out":
             raise ValueError(f"sim channel {self.spec.name!r} is an input channel")
         if isinstance(self.device, Multirotor):
-            self.device.command([raw] if isinstance(raw, int | float) else list(raw), f"sim channel {self.spec.name!r}")
+            owner = f"sim channel {self.spec.name!r}"
+            if v.get("axis") and isinstance(raw, int | float):  # one value of the set-point (an Actuator's)
+                self.device.command_axis(v["axis"], float(raw), owner)
+            else:
+                self.device.command([raw] if isinstance(raw, int | float) else list(raw), owner)
             return
         if not isinstance(raw, int | float):
             raise ValueError(f"sim channel {self.spec.name!r} takes one value, got {len(raw)}")

@@ -36,6 +36,8 @@ from .robots import Robot
 
 Array = npt.NDArray[np.float64]
 GRAVITY = 9.81
+AXES = ("vx", "vy", "vz", "yaw_rate")
+"""The set-point's values in order; an ``axis`` channel drives one of them (a CKM Actuator is scalar)."""
 # The controller's gains (1/s, 1/s²): the velocity loops are slower than the attitude loop, which
 # is kept slower than the rotors (ATTITUDE_BANDWIDTH × thrustLag), so their lag does not shake it.
 VELOCITY_GAIN = np.array([2.0, 2.0, 4.0])
@@ -182,6 +184,13 @@ class Multirotor:
         # our drag is the body's only one (pybullet's own damping is off for it)
         p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         robot.world.before_step.append(self.push)
+
+    def command_axis(self, axis: str, value: float, owner: str = "") -> None:
+        """Fly the set-point with one of its values (:data:`AXES`) replaced by ``value``; ValueError as
+        :meth:`command` (the other axes' channels keep theirs)."""
+        values = list(self.setpoint)
+        values[AXES.index(axis)] = value
+        self.command(values, owner)
 
     def command(self, values: Sequence[float], owner: str = "") -> None:
         """Fly the set-point (vx, vy, vz, yaw_rate) from now on; ValueError naming ``owner`` (default:

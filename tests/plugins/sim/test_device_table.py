@@ -49,6 +49,8 @@ EXAMPLES: dict[str, tuple[int, float | None, dict[str, str]]] = {
     "bus in, sensor=position": (3, None, {**QUAD, "sensor": "position", "noise": "0.05"}),
     "analog in, sensor=compass": (1, None, {**QUAD, "sensor": "compass"}),
     "bus out, actuator=multirotor": (4, None, {**QUAD, **MULTIROTOR}),
+    "analog out, actuator=multirotor + axis": (1, None, {**QUAD, **MULTIROTOR, "axis": "vz"}),
+    "bus out, actuator=multirotor + axis": (1, None, {**QUAD, **MULTIROTOR, "axis": "yaw_rate"}),
 }
 """An example channel of every row (its size, max and Params): a new row needs one here."""
 
@@ -110,6 +112,7 @@ def test_every_row_is_a_device_whose_reads_give_its_values() -> None:
             where: 0.0 if backend.channel.kind == "pwm" else 0.5 for where, backend in backends.items()
         }
         written["bus out, actuator=multirotor"] = (0.0, 0.0, 0.0, 0.0)  # a velocity set-point: stay landed
+        written["analog out, actuator=multirotor + axis"] = 0.0
         for where, backend in backends.items():
             if backend.channel.direction == "out":
                 backend.write(written[where])  # the rover's wheels stay still: its pose is checked
@@ -194,6 +197,7 @@ def test_the_checks_apply_the_rows_sizes_modes_and_params() -> None:
                 "maxVelocity": "2",
                 "sensor": "imu",
                 "actuator": "multirotor",
+                "axis": "vx",
                 "arc": "1",
                 "width": "4",
                 "height": "4",
@@ -207,7 +211,7 @@ def test_the_checks_apply_the_rows_sizes_modes_and_params() -> None:
             found = messages(example(device, **{name: value}))
             assert found, (device.where, name)  # a Param the device does not read is refused
         for name in device.required:
-            if name in ("sensor", "actuator", "joint", "joints", "grasp"):
+            if name in ("sensor", "actuator", "axis", "joint", "joints", "grasp"):
                 continue  # these choose the device: without them it is another row
             _, _, params = EXAMPLES[device.where]
             left_out = record(

@@ -18,13 +18,16 @@ import pytest
 import ckmconf
 from ckmconf.model import HWChannel, Param
 from plugins.hardware.sim import SimBackend, find_world
-from plugins.hardware.simulation import ManualClock, PlantScope
+from plugins.hardware.simulation import ManualClock, PlantScope, plant_scope
 from plugins.sim.client import ENV_ADDRESS, ENV_KEY
 from plugins.sim.devices import SimWorld
-from plugins.sim.flight import GRAVITY, Multirotor
+from plugins.sim.flight import AXES, GRAVITY, Multirotor
 from plugins.sim.session import ServerProcess
 from runtime.kernel.interfaces import ParamError
+from runtime.kernel.node import NodeRuntime
+from runtime.network import open_transport
 from tests.conftest import REPO
+from tests.runtime.network.conftest import private_network
 
 EXAMPLE = REPO / "configs" / "examples" / "sim_multirotor.xml"
 AIRFRAMES = {
@@ -346,3 +349,92 @@ def test_a_multirotor_flies_through_the_world_server(tmp_path: Path, monkeypatch
         finally:
             fly.stop()
             fix.stop()
+
+
+def test_axis_channels_fly_as_the_set_point_channel() -> None:
+    """Four size-1 channels (``axis``), one per value, as four CKM Actuators drive them, fly the robot
+    exactly as one size-4 channel writing the same set-point."""
+    whole = Flight("quadrotor")
+    whole.go(0.5, -0.3, 1.0, 0.2, 2.0)
+    clock = ManualClock()
+    scope = PlantScope(clock, name="axes")
+    frame = {"body": "quadrotor", "pose": "1 1 0", "actuator": "multirotor", **AIRFRAMES["quadrotor"]}
+    axes = [SimBackend(record(f"v_{axis}", "out", "analog", 1, axis=axis, **frame), scope=scope) for axis in AXES]
+    fix = SimBackend(record("fix", "in", "bus", 3, body="quadrotor", sensor="position"), scope=scope)
+    for backend in (*axes, fix):
+        backend.setup()
+    fix.read()  # the world's clock starts at its first use (D88), as Flight's first write starts it
+    for _ in range(4):  # as Flight settles its robot
+        clock.advance(TICK)
+    for backend, value in zip(axes, (0.5, -0.3, 1.0, 0.2), strict=True):
+        backend.write(value)
+    for _ in range(round(2.0 / TICK)):
+        clock.advance(TICK)
+        fix.read()
+    assert np.array_equal(np.array(fix.read()), whole.position())
+    assert axes[2].read() == 1.0  # an axis channel reads back its own value
+    with pytest.raises(ValueError, match=re.escape("sim channel 'v_vz': set-point [0.0, 0.0, 5.0, 0.0]: climb rate")):
+        axes[2].write(5.0)
+    other = SimBackend(record("v2", "out", "analog", 1, axis="vx", **{**frame, "maxThrust": "7"}), scope=scope)
+    with pytest.raises(ValueError, match="robot 'quadrotor' is flown by sim channel 'v_vx' with another airframe"):
+        other.setup()  # one robot, one set of rotors
+
+
+NODE = """<?xml version="1.0" encoding="UTF-8"?>
+<System xmlns="urn:ckm:1" version="1.0" name="climb">
+  <Node name="air" kind="light">
+    <HWChannel name="climb" direction="out" kind="analog" backend="sim" units="m/s" min="-1" max="1">
+      <Param name="body" value="quadrotor"/>
+      <Param name="pose" value="2 2 0"/>
+      <Param name="actuator" value="multirotor"/>
+      <Param name="axis" value="vz"/>
+      <Param name="rotors" value="rotor_fl rotor_fr rotor_rl rotor_rr"/>
+      <Param name="spin" value="1 -1 -1 1"/>
+      <Param name="maxThrust" value="6"/>
+    </HWChannel>
+    <HWChannel name="range" direction="in" kind="analog" backend="sim" units="m">
+      <Param name="body" value="quadrotor"/>
+      <Param name="sensor" value="altimeter"/>
+      <Param name="link" value="camera_link"/>
+    </HWChannel>
+    <Topic name="height" type="float64" scope="internal"/>
+    <Topic name="climb_rate" type="float64" scope="internal"/>
+    <Sensor name="altimeter" channel="range" topic="height" period="0.05"/>
+    <Controller name="up" kind="constant" period="0.05"><Param name="value" value="0.5"/>
+      <Input topic="height" role="measure"/>
+      <Output topic="climb_rate"/></Controller>
+    <Actuator name="climb_motor" channel="climb" topic="climb_rate" min="-1" max="1" safeValue="0"/>
+  </Node>
+  <Environment name="hall" frame="map">
+    <Map xmin="0" ymin="0" xmax="4" ymax="4" height="3"/>
+  </Environment>
+</System>
+"""
+
+
+def test_a_ckm_actuator_flies_an_axis_channel(tmp_path: Path) -> None:
+    """The kernel's path: a constant controller's 0.5 m/s, an Actuator, the vz channel; the robot climbs."""
+    path = tmp_path / "climb.xml"
+    path.write_text(NODE, encoding="utf-8")
+    system = ckmconf.load(path)
+    transport = open_transport(private_network(), name="climb")
+    transport.setup()
+    transport.start()
+    scope = PlantScope(time.monotonic, name="climb")
+    runtime = NodeRuntime(system.nodes[0], system, transport)
+    try:
+        with plant_scope(scope):
+            runtime.setup()
+        runtime.start()
+        sim = find_world(scope)
+        assert sim is not None
+        deadline, height = time.monotonic() + 30.0, 0.0  # real time; bounded on a loaded machine
+        while time.monotonic() < deadline and height < 0.6:
+            time.sleep(0.1)
+            with sim.lock:
+                height = sim.robots["quadrotor"].link_pose(-1)[0][2] - 0.13
+        assert height >= 0.6
+        assert sim.flyers["quadrotor"].setpoint == (0.0, 0.0, 0.5, 0.0)
+    finally:
+        runtime.stop()
+        transport.stop()
