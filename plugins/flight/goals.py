@@ -2,7 +2,8 @@
 
 A goal is ``{id, action, frame, x, y, z, yaw}``: ``takeoff`` climbs ``z`` metres above where the
 robot stands, ``goto`` flies to (x, y, z) (``frame`` ``map``, z above the floor; or ``robot``:
-ahead, left, up from where it is) and turns to ``yaw`` (NaN or absent: keep the heading), ``land``
+ahead, left, up from where it is) and turns to ``yaw`` (NaN or absent: keep the heading) — in
+legs: up to the higher of its height and the goal's, level to above the goal, down to it — ``land``
 descends where it is until it rests, ``hold`` hovers where it is. Every goal carries a fresh id; a
 newer one preempts the older (PX4's and MAVROS' offboard set-points work alike).
 """
@@ -32,6 +33,7 @@ class Flight:
     id: Any
     action: str
     target: Pose3 | None = None
+    legs: list[Pose3] = field(default_factory=list)  # waypoints before the target (climb, transit)
     keep_heading: bool = True
     state: str = "active"  # active | arrived | landed | failed
     reason: str = ""
@@ -93,6 +95,11 @@ def accept(message: Any, pose: Pose3 | None, landed: bool) -> Flight:
             x, y, z = pose.x + c * x - s * y, pose.y + s * x + c * y, pose.z + z
             heading = pose.yaw + (0.0 if keep or yaw is None else yaw)
         flight.target = Pose3(x, y, z, wrap(heading))
+        cruise = max(pose.z, z)  # climb first, fly level, descend last: the legs verify checks
+        if cruise > pose.z:
+            flight.legs.append(Pose3(pose.x, pose.y, cruise, pose.yaw))
+        if cruise > z:
+            flight.legs.append(Pose3(x, y, cruise, wrap(heading)))
     else:  # land and hold: where it is
         flight.target = Pose3(pose.x, pose.y, pose.z, pose.yaw)
     return flight

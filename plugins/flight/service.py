@@ -33,13 +33,16 @@ A failed or arrived goal hovers where it ended.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from ckmconf.model.resources import Plugin
-from runtime.resources.spt import Context, ProcessingPlugin
-from runtime.verification.manifest import MAPPING, P, Params, Ports
+from plugins.environment.airspace import Airspace
+from plugins.environment_file import environment_of
+from runtime.resources.spt import Context, ProcessingPlugin, config_dir
+from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, P, Params, Ports
 
 from .estimate import Estimator, Pose3, read_position, read_scalar, read_velocity
 from .goals import Flight, accept, wrap
@@ -74,6 +77,14 @@ class FlightControl(ProcessingPlugin):
           above=0.0, max=1.0),
         P("staleAfter", 1.0, "A goal fails after this long without a new position fix.", unit="s", above=0.0),
         P("timeoutMargin", 10.0, "Time a goal has beyond twice its flying time.", unit="s", min=0.0),
+        P("environment", "", "File holding the system's <Environment>: each goto's and takeoff's legs are checked "
+          "against its solids and their heights (empty: not checked).", type=str, file=ENVIRONMENT_FILE),
+        P("radius", None, "The robot's horizontal radius, rotors included (required with 'environment').",
+          type=float, unit="m", above=0.0),
+        P("halfHeight", 0.15, "Half the robot's height, landing gear included (with 'environment').", unit="m",
+          min=0.0),
+        P("clearance", 0.3, "Margin kept around the robot's body from every solid (with 'environment').",
+          unit="m", min=0.0),
     )
 
     def __init__(self, record: Plugin) -> None:
@@ -84,6 +95,15 @@ class FlightControl(ProcessingPlugin):
         self.flight: Flight | None = None
         self.landed: bool | None = None  # unknown until the first estimate
         self._message: Any = None
+        self.airspace: Airspace | None = None
+        if v["environment"] and v["radius"] is None:
+            raise ValueError(f"{self.owner}: checking flights against 'environment' needs parameter 'radius' "
+                             "(the robot's horizontal radius, rotors included)")
+
+    def setup(self) -> None:
+        """Read the environment whose solids the flights are checked against (when one is named)."""
+        if self.params["environment"]:
+            self.airspace = Airspace(environment_of(config_dir(self.record) / self.params["environment"], self.owner))
 
     def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
         """The service's ``speed`` Parameter caps the horizontal speed."""
@@ -130,7 +150,10 @@ class FlightControl(ProcessingPlugin):
                           "pose": {"x": round(pose.x, 4), "y": round(pose.y, 4), "z": round(pose.z, 4),
                                    "yaw": round(pose.yaw, 4)}}
         flight = self.flight
-        remaining = 0.0 if flight is None or flight.target is None else pose.distance(flight.target)
+        remaining = 0.0
+        if flight is not None and flight.target is not None:
+            points = [pose, *flight.legs, flight.target]
+            remaining = sum(a.distance(b) for a, b in itertools.pairwise(points))
         result["active"] = 0 if flight is not None and flight.state == "failed" else 1
         result["remaining"] = round(remaining, 3)
         if flight is not None:
@@ -140,14 +163,36 @@ class FlightControl(ProcessingPlugin):
                                 "reason": flight.reason}
         return result
 
+    def _blocked(self, flight: Flight, pose: Pose3) -> str:
+        """What the goal's legs meet in the environment, in words ("" when they are clear)."""
+        if self.airspace is None or flight.action not in ("goto", "takeoff") or flight.target is None:
+            return ""
+        v = self.params
+        points = [pose, *flight.legs, flight.target]
+        for number, (a, b) in enumerate(itertools.pairwise(points), start=1):
+            met = self.airspace.path_blockers((a.x, a.y, a.z), (b.x, b.y, b.z), radius=v["radius"] + v["clearance"],
+                                              half_height=v["halfHeight"] + v["clearance"])
+            met = [m for m in met if m != "floor" or number > 1 or b.z < a.z]  # leaving the ground is no collision
+            if met:
+                return (f"the flight's leg {number} from ({a.x:.2f}, {a.y:.2f}, {a.z:.2f}) to ({b.x:.2f}, "
+                        f"{b.y:.2f}, {b.z:.2f}) meets {', '.join(repr(m) for m in met)}")
+        return ""
+
     def _start(self, flight: Flight, pose: Pose3 | None, now: float) -> Flight:
         """Time a new goal: its deadline from the flying it asks."""
         flight.started = now
         if flight.state == "failed" or flight.target is None or pose is None:
             return flight
+        blocked = self._blocked(flight, pose)
+        if blocked:
+            flight.fail(f"goal {flight.id}: {blocked}")
+            flight.target, flight.legs = Pose3(pose.x, pose.y, pose.z, pose.yaw), []
+            return flight
         target, margin = flight.target, self.params["timeoutMargin"]
-        horizontal = math.hypot(target.x - pose.x, target.y - pose.y)
-        flying = horizontal / self.speed + abs(target.z - pose.z) / self.params["climbRate"]
+        points = [pose, *flight.legs, target]
+        horizontal = sum(math.hypot(b.x - a.x, b.y - a.y) for a, b in itertools.pairwise(points))
+        vertical = sum(abs(b.z - a.z) for a, b in itertools.pairwise(points))
+        flying = horizontal / self.speed + vertical / self.params["climbRate"]
         if flight.action == "land":
             flying = max(pose.z, 0.5) / self.params["landingSpeed"]
         flight.deadline = math.inf if flight.action == "hold" else now + 2.0 * flying + margin
@@ -174,7 +219,9 @@ class FlightControl(ProcessingPlugin):
             flight.target = Pose3(pose.x, pose.y, pose.z, pose.yaw)
         if flight.state == "failed" and flight.target is None:
             return dict(HOVER)
-        target = flight.target
+        if flight.legs and pose.distance(flight.legs[0]) <= v["tolerance"]:
+            flight.legs.pop(0)
+        target = flight.legs[0] if flight.legs else flight.target
         assert target is not None
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         ex, ey = target.x - pose.x, target.y - pose.y
@@ -189,7 +236,7 @@ class FlightControl(ProcessingPlugin):
             self._judge_landing(flight, pose, altitude, now)
         else:
             up = max(-v["climbRate"], min(v["climbRate"], v["gain"] * (target.z - pose.z)))
-            if flight.state == "active":
+            if flight.state == "active" and not flight.legs:
                 reached = pose.distance(target) <= v["tolerance"] and abs(turn_error) <= v["yawTolerance"]
                 if not reached:
                     flight.settled_since = None

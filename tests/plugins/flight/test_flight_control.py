@@ -5,9 +5,14 @@ tests/plugins/sim."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
+from ckmconf import Loc
+from ckmconf.model import Param
+from ckmconf.model.resources import Plugin
+from plugins.flight.service import FlightControl
 from runtime.resources.spt import Context
 
 from .point_mass import Loop, PointMass, flight_control
@@ -129,3 +134,46 @@ def test_pose_messages_and_a_range_finder_are_read_and_a_bad_input_names_itself(
         service.process({"position": {"x": 1.0, "y": "two"}}, Context(1, 0.05))
     with pytest.raises(ValueError, match="input 'altitude'"):
         service.process({"position": {"x": 1, "y": 2, "z": 0}, "altitude": "high"}, Context(2, 0.1))
+
+
+RACKS = """<?xml version="1.0" encoding="UTF-8"?>
+<Part xmlns="urn:ckm:1" version="1.0" description="two racks in a hall">
+  <Environment name="hall" frame="map">
+    <Map xmin="0" ymin="0" xmax="12" ymax="8" height="5"/>
+    <AvoidedArea name="rack_low" height="2.0">
+      <Vertex x="4" y="1"/><Vertex x="5" y="1"/><Vertex x="5" y="7"/><Vertex x="4" y="7"/>
+    </AvoidedArea>
+    <AvoidedArea name="rack_high" height="4.5">
+      <Vertex x="8" y="1"/><Vertex x="9" y="1"/><Vertex x="9" y="7"/><Vertex x="8" y="7"/>
+    </AvoidedArea>
+  </Environment>
+</Part>
+"""
+
+
+def test_a_goto_is_flown_up_level_and_down_and_refused_when_a_leg_meets_a_solid(tmp_path: Path) -> None:
+    path = tmp_path / "hall.xml"
+    path.write_text(RACKS)
+    given = {"environment": "hall.xml", "radius": "0.3", "speed": "1.5"}
+    params = tuple(Param(name=k, value=v) for k, v in given.items())
+    record = Plugin(name="flight", kind="flight-control", params=params, loc=Loc(str(path), 1, 1, "/Plugin"))
+    service = FlightControl(record)
+    service.setup()
+    loop = Loop(service, PointMass(x=2.0, y=4.0, z=1.0))
+    heights = []
+    loop.send("goto", frame="map", x=6.5, y=4.0, z=1.0)  # over the 2 m rack: up to 1 m is not enough
+    out = loop.run(0.2)
+    assert status(out)["state"] == "failed" and "meets 'rack_low'" in str(status(out)["reason"])
+    loop.send("goto", frame="map", x=6.5, y=4.0, z=3.0)  # at 3 m it clears the rack (2 m + margins)
+    for _ in range(300):
+        out = loop.run(0.1)
+        heights.append((loop.body.x, loop.body.z))
+        if status(out)["state"] != "active":
+            break
+    assert status(out)["state"] == "arrived"
+    assert all(z > 2.9 for x, z in heights if 3.5 <= x <= 5.5)  # it climbed before it crossed the rack
+    loop.send("goto", frame="map", x=10.5, y=4.0, z=3.0)
+    out = loop.run(0.2)
+    assert "meets 'rack_high'" in str(status(out)["reason"])
+    with pytest.raises(ValueError, match="needs parameter 'radius'"):
+        FlightControl(Plugin(name="f", kind="flight-control", params=(Param(name="environment", value="hall.xml"),)))
