@@ -10,11 +10,13 @@ RGB recognition's model file so objects wear the textures it learnt. A camera's 
 geometry has no default (D284): ``fov``, and a lidar's range (the HWChannel's ``max``), are the
 sensor's own, never the lab's Xtion's or Hokuyo's.
 The device is chosen by ``sensor`` (``contact``, ``lidar``, ``rgb``, ``depth``, ``imu``,
-``altimeter``, ``pose``) or by ``joint``/``joints`` (with ``grasp``: a gripper), and the channel's kind
-and direction. Every device — kind × direction, the values in order with their units, the size, the
-``mode``s it accepts and its Params — is a row of :data:`plugins.sim.device_table.DEVICES` (D295):
-``SimBackend.problems`` (so ``verify``) refuses a channel no row allows, and ``ckm-plugins show
-hardware.sim`` prints the table after this text (:meth:`SimBackend.reference`).
+``altimeter``, ``pose``, ``flow``, ``position``, ``compass``), by ``joint``/``joints`` (with ``grasp``:
+a gripper) or by ``actuator`` (``multirotor``: a velocity set-point flown by the robot's rotors,
+:mod:`plugins.sim.flight`, D293), and the channel's kind and direction. Every device — kind ×
+direction, the values in order with their units, the size, the ``mode``s it accepts and its Params —
+is a row of :data:`plugins.sim.device_table.DEVICES` (D295): ``SimBackend.problems`` (so ``verify``)
+refuses a channel no row allows, and ``ckm-plugins show hardware.sim`` prints the table after this
+text (:meth:`SimBackend.reference`).
 
 Time (decision D88): the world is a :class:`SimulationHook` of the channel's scope; each read or
 write first steps the physics, in fixed steps, up to the scope clock's time — real time under
@@ -37,18 +39,22 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ckmconf.loader import load
 from ckmconf.model import HWChannel, Node, System
 from plugins.sim import device_table
 from plugins.sim.client import RemoteDevice, server_address
 from plugins.sim.devices import ChannelDevice, SimWorld, Spec, to_value
+from plugins.sim.flight import AXES, Airframe
 from runtime.kernel.interfaces import Backend, ParamError, Value, read_params
 from runtime.verification.manifest import NUMBERS, P, Params, Ports
 
-from .sim_checks import device_problems, system_problems
+from .sim_checks import device_problems, multirotor_problems, system_problems
 from .simulation import PlantScope, scope_for
 
-SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose")
+SENSORS = ("", "contact", "lidar", "rgb", "depth", "imu", "altimeter", "pose", "flow", "position", "compass")
+ACTUATORS = ("", "multirotor")
 _SPEC = Params(
     P("body", "", "Robot the channel belongs to (model plugins/sim/models/<body>.urdf)."),
     P("model", "", "URDF of the robot, relative to the configuration file (default: from body)."),
@@ -97,6 +103,23 @@ _SPEC = Params(
     ),
     P("width", 640, "Image width.", unit="px", min=1),
     P("height", 480, "Image height.", unit="px", min=1),
+    P("actuator", "", "Actuator device of an out channel other than a joint (multirotor: D293).", choices=ACTUATORS),
+    P("axis", "", "Multirotor: the one set-point value a size-1 channel drives (an Actuator's), the others "
+                  "kept: vx, vy, vz or yaw_rate.", choices=("", *AXES)),
+    P("rotors", "", "Multirotor: its rotor links, space-separated (3 or more; positions and axes from the URDF)."),
+    P("spin", "", "Multirotor: one +1 or -1 per rotor, its reaction torque's sense (+1: counter-clockwise "
+                  "seen from above, the propeller turning clockwise)."),
+    P("maxThrust", None, "Multirotor: the most thrust one rotor gives (required: the motor's own).", type=float,
+      unit="N", above=0.0),
+    P("thrustLag", 0.05, "Multirotor: the rotors' first-order time constant (slower than 0.2 s cannot hold "
+                         "the attitude).", unit="s", min=0.0, max=0.2),
+    P("maxTilt", 0.6, "Multirotor: the most the controller tilts the body.", unit="rad", above=0.0, below=1.5),
+    P("maxSpeed", 5.0, "Multirotor: the fastest horizontal set-point accepted.", unit="m/s", above=0.0),
+    P("maxClimb", 3.0, "Multirotor: the fastest climb or descent set-point accepted.", unit="m/s", above=0.0),
+    P("maxYawRate", 2.0, "Multirotor: the fastest yaw-rate set-point accepted.", unit="rad/s", above=0.0),
+    P("drag", 0.3, "Multirotor: linear drag of the body.", unit="N/(m/s)", min=0.0),
+    P("yawMoment", 0.016, "Multirotor: a rotor's reaction torque per newton of its thrust.", unit="N·m/N",
+      above=0.0),
     P(
         "latency",
         0.0,
@@ -146,8 +169,10 @@ class SimBackend(Backend):
 
         if not v["body"]:
             problem(None, "Param 'body' (the robot) is required")
-        if not (v["sensor"] or v["joint"] or v["joints"]):
-            problem(None, "give Param 'sensor' or 'joint'/'joints' to choose the device")
+        if not (v["sensor"] or v["joint"] or v["joints"] or v["actuator"]):
+            problem(None, "give Param 'sensor', 'joint'/'joints' or 'actuator' to choose the device")
+        if v["actuator"]:
+            multirotor_problems(v, problem)
         if v["latency"] and v["sensor"] not in ("rgb", "depth"):
             problem("latency", f"Param 'latency' is a camera's (sensor rgb or depth), not {v['sensor'] or 'a joint'}'s")
         if v["initial"]:
@@ -209,7 +234,8 @@ class SimBackend(Backend):
         self._device: ChannelDevice | None = None
         self.device: Any = None  # in-process: the simulated device itself (a Camera, a Lidar, joints…)
         self.remote: RemoteDevice | None = None  # client mode: the device in the world server
-        self.last = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
+        self.last: Value = 0.0  # the last raw value written (what reading an out channel gives, as loopback's)
+        self.airframe = Airframe.from_values(v, self.owner) if v["actuator"] == "multirotor" else None
 
     def _path(self, text: str) -> str:
         return str((self.base_dir / text).resolve()) if text else ""
@@ -280,6 +306,9 @@ class SimBackend(Backend):
         """Drive the device (joint target, wheel duty…) with one raw value, at the clock's time."""
         if self.channel.direction != "out":
             raise RuntimeError(f"{self.owner} is an input channel")
+        if self.airframe is not None:
+            self._fly(self.airframe, value)
+            return
         raw = float(value[0] if isinstance(value, tuple) else value)
         if self.remote is not None:
             self.remote.write(raw)
@@ -290,6 +319,30 @@ class SimBackend(Backend):
         with sim.lock:
             sim.sync()
             device.write(raw)
+
+    def _fly(self, airframe: Airframe, value: Value) -> None:
+        """A multirotor's set-point (D293), or one value of it (``axis``), refused here if bad; the device
+        checks it again (with the other axes' values) wherever it runs."""
+        given = np.asarray(value, dtype=float).ravel().tolist()
+        axis = self.values["axis"]
+        setpoint: float | list[float]
+        if axis:
+            if len(given) != 1:
+                raise ValueError(f"{self.owner} drives the multirotor's {axis}: one value, got {len(given)}")
+            alone = [0.0] * len(AXES)
+            alone[AXES.index(axis)] = given[0]
+            airframe.setpoint(alone, self.owner)
+            setpoint = float(given[0])
+        else:
+            setpoint = list(airframe.setpoint(given, self.owner))
+        if self.remote is not None:
+            self.remote.write(setpoint)
+        else:
+            sim, device = self._require()
+            with sim.lock:
+                sim.sync()
+                device.write(setpoint)
+        self.last = setpoint if isinstance(setpoint, float) else tuple(setpoint)
 
     @classmethod
     def run_session(
@@ -306,3 +359,4 @@ class SimBackend(Backend):
         if self.remote is not None:
             self.remote.close()
         self.sim, self._device, self.device, self.remote = None, None, None, None
+

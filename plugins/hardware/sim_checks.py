@@ -1,17 +1,18 @@
 """The checks of a ``hardware.sim`` channel: against the device table (decision D295: its kind,
 direction, size, mode and Params as the row of :data:`plugins.sim.device_table.DEVICES` serving it
 allows, so the documented table and the checks cannot disagree) and against the rest of its system
-(decision D288): its robot's URDF (the model file, the links and joints its Params name) and where the
-robot is spawned (inside the map, clear of avoided areas, objects and the other robots).
-``SimBackend.problems`` runs the first always, the others when ``verify`` gives it the system; at run
-time the world loads the model anyway.
+(decision D288): its robot's URDF (the model file, the links and joints its Params name; a
+multirotor's rotor links and whether its rotors lift its mass, D293) and where the robot is spawned
+(inside the map, clear of avoided areas, objects and the other robots). ``SimBackend.problems`` runs
+the first always, the others when ``verify`` gives it the system; at run time the world loads the
+model anyway.
 """
 
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from difflib import get_close_matches
 from functools import lru_cache
 from pathlib import Path
@@ -22,6 +23,7 @@ from plugins.environment.geometry import Footprint
 from plugins.environment.map_model import BOUNDS, MapModel
 from plugins.environment_file import environment_of
 from plugins.sim.device_table import find, selector_of, unserved
+from plugins.sim.flight import GRAVITY
 from plugins.sim.urdf import MODELS, Kinematics
 
 PWM_MODE = (
@@ -152,7 +154,29 @@ def _model_problems(
     for joint in v["joints"].split():
         if joint not in joints:
             unknown("joints", joint, joints, "joint")
+    if v["actuator"] == "multirotor":
+        rotors = v["rotors"].split()
+        for rotor in rotors:
+            if rotor not in links:
+                unknown("rotors", rotor, links, "link")
+        mass = _mass(str(path), path.stat().st_mtime)
+        if rotors and v["maxThrust"] is not None and len(rotors) * v["maxThrust"] <= mass * GRAVITY:
+            found.append((named.get("maxThrust", channel), f"thrust {len(rotors)} × {v['maxThrust']:g} N cannot lift "
+                                                           f"{mass:.3g} kg ({mass * GRAVITY:.1f} N), the mass of "
+                                                           f"{path.name}"))
     return found
+
+
+@lru_cache(maxsize=32)  # keyed by the file's modification time: an edited URDF is read again
+def _mass(path: str, mtime: float) -> float:
+    """The robot's mass (kg): every link's ``<inertial><mass>`` summed, as the simulator loads it."""
+    total = 0.0
+    for mass in ET.parse(path).getroot().findall("link/inertial/mass"):
+        try:
+            total += float(mass.get("value", "0"))
+        except ValueError:
+            continue
+    return total
 
 
 def _world_of(channel: HWChannel, v: dict[str, Any], system: System) -> Environment | None:
@@ -255,3 +279,14 @@ def _overlap_problems(channel: HWChannel, v: dict[str, Any], param: Any, system:
                 )
             )
     return found
+
+
+def multirotor_problems(v: dict[str, Any], problem: Callable[[str | None, str], None]) -> None:
+    """What keeps an ``actuator="multirotor"`` channel from flying beyond what its device row checks
+    (kind, direction, size, required Params; D293): 3 rotors or more, one spin of ±1 per rotor."""
+    rotors = v["rotors"].split()
+    if v["rotors"] and len(rotors) < 3:
+        problem("rotors", f"Param 'rotors': a multirotor needs 3 rotor links or more, not {len(rotors)}")
+    spins = v["spin"].split()
+    if v["spin"] and (not all(s in ("1", "+1", "-1", "1.0", "-1.0") for s in spins) or len(spins) != len(rotors)):
+        problem("spin", f"Param 'spin' needs one +1 or -1 per rotor ({len(rotors)} rotors), not {v['spin']!r}")

@@ -162,8 +162,9 @@ class RemoteDevice:
         value: Sample = self.link.request({"op": "frame", "handle": self.handle, "ticket": ticket})["value"]
         return value
 
-    def write(self, raw: float) -> None:
-        """Write ``raw`` to the device in the world server (no reply unless it fails)."""
+    def write(self, raw: float | list[float]) -> None:
+        """Write ``raw`` (a multirotor's set-point: a list) to the device in the world server (no reply
+        unless it fails)."""
         # silent: an actuator's write waits for no round trip (its error comes with the next one); in
         # lock-step answered, so it is applied before the run's clock moves on (D190)
         answered = lockstep.active() is not None

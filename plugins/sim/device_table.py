@@ -51,7 +51,7 @@ DEPTH_FRAME = Size("width × height", lambda values: int(values["width"]) * int(
 @dataclass(frozen=True)
 class Device:
     """One device: a channel of ``kind`` and ``direction`` whose Params choose it by ``selector``
-    (``joint``, ``joints``, ``joint + grasp`` or ``sensor=NAME``).
+    (``joint``, ``joints``, ``joint + grasp``, ``sensor=NAME`` or ``actuator=NAME``).
 
     ``values`` are (name, unit) in the order a read gives them (a write takes the first), repeated
     for ``size`` when it is a rule; ``modes`` are the ``mode`` values accepted, the first being what
@@ -70,9 +70,9 @@ class Device:
 
     @property
     def name(self) -> str:
-        """What messages call the device: its sensor, ``joint``, ``joints`` or ``gripper``."""
-        if self.selector.startswith("sensor="):
-            return self.selector.removeprefix("sensor=")
+        """What messages call the device: its sensor or actuator, ``joint``, ``joints`` or ``gripper``."""
+        if self.selector.startswith(("sensor=", "actuator=")):
+            return self.selector.partition("=")[2].replace(" + ", " ")
         return "gripper" if self.selector == "joint + grasp" else self.selector
 
     @property
@@ -136,6 +136,24 @@ def _gripper(kind: str) -> Device:
         modes=("position",),
         required=("joint", "mirror", "grasp"),
         optional=("mode", "scale", "offset", "holdForce", "initial"),
+    )
+
+
+MULTIROTOR = ("actuator", "rotors", "spin", "maxThrust")
+AIRFRAME = ("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment")
+
+
+def _axis(kind: str) -> Device:
+    return Device(
+        kind=kind,
+        direction="out",
+        selector="actuator=multirotor + axis",
+        summary="one value of a multirotor's velocity set-point (`axis`: vx, vy, vz or yaw_rate), the others "
+        "kept: one CKM Actuator per axis; every channel of the robot gives the same rotor Params (D293)",
+        values=(("the axis' set-point", "m/s, or rad/s for yaw_rate"),),
+        size=fixed(1),
+        required=(*MULTIROTOR, "axis"),
+        optional=AIRFRAME,
     )
 
 
@@ -256,6 +274,53 @@ DEVICES: tuple[Device, ...] = (
         required=("sensor",),
         optional=("link",),
     ),
+    Device(
+        kind="bus",
+        direction="in",
+        selector="sensor=flow",
+        summary="optical flow: `link`'s velocity over the ground in the robot's heading frame (x ahead, y left), "
+        "plus `noise` (s.d., m/s; D293)",
+        values=(("vx", "m/s"), ("vy", "m/s")),
+        size=fixed(2),
+        required=("sensor",),
+        optional=("link", "noise"),
+    ),
+    Device(
+        kind="bus",
+        direction="in",
+        selector="sensor=position",
+        summary="a position fix (UWB, GNSS, motion capture): `link`'s position in the map, plus `noise` (s.d., "
+        "m; D293); unlike `pose`, a sensor a robot has",
+        values=(("x", "m"), ("y", "m"), ("z", "m")),
+        size=fixed(3),
+        required=("sensor",),
+        optional=("link", "noise"),
+    ),
+    Device(
+        kind="analog",
+        direction="in",
+        selector="sensor=compass",
+        summary="a compass: `link`'s heading, counter-clockwise from the map's x axis, in (−π, π], plus `noise` "
+        "(s.d., rad; D293)",
+        values=(("yaw", "rad"),),
+        size=fixed(1),
+        required=("sensor",),
+        optional=("link", "noise"),
+    ),
+    Device(
+        kind="bus",
+        direction="out",
+        selector="actuator=multirotor",
+        summary="a multirotor flown by a velocity set-point (as PX4 offboard, MAVROS `setpoint_velocity`): "
+        "`rotors` (links) with `spin` (±1 each) and `maxThrust` (N per rotor) push the robot; landed on the "
+        "ground while vz ≤ 0 (plugins/sim/flight.py, D293)",
+        values=(("vx", "m/s, ahead"), ("vy", "m/s, left"), ("vz", "m/s, up"), ("yaw_rate", "rad/s")),
+        size=fixed(4),
+        required=MULTIROTOR,
+        optional=AIRFRAME,
+    ),
+    _axis("analog"),
+    _axis("bus"),
 )
 """Every device ``hardware.sim`` serves, one row per kind × direction × device."""
 
@@ -264,9 +329,12 @@ OUT_READ = "Reading an out channel gives the last raw value written (as `hardwar
 
 def selector_of(values: Mapping[str, Any]) -> str:
     """The device a channel's Params choose, as :attr:`Device.selector` names it ("" if none):
-    ``sensor`` first, then ``joints``, then ``joint`` (with ``grasp``: a gripper), as the device code."""
+    ``sensor`` first, then ``actuator``, ``joints``, then ``joint`` (with ``grasp``: a gripper), as the
+    device code."""
     if values.get("sensor"):
         return f"sensor={values['sensor']}"
+    if values.get("actuator"):
+        return f"actuator={values['actuator']}" + (" + axis" if values.get("axis") else "")
     if values.get("joints"):
         return "joints"
     if values.get("joint"):

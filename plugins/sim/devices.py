@@ -14,6 +14,7 @@ flattens them into the channel's flat array (:func:`to_value`), after the server
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -25,9 +26,10 @@ from plugins.hardware.simulation import Clock, SimulationHook
 from plugins.processing.textures import read_model
 
 from .device_table import find, unserved
+from .flight import Airframe, Multirotor
 from .grasp import ChannelGrasp
 from .robots import Robot
-from .sensors import Bumper, Camera, Frame, Imu, Lidar
+from .sensors import Bumper, Camera, Frame, GroundSensor, Imu, Lidar
 from .world import World
 
 Sample = float | tuple[float, ...] | np.ndarray
@@ -80,6 +82,9 @@ class SimWorld(SimulationHook):
         self.world = World(environment, seed=seed, catalog=read_model(textures) if textures else None)
         self.environment = environment
         self.robots: dict[str, Robot] = {}
+        self.flyers: dict[str, Multirotor] = {}
+        """Each multirotor robot's rotors and flight controller, by robot name (one per robot: a second
+        channel of the same airframe flies the same one, D293)."""
         self.origin = 0.0
         self._frames: dict[tuple[int, int, float, int, int], tuple[int, Frame]] = {}
 
@@ -157,7 +162,8 @@ class ChannelDevice:
 
     def _make(self) -> Any:
         v, sensor, robot = self.spec.values, self.spec.values.get("sensor", ""), self.robot
-        if (sensor or v.get("joint") or v.get("joints")) and find(self.spec.kind, self.spec.direction, v) is None:
+        chosen = sensor or v.get("joint") or v.get("joints") or v.get("actuator")
+        if chosen and find(self.spec.kind, self.spec.direction, v) is None:
             raise ValueError(f"sim channel {self.spec.name!r}: {unserved(self.spec.kind, self.spec.direction, v)}")
         if sensor in ("lidar", "rgb", "depth") and v.get("fov") is None:  # the backend refuses it first (D284)
             raise ValueError(f"sim channel {self.spec.name!r}: a {sensor} channel needs its field of view, Param 'fov'")
@@ -182,11 +188,27 @@ class ChannelDevice:
             return Bumper(robot, v["link"], self.sim.world.floor, arc=v["arc"])
         if sensor in ("altimeter", "pose"):
             return robot.link(v["link"])
+        if sensor in ("flow", "position", "compass"):
+            return GroundSensor(robot, v["link"], noise=v["noise"], seed=v["seed"])
+        if v.get("actuator") == "multirotor":
+            return self._flyer()
         if v.get("joints"):
             return [robot.joint(name) for name in v["joints"].split()]
         if not v.get("joint"):
             raise ValueError(f"sim channel {self.spec.name!r}: no 'sensor' nor 'joint'/'joints' chooses the device")
         return [robot.joint(v["joint"])] + ([robot.joint(v["mirror"])] if v.get("mirror") else [])
+
+    def _flyer(self) -> Multirotor:
+        """The robot's multirotor: the one already flying it if it has the same airframe, else a new one."""
+        owner = f"sim channel {self.spec.name!r}"
+        frame = Airframe.from_values(self.spec.values, owner)
+        flying = self.sim.flyers.get(self.robot.name)
+        if flying is None:
+            flying = self.sim.flyers[self.robot.name] = Multirotor(self.robot, frame, owner)
+        elif flying.frame != frame:  # one robot, one set of rotors: its axis channels say the same
+            raise ValueError(f"{owner}: robot {self.robot.name!r} is flown by {flying.owner} with another "
+                             f"airframe ({flying.frame}); give every channel of it the same rotor Params")
+        return flying
 
     def _joint_value(self, joint: int) -> float:
         v = self.spec.values
@@ -217,6 +239,8 @@ class ChannelDevice:
             return self._noisy(self.robot.link_pose(self.device)[0][2])
         if sensor == "pose":  # ground truth: never noisy
             return self.robot.planar_pose(self.device)
+        if sensor in ("flow", "position", "compass"):
+            return getattr(self.device, sensor)()  # type: ignore[no-any-return]
         if v.get("joints"):
             return tuple(self._noisy(self._joint_value(j)) for j in self.device)
         return self._noisy(self._joint_value(self.device[0]))
@@ -233,11 +257,21 @@ class ChannelDevice:
         """A camera channel's read of ``frame``: its colour, or its depth in mm."""
         return frame.rgb if self.spec.values.get("sensor") == "rgb" else np.round(frame.depth * 1000.0)
 
-    def write(self, raw: float) -> None:
-        """Drive the joint(s) to ``raw`` (the world's lock held, the world synced)."""
+    def write(self, raw: float | Sequence[float]) -> None:
+        """Drive the joint(s) to ``raw``, or fly a multirotor's set-point (the world's lock held, the
+        world synced); ValueError naming the channel for a value its device refuses."""
         v = self.spec.values
         if self.spec.direction != "out":
             raise ValueError(f"sim channel {self.spec.name!r} is an input channel")
+        if isinstance(self.device, Multirotor):
+            owner = f"sim channel {self.spec.name!r}"
+            if v.get("axis") and isinstance(raw, int | float):  # one value of the set-point (an Actuator's)
+                self.device.command_axis(v["axis"], float(raw), owner)
+            else:
+                self.device.command([raw] if isinstance(raw, int | float) else list(raw), owner)
+            return
+        if not isinstance(raw, int | float):
+            raise ValueError(f"sim channel {self.spec.name!r} takes one value, got {len(raw)}")
         for joint in self.device:
             if self.spec.kind == "pwm":
                 velocity = v["mode"] == "velocity"

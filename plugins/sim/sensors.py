@@ -1,5 +1,6 @@
 """Simulated sensors: a 2D lidar (``rayTestBatch``), an RGB-D camera (``getCameraImage``: colour and
-depth from one render, only when asked, at the asked resolution), an IMU and a contact bumper."""
+depth from one render, only when asked, at the asked resolution), an IMU, a contact bumper, and what
+an aerial robot adds (D293): an optical-flow velocity over the ground, a position fix and a compass."""
 
 from __future__ import annotations
 
@@ -172,3 +173,47 @@ class Bumper:
             if abs(math.atan2(math.sin(bearing), math.cos(bearing))) <= self.arc / 2:
                 return True
         return False
+
+
+def _link_velocity(robot: Robot, link: int) -> Array:
+    cid = robot.world.client
+    if link < 0:
+        return np.asarray(p.getBaseVelocity(robot.body, physicsClientId=cid)[0], dtype=float)
+    state = p.getLinkState(robot.body, link, computeLinkVelocity=True, physicsClientId=cid)
+    return np.asarray(state[6], dtype=float)
+
+
+class GroundSensor:
+    """What a UAV measures of where it is and how it moves (D293), each value with Gaussian ``noise``
+    (s.d., in its unit), of ``link``:
+
+    - :meth:`flow`: the link's velocity over the ground (vx, vy, m/s) in the robot's heading frame (x
+      ahead, y left), as an optical-flow sensor with its range finder gives it (PX4Flow, PMW3901);
+    - :meth:`position`: x, y, z (m) in the map frame, a fix as UWB, GNSS or motion capture gives it;
+    - :meth:`compass`: the heading (yaw, rad, counter-clockwise from the map's x axis, in (−π, π]).
+    """
+
+    def __init__(self, robot: Robot, link: str, *, noise: float = 0.0, seed: int = 0) -> None:
+        self.robot, self.link, self.noise = robot, robot.link(link), noise
+        self._rng = np.random.default_rng(seed)
+
+    def _noisy(self, values: Array) -> tuple[float, ...]:
+        if self.noise > 0.0:
+            values = values + self._rng.normal(0.0, self.noise, values.shape)
+        return tuple(float(v) for v in values)
+
+    def flow(self) -> tuple[float, ...]:
+        """(vx, vy) over the ground in the heading frame (the robot's, whatever way the link's frame turns)."""
+        _, _, yaw = self.robot.planar_pose(-1)
+        vx, vy, _ = _link_velocity(self.robot, self.link)
+        c, s = math.cos(yaw), math.sin(yaw)
+        return self._noisy(np.array([c * vx + s * vy, -s * vx + c * vy]))
+
+    def position(self) -> tuple[float, ...]:
+        """(x, y, z) in the map frame."""
+        return self._noisy(np.asarray(self.robot.link_pose(self.link)[0], dtype=float))
+
+    def compass(self) -> float:
+        """The heading, wrapped to (−π, π] after the noise."""
+        (yaw,) = self._noisy(np.array([self.robot.planar_pose(self.link)[2]]))
+        return math.atan2(math.sin(yaw), math.cos(yaw))

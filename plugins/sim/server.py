@@ -16,7 +16,8 @@ sets how many (default: one per robot with a camera, at most one per core), 0 re
 Before each read or write the world advances, in its fixed steps, to the
 server's clock (real time, ``time.monotonic``; started by the first request), as D88 does in
 process. A request is a JSON object with ``op``: ``open`` (``spec``: a :class:`Spec`) → ``handle``;
-``read``/``write``/``close`` (``handle``; ``value`` to write, ``"reply": false`` for a silent write,
+``read``/``write``/``close`` (``handle``; ``value`` to write, a number or a multirotor's list of four,
+``"reply": false`` for a silent write,
 answered only if it fails); ``render`` → ``ticket`` then ``frame`` (``handle``, ``ticket``) → the
 camera's frame of the step it was ordered at (D246); ``state`` (time, steps, robots' true
 planar poses); ``ping``. A bad request (malformed, unknown op, handle, body, joint, link) is
@@ -234,9 +235,12 @@ class WorldServer(RenderDispatch):
                 if op == "read":
                     return {"value": device.read(), "time": self.sim.world.time}
                 value = message.get("value")
-                if isinstance(value, bool) or not isinstance(value, int | float):
-                    raise ValueError(f"write needs a number 'value', not {value!r}")
-                device.write(float(value))
+                if isinstance(value, list) and value and all(_number(x) for x in value):  # a multirotor's set-point
+                    device.write([float(x) for x in value])
+                elif isinstance(value, int | float) and _number(value):
+                    device.write(float(value))
+                else:
+                    raise ValueError(f"write needs a number 'value' (or a list of numbers), not {value!r}")
                 return None if silent else {"time": self.sim.world.time}
         except Exception as exc:  # every failure is the client's answer, never the server's end
             self.errors += 1
@@ -276,6 +280,10 @@ class WorldServer(RenderDispatch):
 
 
 # ---------------------------------------------------------------------- the process
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def render_workers(plan: WorldPlan) -> int:

@@ -145,6 +145,9 @@ class World:
         """Joint torques held across steps (effort-mode joints), by (body, joint)."""
         self.hooks: list[Callable[[World], None]] = []
         """Called after each advance (:meth:`step`): a scenario's disturbances (D178) fire there."""
+        self.before_step: list[Callable[[], None]] = []
+        """Called before every physics step: an external force lasts one step only (a multirotor's
+        thrust, :mod:`plugins.sim.flight`, D293), so whatever pushes a body pushes it again there."""
         cid = self.client
         p.resetSimulation(physicsClientId=cid)
         p.setPhysicsEngineParameter(
@@ -273,6 +276,8 @@ class World:
             # pybullet applies a torque-control command for one step only: re-apply the held ones
             for (body, joint), torque in self.torques.items():
                 p.setJointMotorControl2(body, joint, p.TORQUE_CONTROL, force=torque, physicsClientId=self.client)
+            for push in self.before_step:
+                push()
             p.stepSimulation(physicsClientId=self.client)
         self.steps += count
         self.time = self.steps * self.time_step

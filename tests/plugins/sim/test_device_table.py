@@ -24,6 +24,9 @@ ROVER = {"body": "rover", "pose": "3 1 0.5"}
 ARM = {"body": "station_arm", "pose": "1 1 0"}
 CAMERA = {**ARM, "link": "wrist_camera_optical_frame", "width": "8", "height": "6", "fov": "1.2"}
 FINGERS = {**ARM, "joint": "left_finger_joint", "mirror": "right_finger_joint", "grasp": "palm_link"}
+QUAD = {"body": "quadrotor", "pose": "5.3 1.0 1.0"}
+MULTIROTOR = {"actuator": "multirotor", "rotors": "rotor_fl rotor_fr rotor_rl rotor_rr", "spin": "1 -1 -1 1",
+              "maxThrust": "6"}  # fmt: skip
 
 EXAMPLES: dict[str, tuple[int, float | None, dict[str, str]]] = {
     "counter in, joint": (1, None, {**ROVER, "joint": "left_wheel_joint", "ticksPerRev": "100"}),
@@ -42,6 +45,12 @@ EXAMPLES: dict[str, tuple[int, float | None, dict[str, str]]] = {
     "analog in, sensor=imu": (6, None, {**ROVER, "sensor": "imu"}),
     "analog in, sensor=altimeter": (1, None, {**ROVER, "sensor": "altimeter", "link": "laser_link"}),
     "bus in, sensor=pose": (3, None, {**ROVER, "sensor": "pose"}),
+    "bus in, sensor=flow": (2, None, {**QUAD, "sensor": "flow", "link": "camera_link"}),
+    "bus in, sensor=position": (3, None, {**QUAD, "sensor": "position", "noise": "0.05"}),
+    "analog in, sensor=compass": (1, None, {**QUAD, "sensor": "compass"}),
+    "bus out, actuator=multirotor": (4, None, {**QUAD, **MULTIROTOR}),
+    "analog out, actuator=multirotor + axis": (1, None, {**QUAD, **MULTIROTOR, "axis": "vz"}),
+    "bus out, actuator=multirotor + axis": (1, None, {**QUAD, **MULTIROTOR, "axis": "yaw_rate"}),
 }
 """An example channel of every row (its size, max and Params): a new row needs one here."""
 
@@ -99,7 +108,11 @@ def test_every_row_is_a_device_whose_reads_give_its_values() -> None:
     for backend in backends.values():
         backend.setup()
     try:
-        written = {where: 0.0 if backend.channel.kind == "pwm" else 0.5 for where, backend in backends.items()}
+        written: dict[str, float | tuple[float, ...]] = {
+            where: 0.0 if backend.channel.kind == "pwm" else 0.5 for where, backend in backends.items()
+        }
+        written["bus out, actuator=multirotor"] = (0.0, 0.0, 0.0, 0.0)  # a velocity set-point: stay landed
+        written["analog out, actuator=multirotor + axis"] = 0.0
         for where, backend in backends.items():
             if backend.channel.direction == "out":
                 backend.write(written[where])  # the rover's wheels stay still: its pose is checked
@@ -131,6 +144,10 @@ def test_every_row_is_a_device_whose_reads_give_its_values() -> None:
     assert reads["digital in, sensor=contact"] in (0.0, 1.0)
     ranges = reads["stream in, sensor=lidar"]
     assert isinstance(ranges, np.ndarray) and ranges.min() > 0.0 and ranges.max() <= 5.0  # m, up to max
+    fix, compass = named["bus in, sensor=position"], reads["analog in, sensor=compass"]
+    assert (fix["x"], fix["y"]) == pytest.approx((5.3, 1.0), abs=0.3)  # m; noise 0.05
+    assert compass == pytest.approx(1.0, abs=0.01)  # rad: the quadrotor spawned at yaw 1
+    assert named["bus in, sensor=flow"]["vx"] == pytest.approx(0.0, abs=0.01)  # m/s: it stands landed
 
 
 def _selectors() -> dict[str, dict[str, str]]:
@@ -179,6 +196,8 @@ def test_the_checks_apply_the_rows_sizes_modes_and_params() -> None:
                 "initial": "0",
                 "maxVelocity": "2",
                 "sensor": "imu",
+                "actuator": "multirotor",
+                "axis": "vx",
                 "arc": "1",
                 "width": "4",
                 "height": "4",
@@ -186,11 +205,13 @@ def test_the_checks_apply_the_rows_sizes_modes_and_params() -> None:
                 "latency": "0.1",
                 "scale": "2",
                 "offset": "1",
+                **dict.fromkeys(("maxThrust", "thrustLag", "maxTilt", "maxSpeed", "maxClimb"), "0.1"),
+                **dict.fromkeys(("maxYawRate", "drag", "yawMoment"), "0.1"),
             }.get(name, "x")
             found = messages(example(device, **{name: value}))
             assert found, (device.where, name)  # a Param the device does not read is refused
         for name in device.required:
-            if name in ("sensor", "joint", "joints", "grasp"):
+            if name in ("sensor", "actuator", "axis", "joint", "joints", "grasp"):
                 continue  # these choose the device: without them it is another row
             _, _, params = EXAMPLES[device.where]
             left_out = record(
