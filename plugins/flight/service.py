@@ -38,11 +38,13 @@ import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ckmconf.model import System
 from ckmconf.model.resources import Plugin
 from plugins.environment.airspace import Airspace
 from plugins.environment_file import environment_of
+from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin, config_dir
-from runtime.verification.manifest import ENVIRONMENT_FILE, MAPPING, P, Params, Ports
+from runtime.verification.manifest import ANY, ENVIRONMENT_FILE, MAPPING, P, Params, Ports
 
 from .estimate import Estimator, Pose3, read_position, read_scalar, read_velocity
 from .goals import Flight, accept, wrap
@@ -57,7 +59,7 @@ def _twist(ahead: float, left: float, up: float, turn: float) -> dict[str, Any]:
 class FlightControl(ProcessingPlugin):
     """Flight goals to velocity set-points, and their status (see the module docstring)."""
 
-    PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
+    PORTS = Ports(inputs={"heading": ANY, "altitude": ANY, "velocity": ANY, "*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "flight"  # docs/interfaces.md
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("speed", 1.0, "Top horizontal speed; the service Parameter 'speed' overrides it.", unit="m/s", above=0.0),
@@ -96,9 +98,17 @@ class FlightControl(ProcessingPlugin):
         self.landed: bool | None = None  # unknown until the first estimate
         self._message: Any = None
         self.airspace: Airspace | None = None
-        if v["environment"] and v["radius"] is None:
-            raise ValueError(f"{self.owner}: checking flights against 'environment' needs parameter 'radius' "
-                             "(the robot's horizontal radius, rotors included)")
+        if (problems := self.problems(record, None)):
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
+
+    @classmethod
+    def problems(cls, record: Plugin, system: System | None) -> list[tuple[Any, str]]:
+        """An ``environment`` without the ``radius`` its checks need (verify reports it at the Param)."""
+        given = {param.name: param for param in record.params}
+        if "environment" in given and given["environment"].value and "radius" not in given:
+            return [(given["environment"], "checking flights against 'environment' needs parameter 'radius' "
+                                            "(the robot's horizontal radius, rotors included)")]
+        return []
 
     def setup(self) -> None:
         """Read the environment whose solids the flights are checked against (when one is named)."""

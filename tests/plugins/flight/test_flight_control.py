@@ -13,6 +13,7 @@ from ckmconf import Loc
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.flight.service import FlightControl
+from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context
 
 from .point_mass import Loop, PointMass, flight_control
@@ -175,5 +176,5 @@ def test_a_goto_is_flown_up_level_and_down_and_refused_when_a_leg_meets_a_solid(
     loop.send("goto", frame="map", x=10.5, y=4.0, z=3.0)
     out = loop.run(0.2)
     assert "meets 'rack_high'" in str(status(out)["reason"])
-    with pytest.raises(ValueError, match="needs parameter 'radius'"):
+    with pytest.raises(ParamError, match="needs parameter 'radius'"):
         FlightControl(Plugin(name="f", kind="flight-control", params=(Param(name="environment", value="hall.xml"),)))
