@@ -47,7 +47,7 @@ import ckmconf
 from benchmarks.mission_compact import compact
 from benchmarks.mission_random import NS, Jitter, Q, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
-from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, object_home, run_split
+from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, object_home, run_evidence, run_split
 from runtime.missions.recording import Run, RunError, read_run
 from runtime.missions.report import build_report
 
@@ -314,11 +314,12 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
             code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs",
                               args.lockstep, args.record)  # fmt: skip
             record = collect(out / "runs" / name, code, finals[plan])
-            record["object_home"] = object_home(config, out / "runs" / name)
+            record["object_home"] = object_home(config, out / "runs" / name, plan)
+            record["evidence"] = run_evidence(config, plan, out / "runs" / name)
             record["success"] = record["success"] and record["object_home"] is not False
             record.update(plan=plan, seed=seed, wall_s=round(wall, 3), randomised=changed)
             if scenario is not None:
-                judge(scenario, out / "runs" / name, record, config, finals[plan])
+                judge(scenario, out / "runs" / name, record, config, finals[plan], plan)
             results[plan].append(record)
             print(
                 f"{name}: exit {code}, {'success' if record['success'] else 'failure'}, "
