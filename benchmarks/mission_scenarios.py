@@ -70,7 +70,7 @@ BUILT_IN = {
     "blocked-path": Scenario("blocked-path", world=str(SCENARIOS / "blocked-path.scenario")),
     "moved-object": Scenario("moved-object", world=str(SCENARIOS / "moved-object.scenario")),
     "dropped-object": Scenario("dropped-object", world=str(SCENARIOS / "dropped-object.scenario")),
-    "lost-humanoid": Scenario("lost-humanoid", kill_agent="nao", kill_after=1.0, expect="failure")  # D232,
+    "lost-humanoid": Scenario("lost-humanoid", kill_agent="nao", kill_after=1.0, expect="failure"),  # D232,
 }
 
 
@@ -317,6 +317,9 @@ def object_home(config: Path, run_dir: Path, plan: str) -> bool | None:
 def _top(place: EnvObject) -> float:
     """The height of an environment object's highest face (m): its pose's z plus its prisms' zmax."""
     geometry = place.geometry
-    prisms = geometry.prisms if isinstance(geometry, Geometry3D) else (
-        (geometry.prism,) if isinstance(geometry, Geometry25D) else ())
+    prisms = (
+        geometry.prisms
+        if isinstance(geometry, Geometry3D)
+        else ((geometry.prism,) if isinstance(geometry, Geometry25D) else ())
+    )
     return place.pose.z + max((prism.zmax for prism in prisms), default=0.0)

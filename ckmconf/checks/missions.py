@@ -333,7 +333,7 @@ def _check_expects(plan: Plan, system: System, report: Reporter) -> None:
         if expect.object not in objects:
             report.error(expect, missing("object", expect.object, "the environment", objects), "object")
         if expect.on is None and expect.in_ is None:
-            report.error(expect, f"expect of {expect.object!r} says neither on=\"…\" nor in=\"…\"", "object")
+            report.error(expect, f'expect of {expect.object!r} says neither on="…" nor in="…"', "object")
         if expect.on is not None and expect.on not in objects:
             report.error(expect, missing("object", expect.on, "the environment", objects), "on")
         if expect.in_ is not None and expect.in_ not in areas:
