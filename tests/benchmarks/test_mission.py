@@ -449,7 +449,7 @@ def test_a_disturbed_run_whose_ckm_run_made_no_directory_is_judged_a_failure(tmp
     # ckm-run refused its arguments (a bad --record topic) before making the run directory
     run_dir = tmp_path / "runs" / "cooperative-seed1"
     record = collect(run_dir, 2, {"turtlebot": "succeeded"})
-    judge(BUILT_IN["blocked-path"], run_dir, record, CONFIGS / "usecase" / "lab.xml", {"turtlebot": "succeeded"})
+    judge(BUILT_IN["blocked-path"], run_dir, record, CONFIGS / "usecase" / "lab.xml", {"turtlebot": "succeeded"}, "individual")
     assert record["handled"] is False and record["disturbed"] is False
     assert json.loads((run_dir / "scenario.json").read_text())["scenario"]["name"] == "blocked-path"
 
@@ -477,9 +477,9 @@ def test_the_object_is_home_only_on_the_drop_table_s_top(
     """object_home (the bench's check that the robots did the work): compact seed 301 once left the
     cylinder on the floor 0.3 m in front of the table and was counted home by the radius alone."""
     (tmp_path / "sim-final.json").write_text(json.dumps({"positions": {"cylinder_red_stripes": list(where)}}))
-    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path) is home
+    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path, "cooperative") is home
     (tmp_path / "sim-final.json").write_text(json.dumps({"positions": {}}))
-    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path) is None
+    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path, "cooperative") is None
 
 
 def test_the_state_plot_of_runs_that_recorded_no_state_says_so_without_warnings(tmp_path: Path) -> None:
