@@ -449,7 +449,8 @@ def test_a_disturbed_run_whose_ckm_run_made_no_directory_is_judged_a_failure(tmp
     # ckm-run refused its arguments (a bad --record topic) before making the run directory
     run_dir = tmp_path / "runs" / "cooperative-seed1"
     record = collect(run_dir, 2, {"turtlebot": "succeeded"})
-    judge(BUILT_IN["blocked-path"], run_dir, record, CONFIGS / "usecase" / "lab.xml", {"turtlebot": "succeeded"}, "individual")
+    lab = CONFIGS / "usecase" / "lab.xml"
+    judge(BUILT_IN["blocked-path"], run_dir, record, lab, {"turtlebot": "succeeded"}, "individual")
     assert record["handled"] is False and record["disturbed"] is False
     assert json.loads((run_dir / "scenario.json").read_text())["scenario"]["name"] == "blocked-path"
 
