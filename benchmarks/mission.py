@@ -47,7 +47,16 @@ import ckmconf
 from benchmarks.mission_compact import compact
 from benchmarks.mission_random import NS, Jitter, Q, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
-from benchmarks.mission_scenarios import Scenario, check, choose, environment, judge, object_home, run_split
+from benchmarks.mission_scenarios import (
+    Scenario,
+    check,
+    choose,
+    environment,
+    judge,
+    object_home,
+    run_evidence,
+    run_split,
+)
 from runtime.missions.recording import Run, RunError, read_run
 from runtime.missions.report import build_report
 
@@ -108,6 +117,7 @@ def mission_wall(recorded: Run) -> float | None:
     """Wall seconds from the first agent's start to the last agent's end, on the machine's own clock
     (the events' ``real``, D248): the mission without the run's start-up and shutdown. None if an
     agent that started has no end (killed, or cut off by the bench's timeout): its phase is unknown."""
+
     def stamps(kind: str) -> dict[str, float]:
         return {e.agent: t for e in recorded.events if e.kind == kind and isinstance(t := e.get("real"), int | float)}
 
@@ -168,8 +178,15 @@ def run_once(
 
 
 def _run(
-    config: Path, plan: str, run_dir: Path, scenario: Scenario | None, duration: float, scale: float | None, logs: Path,
-    lockstep: float | None = None, record: str | None = None,
+    config: Path,
+    plan: str,
+    run_dir: Path,
+    scenario: Scenario | None,
+    duration: float,
+    scale: float | None,
+    logs: Path,
+    lockstep: float | None = None,
+    record: str | None = None,
 ) -> tuple[int | None, float]:
     """One run of the benchmark, disturbed as ``scenario`` says: split over processes to kill an agent."""
     log = logs / f"{run_dir.name}.log"
@@ -248,13 +265,23 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--time-scale", type=float, default=0.2, help="ckm-run --time-scale (0 for none)")
     parser.add_argument("--out", type=Path, default=Path("runs/bench-mission"), help="copies, runs, summary, plot")
     parser.add_argument("--no-randomise", action="store_true", help="run the configuration as it is")
-    parser.add_argument("--layout", choices=("lab", "compact"), default="lab",
-                        help="compact: the drop table and the start next to the workbench (a short fetch)")
+    parser.add_argument(
+        "--layout",
+        choices=("lab", "compact"),
+        default="lab",
+        help="compact: the drop table and the start next to the workbench (a short fetch)",
+    )
     parser.add_argument("--lockstep", type=float, help="ckm-run --lockstep STEP (simulated s): lock-step time")
-    parser.add_argument("--ports", type=int, nargs=2, metavar=("DISCOVERY", "BASE"),
-                        help="run a copy on these network ports (its <Network> discoveryPort and basePort)")
-    parser.add_argument("--record", metavar="TOPICS",
-                        help="ckm-run --record TOPICS in every run (to see afterwards why one failed)")
+    parser.add_argument(
+        "--ports",
+        type=int,
+        nargs=2,
+        metavar=("DISCOVERY", "BASE"),
+        help="run a copy on these network ports (its <Network> discoveryPort and basePort)",
+    )
+    parser.add_argument(
+        "--record", metavar="TOPICS", help="ckm-run --record TOPICS in every run (to see afterwards why one failed)"
+    )
     parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies the sensor noise (0: none)")
     parser.add_argument(
         "--scenario",
@@ -314,11 +341,12 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
             code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs",
                               args.lockstep, args.record)  # fmt: skip
             record = collect(out / "runs" / name, code, finals[plan])
-            record["object_home"] = object_home(config, out / "runs" / name)
+            record["object_home"] = object_home(config, out / "runs" / name, plan)
+            record["evidence"] = run_evidence(config, plan, out / "runs" / name)
             record["success"] = record["success"] and record["object_home"] is not False
             record.update(plan=plan, seed=seed, wall_s=round(wall, 3), randomised=changed)
             if scenario is not None:
-                judge(scenario, out / "runs" / name, record, config, finals[plan])
+                judge(scenario, out / "runs" / name, record, config, finals[plan], plan)
             results[plan].append(record)
             print(
                 f"{name}: exit {code}, {'success' if record['success'] else 'failure'}, "

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import signal
 import subprocess
@@ -38,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import ckmconf
+from benchmarks.mission_random import _inside
 from ckmconf.model.environment import EnvObject, Geometry3D, Geometry25D
 from plugins.sim.disturbances import ENV_SCENARIO, Disturbances
 from plugins.sim.plan import WorldPlan
@@ -46,7 +48,6 @@ from runtime import simtime
 from runtime.missions.recording import RunError, agent_file_name, read_run
 
 SCENARIOS = Path(__file__).with_name("scenarios")
-HOME = ("cylinder_red_stripes", "drop_table", 0.5)  # the lab's target, where PLACE puts it, radius (m)
 STOP_GRACE_S = 30.0
 
 
@@ -69,7 +70,7 @@ BUILT_IN = {
     "blocked-path": Scenario("blocked-path", world=str(SCENARIOS / "blocked-path.scenario")),
     "moved-object": Scenario("moved-object", world=str(SCENARIOS / "moved-object.scenario")),
     "dropped-object": Scenario("dropped-object", world=str(SCENARIOS / "dropped-object.scenario")),
-    "lost-humanoid": Scenario("lost-humanoid", kill_agent="nao", kill_after=1.0, expect="failure")  # D232,
+    "lost-humanoid": Scenario("lost-humanoid", kill_agent="nao", kill_after=1.0, expect="failure"),  # D232,
 }
 
 
@@ -234,7 +235,9 @@ def run_split(
     return code
 
 
-def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Path, finals: dict[str, str]) -> None:
+def judge(
+    scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Path, finals: dict[str, str], plan: str
+) -> None:
     """Add to a run's ``record`` what the scenario did and whether the missions handled it."""
     fired: list[dict[str, Any]] = []
     with contextlib.suppress(OSError, ValueError):
@@ -249,7 +252,8 @@ def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Pat
     record["disturbances"] = fired
     record["killed"] = killed
     record["disturbed"] = bool(fired) or killed is not None
-    record["object_home"] = object_home(config, run_dir)
+    record["object_home"] = object_home(config, run_dir, plan)
+    record["evidence"] = run_evidence(config, plan, run_dir)
     if scenario.expect == "success":
         record["handled"] = bool(record["success"]) and record["object_home"] is not False
     else:
@@ -266,27 +270,56 @@ def judge(scenario: Scenario, run_dir: Path, record: dict[str, Any], config: Pat
         ))  # fmt: skip
 
 
-def object_home(config: Path, run_dir: Path) -> bool | None:
-    """Whether the world's final state has the lab's target on the drop table (None: not known): its
-    centre within ``radius`` of the table's and above the table's top (a cylinder fallen beside the
-    table is within the radius too)."""
-    target, table, radius = HOME
+def evidence(config: Path, plan: str, final: dict[str, Any]) -> list[dict[str, Any]]:
+    """Each ``<Expect>`` of ``plan`` (D300) judged against a world's final record (``sim-final.json``):
+    ``{object, on, in, met, position}``; ``met`` is None when the record lacks the object."""
+    system = ckmconf.load(config)
+    found = system.plan(plan)
+    environment = system.environment
+    if found is None or environment is None:
+        return []
+    objects = {o.name: o for o in environment.objects}
+    areas = {a.name: a.points() for a in environment.areas}
+    out: list[dict[str, Any]] = []
+    for expect in found.expects:
+        position = final.get("positions", {}).get(expect.object)
+        met: bool | None = None
+        if position is not None:
+            met = True
+            place = objects.get(expect.on) if expect.on is not None else None
+            if place is not None:
+                near = math.hypot(position[0] - place.pose.x, position[1] - place.pose.y) <= expect.within
+                met = bool(near and len(position) > 2 and position[2] > _top(place))  # on top, not beside
+            if expect.in_ is not None:
+                met = met and _inside(areas.get(expect.in_, []), position[0], position[1])
+        out.append({"object": expect.object, "on": expect.on, "in": expect.in_, "met": met,
+                    "position": position})  # fmt: skip
+    return out
+
+
+def run_evidence(config: Path, plan: str, run_dir: Path) -> list[dict[str, Any]] | None:
+    """:func:`evidence` of a run's ``sim-final.json`` (None: the run left no final record)."""
     try:
-        environment = ckmconf.load(config).environment
         final = json.loads(next(iter(sorted(run_dir.glob("sim-final*.json")))).read_text())
-    except (StopIteration, OSError, ValueError, ckmconf.ConfigError):
+    except (StopIteration, OSError, ValueError):
         return None
-    place = next((o for o in environment.objects if o.name == table), None) if environment else None
-    position = final.get("positions", {}).get(target)
-    if place is None or position is None:
+    return evidence(config, plan, final)
+
+
+def object_home(config: Path, run_dir: Path, plan: str) -> bool | None:
+    """Whether every ``<Expect>`` of ``plan`` is met by the run's final world (None: not known)."""
+    judged = run_evidence(config, plan, run_dir)
+    if not judged or any(e["met"] is None for e in judged):
         return None
-    near = ((position[0] - place.pose.x) ** 2 + (position[1] - place.pose.y) ** 2) ** 0.5 <= radius
-    return bool(near and len(position) > 2 and position[2] > _top(place))  # on the top, not the floor beside
+    return all(e["met"] for e in judged)
 
 
 def _top(place: EnvObject) -> float:
     """The height of an environment object's highest face (m): its pose's z plus its prisms' zmax."""
     geometry = place.geometry
-    prisms = geometry.prisms if isinstance(geometry, Geometry3D) else (
-        (geometry.prism,) if isinstance(geometry, Geometry25D) else ())
+    prisms = (
+        geometry.prisms
+        if isinstance(geometry, Geometry3D)
+        else ((geometry.prism,) if isinstance(geometry, Geometry25D) else ())
+    )
     return place.pose.z + max((prism.zmax for prism in prisms), default=0.0)

@@ -303,6 +303,7 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
                 report.error(
                     signal, f"signal type {signal.type!r} differs from its topic's type {topic.type!r}", "type"
                 )
+    _check_expects(plan, system, report)
     for dependency in plan.dependencies:
         waiter = agent_state(dependency)
         wanted = signals.get(dependency.signal)
@@ -321,3 +322,21 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
                 f"signal {wanted.name!r} comes from agent {wanted.agent!r} itself; a dependency ties two agents",
                 "signal",
             )
+
+
+def _check_expects(plan: Plan, system: System, report: Reporter) -> None:
+    """Each ``<Expect>`` (D300) names an environment Object, and the Object or Area it must end on or in."""
+    environment = system.environment
+    if environment is None:  # a Part with the plans alone: checked once the System includes the environment
+        return
+    objects = [o.name for o in environment.objects]
+    areas = [a.name for a in environment.areas]
+    for expect in plan.expects:
+        if expect.object not in objects:
+            report.error(expect, missing("object", expect.object, "the environment", objects), "object")
+        if expect.on is None and expect.in_ is None:
+            report.error(expect, f'expect of {expect.object!r} says neither on="…" nor in="…"', "object")
+        if expect.on is not None and expect.on not in objects:
+            report.error(expect, missing("object", expect.on, "the environment", objects), "on")
+        if expect.in_ is not None and expect.in_ not in areas:
+            report.error(expect, missing("area", expect.in_, "the environment", areas), "in")

@@ -216,6 +216,17 @@ class Dependency(Record):
 
 
 @dataclass(frozen=True, kw_only=True)
+class Expect(Record):
+    """<Expect>: where an environment object must end when the plan succeeds (D300)."""
+
+    TAG = "Expect"
+    object: str = attr()
+    on: str | None = attr(default=None)
+    in_: str | None = attr(xml="in", default=None)
+    within: float = attr(default=0.5)
+
+
+@dataclass(frozen=True, kw_only=True)
 class Plan(Record):
     """<Plan>: missions assigned to agents and the signals tying them (§5.3)."""
 
@@ -226,6 +237,7 @@ class Plan(Record):
     agents: tuple[Agent, ...] = children()
     signals: tuple[Signal, ...] = children()
     dependencies: tuple[Dependency, ...] = children()
+    expects: tuple[Expect, ...] = children()
 
     def signal_topic(self, signal: Signal) -> str:
         """Topic of ``signal``: its ``topic`` attribute, else ``/plan/PLAN/SIGNAL`` (§5.3)."""

@@ -449,7 +449,8 @@ def test_a_disturbed_run_whose_ckm_run_made_no_directory_is_judged_a_failure(tmp
     # ckm-run refused its arguments (a bad --record topic) before making the run directory
     run_dir = tmp_path / "runs" / "cooperative-seed1"
     record = collect(run_dir, 2, {"turtlebot": "succeeded"})
-    judge(BUILT_IN["blocked-path"], run_dir, record, CONFIGS / "usecase" / "lab.xml", {"turtlebot": "succeeded"})
+    lab = CONFIGS / "usecase" / "lab.xml"
+    judge(BUILT_IN["blocked-path"], run_dir, record, lab, {"turtlebot": "succeeded"}, "individual")
     assert record["handled"] is False and record["disturbed"] is False
     assert json.loads((run_dir / "scenario.json").read_text())["scenario"]["name"] == "blocked-path"
 
@@ -464,22 +465,23 @@ def test_the_mission_phase_is_unknown_while_an_agent_that_started_has_no_end(tmp
     assert mission_wall(Run(tmp_path, both[:2])) is None
 
 
-@pytest.mark.parametrize(("where", "home"), [
-    ((1.02, 1.75, 0.36), True),  # standing on the drop table's 0.30 m top
-    ((0.95, 1.80, 0.335), True),  # lying on it
-    ((1.0, 1.45, 0.06), False),  # on the floor in front of it, within the 0.5 m radius
-    ((2.0, 1.9, 0.36), False),  # at the table's height, a metre away
-    ((1.0, 1.9), False),  # a final state with no height
-])
-def test_the_object_is_home_only_on_the_drop_table_s_top(
-    tmp_path: Path, where: tuple[float, ...], home: bool
-) -> None:
+@pytest.mark.parametrize(
+    ("where", "home"),
+    [
+        ((1.02, 1.75, 0.36), True),  # standing on the drop table's 0.30 m top
+        ((0.95, 1.80, 0.335), True),  # lying on it
+        ((1.0, 1.45, 0.06), False),  # on the floor in front of it, within the 0.5 m radius
+        ((2.0, 1.9, 0.36), False),  # at the table's height, a metre away
+        ((1.0, 1.9), False),  # a final state with no height
+    ],
+)
+def test_the_object_is_home_only_on_the_drop_table_s_top(tmp_path: Path, where: tuple[float, ...], home: bool) -> None:
     """object_home (the bench's check that the robots did the work): compact seed 301 once left the
     cylinder on the floor 0.3 m in front of the table and was counted home by the radius alone."""
     (tmp_path / "sim-final.json").write_text(json.dumps({"positions": {"cylinder_red_stripes": list(where)}}))
-    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path) is home
+    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path, "cooperative") is home
     (tmp_path / "sim-final.json").write_text(json.dumps({"positions": {}}))
-    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path) is None
+    assert object_home(CONFIGS / "usecase" / "lab.xml", tmp_path, "cooperative") is None
 
 
 def test_the_state_plot_of_runs_that_recorded_no_state_says_so_without_warnings(tmp_path: Path) -> None:
