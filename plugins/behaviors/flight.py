@@ -13,6 +13,7 @@ never ends it; a failure's detail carries the service's reason into the mission 
 
 from __future__ import annotations
 
+import abc
 import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
@@ -41,9 +42,9 @@ class _FlightGoal(_Goals):
         super().start()
         self.goal_id: int | None = None
 
+    @abc.abstractmethod
     def goal(self) -> dict[str, Any] | None:
         """The goal to send (None: not known yet)."""
-        raise NotImplementedError
 
     def step(self) -> BehaviorStatus:
         """Send the goal once, then follow its status by id."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from ckmconf.model import Param
@@ -23,6 +23,30 @@ from ckmconf.model.missions import BehaviorInput, BehaviorOutput, Configure, Use
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
 from runtime.resources.api import Bounds
 from tests.plugins.navigation.loop import Bench
+
+
+class OutputsService:
+    """A service handle that reads its outputs with ``read(name)`` and hands Parameters to ``configure``."""
+
+    def __init__(self, ref: str, read: Callable[[str], Any],
+                 configure: Callable[[dict[str, Any]], None] | None = None) -> None:
+        self.ref, self._read, self._configure = ref, read, configure
+
+    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
+        if self._configure is not None:
+            self._configure(dict(parameters))
+
+    def output(self, name: str) -> Any:
+        return self._read(name)
+
+    def measures(self) -> dict[str, float]:
+        return {}
+
+    def samples(self, measure: str) -> list[float]:
+        return []
+
+    def running(self) -> bool:
+        return True
 
 
 class BenchNavigation:

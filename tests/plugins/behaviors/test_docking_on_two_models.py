@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -19,38 +18,12 @@ from plugins.behaviors.docking import DockRobot, UndockRobot
 from plugins.behaviors.navigation_goals import SetNavGoal, WaitGoal
 from plugins.navigation.docking import Docking
 from runtime.missions.behaviors import Behavior
-from runtime.resources.api import Bounds
-from tests.plugins.behaviors.closed_loop import BenchNavigation, angle, run_states, wired
+from tests.plugins.behaviors.closed_loop import BenchNavigation, OutputsService, angle, run_states, wired
 from tests.plugins.navigation.loop import ROVER_MODEL, TURTLEBOT_MODEL, Bench, RobotModel, Service, plugin, room
 
 MODELS = pytest.mark.parametrize("model", [TURTLEBOT_MODEL, ROVER_MODEL], ids=lambda m: m.urdf)
 CHARGER = (4.6, 2.9, math.pi / 2)  # in front of the room's cabinet, facing it
 STAGING = (4.6, 2.3, math.pi / 2)
-
-
-class BenchDocking:
-    """The bench's docking service as a behavior sees it: its ``status`` output."""
-
-    ref = "Base.Dock"
-
-    def __init__(self, bench: Bench) -> None:
-        self.bench = bench
-
-    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
-        return None
-
-    def output(self, name: str) -> Any:
-        assert name == "status"
-        return self.bench.latest("/dock/status")
-
-    def measures(self) -> dict[str, float]:
-        return {}
-
-    def samples(self, measure: str) -> list[float]:
-        return []
-
-    def running(self) -> bool:
-        return True
 
 
 def docking_bench(tmp_path: Path, model: RobotModel, *, inputs: Mapping[str, str] | None = None,
@@ -72,7 +45,8 @@ def states(bench: Bench, dock: Behavior) -> list[Behavior]:
 
 def docker(bench: Bench, cls: type[Behavior] = DockRobot, dock: str = "", pose: str = "") -> Behavior:
     params = {k: v for k, v in (("dock", dock), ("pose", pose)) if v}
-    return wired(bench, cls, cls.__name__.upper(), {"dock": BenchDocking(bench)}, {},
+    docking = OutputsService("Base.Dock", lambda name: bench.latest(f"/dock/{name}"))
+    return wired(bench, cls, cls.__name__.upper(), {"dock": docking}, {},
                  {"dock_goal": "/dock/goal"}, configure=None, **params)
 
 

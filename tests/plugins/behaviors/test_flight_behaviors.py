@@ -4,7 +4,6 @@ airframe (tests/plugins/flight/point_mass.py); on the simulator's multirotors in
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from typing import Any
 
 import pytest
@@ -15,32 +14,8 @@ from ckmconf.model.missions import BehaviorInput, BehaviorOutput, Uses
 from plugins.behaviors.flight import FlyTo, Land, TakeOff
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
-from runtime.resources.api import Bounds
+from tests.plugins.behaviors.closed_loop import OutputsService
 from tests.plugins.flight.point_mass import Loop, PointMass, flight_control
-
-
-class LoopFlight:
-    """The loop's flight service as a behavior sees it: its ``status`` output."""
-
-    ref = "Drone.Flight"
-
-    def __init__(self, loop: Loop) -> None:
-        self.loop = loop
-
-    def configure(self, parameters: Mapping[str, Any], requirements: tuple[Bounds, ...]) -> None:
-        self.loop.service.apply_service_parameters(dict(parameters))
-
-    def output(self, name: str) -> Any:
-        return self.loop.out.get(name)
-
-    def measures(self) -> dict[str, float]:
-        return {}
-
-    def samples(self, measure: str) -> list[float]:
-        return []
-
-    def running(self) -> bool:
-        return True
 
 
 def behavior(cls: type[Behavior], loop: Loop, signal: dict[str, Any] | None = None, **params: str) -> Behavior:
@@ -53,7 +28,8 @@ def behavior(cls: type[Behavior], loop: Loop, signal: dict[str, Any] | None = No
     def publish(goal: Any) -> None:
         loop.goal = goal
 
-    context = BehaviorContext(services={"flight": LoopFlight(loop)}, now=lambda: loop.now,
+    flight = OutputsService("Drone.Flight", lambda name: loop.out.get(name), loop.service.apply_service_parameters)
+    context = BehaviorContext(services={"flight": flight}, now=lambda: loop.now,
                               inputs={"spotted": lambda: signal} if signal is not None else {},
                               outputs={"flight_goal": publish})
     return cls(record, context)
