@@ -199,7 +199,9 @@ class SurveyArea(_Goals):
         x, y, z, reliability = self._mean()
         robot = robot_pose(self.service("flight").output("pose"))
         self.found = map_sighting({**item, "reliability": reliability}, (x, y, z), robot, now)
-        self.found["frame"] = "map"
+        observer = item.get("observer")  # the pose a map-frame detector placed it with
+        if isinstance(observer, list) and len(observer) == 1 and isinstance(observer[0], Mapping):
+            self.found["observer"] = [dict(observer[0])]
         for name in self.reports:
             self.write(name, self.found)
         self.context.log("object found", label=self.found["label"], x=x, y=y, reliability=reliability,
