@@ -38,12 +38,29 @@ from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 from .coverage import lawnmower
 from .messages import _failed, _Goals, _state, robot_pose
 from .sightings import SIGHTING_USES, labels, map_sighting, mount_of, on_map, perception, sighting_problems
+from .upstream import perception_reports
 
 GOAL = "flight_goal"
 
 
 def _param(record: BehaviorRecord, name: str) -> Any:
     return next((p for p in record.params if p.name == name), None)
+
+
+def _perception_problems(record: BehaviorRecord, system: System) -> list[tuple[Any, str]]:
+    """The watched detector must give positions (not image shares) and be able to report ``label``."""
+    use = next((u for u in record.uses if u.alias in ("detection", "fusion")), None)
+    reports = perception_reports(system, use.service) if use is not None else None
+    if use is None or reports is None:
+        return []
+    if reports.image:
+        return [(use, f"{use.service!r} ({reports.kind}) gives its objects' x, y as shares of the image, not "
+                      "positions: watch a ground-projection service placing them on the map (docs/flight.md)")]
+    label = _param(record, "label")
+    if label is not None and reports.labels is not None and label.value not in reports.labels:
+        return [(label, f"parameter 'label' = {label.value!r} is no label {use.service!r} can report (its "
+                        f"{reports.kind}: {', '.join(sorted(reports.labels))})")]
+    return []
 
 
 class SurveyArea(_Goals):
@@ -88,6 +105,8 @@ class SurveyArea(_Goals):
                                   "topic), and has none"))
         if not [n for n in names if n != GOAL]:
             found.append((record, "give an <Output> (a topic or a plan signal) for the object's map position"))
+        if system is not None:
+            found.extend(_perception_problems(record, system))
         area = _param(record, "area")
         if area is not None and system is not None:
             environment = system.environment

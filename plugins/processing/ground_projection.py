@@ -132,6 +132,7 @@ class GroundProjection(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
     PROVIDES = "object-detection"  # docs/interfaces.md, in the map frame
+    PASSES = "objects"  # the labels of its input's objects (plugins.behaviors.upstream)
     WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"objects": (
         "objects[].name", "objects[].label", "objects[].frame", "objects[].x", "objects[].y", "objects[].z",
         "objects[].reliability", "objects[].observer", "reliability")}

@@ -43,7 +43,7 @@ class Bench:
         context = BehaviorContext(services={"flight": self.flight, "detection": self.eyes}, inputs={},
                                   outputs={n: self.written[n].append for n in self.written},
                                   now=lambda: self.clock[0], environment=ENVIRONMENT)
-        self.survey = SurveyArea(record(**params), context)
+        self.survey = SurveyArea(record(("flight_goal", "parcel"), **params), context)
         self.survey.start()
 
     def goal(self) -> dict[str, Any]:
