@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.mission_scenarios import object_home
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
 
@@ -60,6 +61,7 @@ def test_the_uav_finds_the_red_parcel_signals_where_it_is_and_lands_home(tmp_pat
     assert max(z for _, _, z, *_ in poses) > 2.7  # it searched from the air
     x, y, z = poses[-1][:3]
     assert abs(x - px) <= half and abs(y - py) <= half and z < 0.3, (x, y, z)  # back on its pad
+    assert object_home(SURVEY, run_dir, plan) is True  # the plan's own <Expect>s (D306)
     found = [e for e in events(run_dir / f"mission-{agent}.jsonl") if e.get("message") == "object found"]
     assert len(found) == 1 and found[0]["confirmations"] == 3
 
