@@ -145,6 +145,27 @@ def sim_channels(root: ET.Element) -> list[tuple[ET.Element, ET.Element]]:
     ]
 
 
+def system_files(config: Path) -> list[Path]:
+    """The files of ``config``'s system, sorted: it, the Parts its ``<Include>``s pull in, and the XML files its
+    Params name (a ``world`` or an ``environment``), each relative to the file that names it; recursively.
+    Other files of the directory (another example beside it) are copied but never edited."""
+    found: set[Path] = set()
+    todo = [config.resolve()]
+    while todo:
+        path = todo.pop()
+        if path in found or not path.is_file():
+            continue
+        found.add(path)
+        try:
+            root = ET.parse(path).getroot()
+        except ET.ParseError:
+            continue
+        named = [e.get("href", "") for e in root.iter(Q + "Include")]
+        named += [p.get("value", "") for p in root.iter(Q + "Param") if p.get("value", "").endswith(".xml")]
+        todo += [path.parent / name for name in named if name and not Path(name).is_absolute()]
+    return sorted(found)
+
+
 def _same_pose(text: str, pose: Pose2D) -> bool:
     found = parse_pose(text) if len(text.split()) == 3 else None
     return found is not None and all(abs(a - b) <= START_TOLERANCE for a, b in zip(found, pose, strict=True))
@@ -217,7 +238,7 @@ def randomise(
     nominal = {b.name: b.start for b in robots if b.name in result.starts and b.start is not None}
     texts = {name: " ".join(_fmt(v) for v in pose) for name, pose in result.starts.items()}
     ET.register_namespace("", NS)
-    trees = {path: ET.parse(path) for path in sorted(out_dir.glob("*.xml"))}
+    trees = {path: ET.parse(path) for path in system_files(copy)}
     changed: set[Path] = set()
     index = 0
     for path, tree in trees.items():

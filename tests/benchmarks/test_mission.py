@@ -140,7 +140,9 @@ def test_bench_runs_a_plan_and_its_summary_is_what_the_recordings_say(
     argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "2"]
     argv += ["--duration", "30", "--time-scale", "0", "--no-randomise", "--out", str(out)]
     assert main(argv) == 0
-    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    printed = capsys.readouterr()
+    assert "seed 2: not randomised (--no-randomise)" in printed.err
+    result = json.loads(printed.out.strip().splitlines()[-1])
     assert json.loads((out / "summary.json").read_text()) == result
     (plan,) = result["plans"]
     assert set(plan) >= {"plan", "runs", "success_rate", "mean_mission_s", "realtime_factor", "states"}
@@ -189,10 +191,14 @@ def test_a_lockstep_bench_runs_without_the_default_time_scale(
     # ckm-run refuses --lockstep beside --time-scale: the bench must not pass its default scale along
     out = tmp_path / "bench"
     argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "1"]
-    argv += ["--duration", "30", "--lockstep", "0.01", "--no-randomise", "--out", str(out)]
+    argv += ["--duration", "30", "--lockstep", "0.01", "--out", str(out)]
     assert main(argv) == 0
-    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    printed = capsys.readouterr()
+    result = json.loads(printed.out.strip().splitlines()[-1])
     assert result["time_scale"] is None and result["plans"][0]["success_rate"] == 1.0
+    # a plan with no environment and no simulated robot: randomised, and the line says that nothing moved (D301)
+    assert "seed 1: objects moved: none; starts moved: none; noise none (no noisy sensor)" in printed.err
+    assert result["randomised"] and result["results"][0]["randomised"]["objects"] == {}
     command = (out / "runs" / "fetch-together-seed1.log").read_text().splitlines()[0]
     assert "--lockstep 0.01" in command and "--time-scale" not in command
 
