@@ -109,7 +109,7 @@ def _in_map(env: Environment, x: float, y: float, margin: float) -> bool:
 
 
 def movable(env: Environment) -> list[str]:
-    """The objects that move when ``<Randomise objects>`` is not given (D301): every object that is not a
+    """The objects that move when ``<Randomise objects>`` is not given: every object that is not a
     marking and whose tag's ``<Semantic>`` says ``landmark="free"`` or ``"restricted-area"`` (a landmark,
     or an object whose tag has no Semantic, is furniture the map is built around: it stays)."""
     loose = {s.tag for s in env.semantics if s.landmark in ("free", "restricted-area")}
