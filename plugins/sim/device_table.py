@@ -143,7 +143,7 @@ def _gripper(kind: str) -> Device:
 
 
 MULTIROTOR = ("actuator", "rotors", "spin", "maxThrust")
-AIRFRAME = ("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment")
+AIRFRAME = ("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment", "failsafe")
 
 
 def _axis(kind: str) -> Device:
