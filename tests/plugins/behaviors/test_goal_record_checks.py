@@ -55,7 +55,8 @@ def test_the_reference_systems_behaviors_have_no_problem(relay: System) -> None:
 
 
 @pytest.mark.parametrize(("name", "params", "message"), [
-    ("ROVER_TO_SCOUT", {"input": "scout_pose"}, "parameter 'input' = 'scout_pose' is not one of its inputs (['scout'])"),
+    ("ROVER_TO_SCOUT", {"input": "scout_pose"},
+     "parameter 'input' = 'scout_pose' is not one of its inputs (['scout'])"),
     ("ROVER_TO_SCOUT", {"goal": "Pickup"}, "give the goal either as parameter 'goal' or through parameter 'input'"),
     ("SCOUT_TO_PICKUP", {"goal": None}, "give the goal either as parameter 'goal' or through parameter 'input'"),
 ])
