@@ -72,7 +72,11 @@ MISTAKES = (  # file, text, replaced by, the text of the line it is refused at, 
 )
 
 
-@pytest.mark.parametrize(("name", "old", "new", "at", "message"), MISTAKES)
+IDS = ("navigate-to-input", "emit-signal-take", "fly-to-goal-and-input", "dock-robot-dock", "docking-docks",
+       "lost-agent", "expect-object", "spawn-inside-charger")
+
+
+@pytest.mark.parametrize(("name", "old", "new", "at", "message"), MISTAKES, ids=IDS)
 def test_a_likely_mistake_is_refused_by_ckm_validate_at_its_line(
     tmp_path: Path, name: str, old: str, new: str, at: str | None, message: str
 ) -> None:
