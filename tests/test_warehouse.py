@@ -69,7 +69,8 @@ def test_the_carrier_picks_the_parcel_it_was_signalled(tmp_path: Path) -> None:
     parcel = (3.4, 6.1)
     world = (copy / "aisles.xml").read_text()
     assert '<Pose x="6.8" y="3.3"/>' in world
-    (copy / "aisles.xml").write_text(world.replace('<Pose x="6.8" y="3.3"/>', f'<Pose x="{parcel[0]}" y="{parcel[1]}"/>'))
+    stored = f'<Pose x="{parcel[0]}" y="{parcel[1]}"/>'
+    (copy / "aisles.xml").write_text(world.replace('<Pose x="6.8" y="3.3"/>', stored))
     station = (copy / "station.xml").read_text()
     assert "x: 6.8; y: 3.3" in station
     (copy / "station.xml").write_text(station.replace("x: 6.8; y: 3.3", f"x: {parcel[0]}; y: {parcel[1]}"))
