@@ -144,3 +144,30 @@ def test_an_unnamed_joint_state_gives_its_leading_positions_and_too_few_are_refu
     with pytest.raises(ValueError, match="2 unnamed positions, expected 3"):
         joint_values(state, ["a", "b", "c"], "arm")
     assert math.isclose(joint_values(state, ["a", "b"], "arm")[1], 0.19)  # type: ignore[index]
+
+
+def test_a_pose_stopped_short_ends_reached_on_contact_only_when_the_goal_asks_for_it() -> None:
+    """Joint states stuck short of the pose (what a place meets when the object stands on its table):
+    a contact goal is reached once they stood still ``settle`` s after the planned time, and the last
+    trajectory holds them there; a plain goal waits, then fails at its timeout."""
+    made = service("carrier", "lift_joint", "down: 0.0; carry: 0.28", settle="0.5", timeout="2.0")
+    made.setup()
+
+    def run(goal: dict[str, Any], seconds: float) -> tuple[dict[str, Any], dict[str, Any]]:
+        result: dict[str, Any] = {}
+        trajectory: dict[str, Any] = {}
+        for frame in range(round(seconds / 0.05)):
+            stamp = goal["id"] * 100.0 + frame * 0.05
+            here = 0.28 - min(0.18, frame * 0.05 * 0.15)  # lowering at 0.15 m/s, stopped at 0.10 m
+            result = made.process({"goal": goal, "joint_states": {"stamp": stamp, "name": [], "position": [here]}},
+                                  Context(frame, stamp, "lift"))
+            trajectory = result.get("trajectory", trajectory)
+            if result["status"]["state"] != "moving":
+                break
+        return result["status"], trajectory
+
+    stopped, held = run({"id": 1, "group": "arm", "pose": "down", "contact": True}, 6.0)
+    assert stopped["state"] == "reached" and stopped["contact"] is True, stopped
+    assert held["points"][-1]["positions"] == [pytest.approx(0.10)]  # no more pressing on it
+    plain, _ = run({"id": 2, "group": "arm", "pose": "down"}, 8.0)
+    assert plain["state"] == "failed" and "not reached" in plain["error"] and "lift_joint still 0.100" in plain["error"]
