@@ -272,7 +272,8 @@ def judge(
 
 def evidence(config: Path, plan: str, final: dict[str, Any]) -> list[dict[str, Any]]:
     """Each ``<Expect>`` of ``plan`` (D300) judged against a world's final record (``sim-final.json``):
-    ``{object, on, in, met, position}``; ``met`` is None when the record lacks the object."""
+    ``{object, on, in, met, position}``; ``met`` is None when the record lacks the object. An expected
+    robot (D306) is judged by its base's final position (``bodies``)."""
     system = ckmconf.load(config)
     found = system.plan(plan)
     environment = system.environment
@@ -283,6 +284,8 @@ def evidence(config: Path, plan: str, final: dict[str, Any]) -> list[dict[str, A
     out: list[dict[str, Any]] = []
     for expect in found.expects:
         position = final.get("positions", {}).get(expect.object)
+        if position is None and expect.object in final.get("bodies", {}):  # a robot (D306): its base's x, y, z
+            position = final["bodies"][expect.object][:3]
         met: bool | None = None
         if position is not None:
             met = True

@@ -324,16 +324,26 @@ def _check_plan(plan: Plan, system: System, scope: Scope, report: Reporter) -> N
             )
 
 
+def sim_bodies(system: System) -> list[str]:
+    """The simulated robots of ``system``: the ``body`` Params of its ``sim`` HWChannels, in order."""
+    found = (p.value for node in system.nodes for channel in node.channels if channel.backend == "sim"
+             for p in channel.params if p.name == "body")  # fmt: skip
+    return list(dict.fromkeys(found))
+
+
 def _check_expects(plan: Plan, system: System, report: Reporter) -> None:
-    """Each ``<Expect>`` (D300) names an environment Object, and the Object or Area it must end on or in."""
+    """Each ``<Expect>`` (D300) names an environment Object or a simulated robot (D306), and the Object or
+    Area it must end on or in."""
     environment = system.environment
     if environment is None:  # a Part with the plans alone: checked once the System includes the environment
         return
     objects = [o.name for o in environment.objects]
     areas = [a.name for a in environment.areas]
+    robots = sim_bodies(system)
     for expect in plan.expects:
-        if expect.object not in objects:
-            report.error(expect, missing("object", expect.object, "the environment", objects), "object")
+        if expect.object not in objects and expect.object not in robots:
+            report.error(expect, missing("object", expect.object, "the environment or the simulated robots",
+                                         [*objects, *robots]), "object")
         if expect.on is None and expect.in_ is None:
             report.error(expect, f'expect of {expect.object!r} says neither on="…" nor in="…"', "object")
         if expect.on is not None and expect.on not in objects:

@@ -217,7 +217,7 @@ class Dependency(Record):
 
 @dataclass(frozen=True, kw_only=True)
 class Expect(Record):
-    """<Expect>: where an environment object must end when the plan succeeds (D300)."""
+    """<Expect>: where an environment object or a simulated robot must end when the plan succeeds (D300, D306)."""
 
     TAG = "Expect"
     object: str = attr()

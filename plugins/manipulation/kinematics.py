@@ -112,9 +112,11 @@ def parse_poses(text: str, path: str = "<memory>") -> PoseFile:
         raise ValueError(f"{path}: unsupported pose file version {top['version']!r} (this release reads 1)")
     if not groups["arm"] and not groups["gripper"]:
         raise ValueError(f"{path}: no arm or gripper poses")
+    if not top.get("tool"):  # no robot's link is a default: the targets are this link's positions
+        raise ValueError(f"{path}: no 'tool': the URDF link whose point the arm poses place (tool: LINK)")
     return PoseFile(
         path,
-        top.get("tool", "gripper_tool_link"),
+        top["tool"],
         {name: ArmTarget(*v) for name, v in groups["arm"].items()},
         {name: v[0] for name, v in groups["gripper"].items()},
     )

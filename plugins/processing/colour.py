@@ -89,6 +89,7 @@ class ColourDetection(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": MAPPING})
     PROVIDES = "object-detection"  # docs/interfaces.md
+    POSITIONS = "image"  # x, y: shares of the frame (plugins.behaviors.upstream)
     WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"objects": (
         "objects[].name", "objects[].label", "objects[].x", "objects[].y", "objects[].points",
         "objects[].reliability", "reliability", "width", "height")}
@@ -99,6 +100,15 @@ class ColourDetection(ProcessingPlugin):
         P("maxObjects", 5, "Most blobs kept per colour, the largest first.", min=1),
         P("encoding", "rgb8", "Channel order of the frames: 'rgb8' or 'bgr8'.", choices=("rgb8", "bgr8")),
     )
+
+    @classmethod
+    def labels(cls, record: Plugin) -> set[str] | None:
+        """The colour names of Param ``colours``: the labels it can report (None when they do not parse)."""
+        text = next((p.value for p in record.params if p.name == "colours"), "")
+        try:
+            return {c.label for c in parse_colours(text, record.name)}
+        except ParamError:
+            return None
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)

@@ -31,7 +31,15 @@ from sklearn.neighbors import KDTree
 
 from ckmconf.model import System
 from ckmconf.model.resources import Plugin
-from plugins.processing.cameras import camera_of
+from plugins.processing.camera_info import (
+    CAMERA_INFO,
+    IMAGE,
+    camera_of_info,
+    fed_camera_info,
+    is_camera_frame,
+    stream_input_problems,
+)
+from plugins.processing.cameras import Camera, camera_of
 from plugins.processing.channel_camera import channel_camera, intrinsics_problems
 from plugins.processing.clusters import (
     Cluster,
@@ -137,23 +145,43 @@ class DepthAcquisition(ProcessingPlugin):
 
     Accepts an (H, W) array — unsigned raw units scaled by ``scale`` (0.001: millimetres, as OpenNI depth
     cameras give), float already in metres — or an Image-like dict with encoding ``16UC1``/``mono16`` or ``32FC1``.
-    ``topic`` only documents where frames come from (the service's Input). Bad frames raise
-    ValueError naming the plugin and the problem.
+    ``topic`` only documents where frames come from (the service's Input). With ``cameraInfo``, the
+    stream reads two Inputs, the depth image and the ``sensor_msgs/CameraInfo`` the Param names, and each
+    result is a camera frame ``{image, camera_info}`` whose intrinsics the clustering kinds use
+    (:mod:`.camera_info`); nothing is produced until both have arrived, nor for an image already
+    processed (same header stamp) when only its CameraInfo is new. Bad frames raise ValueError naming the
+    plugin and the problem.
     """
 
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": ARRAY})  # a DepthImage-like message (or array bytes)
     PARAMS: ClassVar[Mapping[str, Any]] = Params(
         P("topic", "", "The raw topic the frames come from (informational)."),
         P("scale", 0.001, "Metres per raw unit of unsigned depth images (0.001: millimetres).", unit="m", above=0.0),
+        P("cameraInfo", "", "The Input carrying the camera's sensor_msgs/CameraInfo: each frame then carries "
+          "its intrinsics (docs/recognition.md).", type=str),
     )
 
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
         if not (math.isfinite(self.params["scale"]) and self.params["scale"] > 0):
             raise ParamError(f"{self.owner}: parameter 'scale' = {self.params['scale']} must be greater than 0")
+        self.info_input: str = self.params["cameraInfo"].strip()
+        self._last_stamp: Any = None
 
-    def process(self, data: Any, context: Context) -> Depth:
-        """The frame as float32 metres (NaN where the sensor saw nothing); ValueError on a bad frame."""
+    @classmethod
+    def problems(cls, record: Plugin, system: System | None) -> list[tuple[Any, str]]:
+        """``cameraInfo`` naming no Input of the stream, or a stream of other than two Inputs."""
+        return stream_input_problems(record, system)
+
+    def process(self, data: Any, context: Context) -> Any:  # Depth, or with cameraInfo a camera frame or None
+        """The frame as float32 metres (NaN where the sensor saw nothing), with ``cameraInfo`` a camera
+        frame (None while either input is missing or the image is the one already processed);
+        ValueError on a bad frame."""
+        if self.info_input:
+            return self._paired(data)
+        return self._metres(data)
+
+    def _metres(self, data: Any) -> Depth:
         if isinstance(data, Mapping):
             image = _decode(data, self.owner)
         elif isinstance(data, np.ndarray):
@@ -161,6 +189,24 @@ class DepthAcquisition(ProcessingPlugin):
         else:
             raise ValueError(f"{self.owner} expects a depth image or message, got {type(data).__name__}")
         return to_metres(image, self.params["scale"], self.owner)
+
+    def _paired(self, data: Any) -> dict[str, Any] | None:
+        if not isinstance(data, Mapping) or self.info_input not in data or len(data) != 2:
+            got = sorted(data) if isinstance(data, Mapping) else type(data).__name__
+            raise ValueError(f"{self.owner} expects its two Inputs, the depth image and {self.info_input!r}, got {got}")
+        info = data[self.info_input]
+        image = next(v for k, v in data.items() if k != self.info_input)
+        if info is None or image is None:
+            return None
+        camera_of_info(info, self.owner)  # refuse an uncalibrated or malformed CameraInfo here, named
+        header = image.get("header") if isinstance(image, Mapping) else None
+        stamp = header.get("stamp") if isinstance(header, Mapping) else None
+        if stamp is not None:
+            key = repr(stamp)
+            if key == self._last_stamp:
+                return None
+            self._last_stamp = key
+        return {IMAGE: self._metres(image), CAMERA_INFO: info}
 
 
 class EuclideanClustering(ProcessingPlugin):
@@ -197,27 +243,37 @@ class EuclideanClustering(ProcessingPlugin):
             raise ParamError(f"{self.owner}: parameter 'minPoints' = {p['minPoints']} must be at least 1")
         if not 0 < p["planeAngle"] <= 90:
             raise ParamError(f"{self.owner}: parameter 'planeAngle' = {p['planeAngle']} is not in (0, 90] degrees")
+        self.camera: Camera | None = None  # None: each frame's CameraInfo gives it (verify checks one does)
         if p["camera"]:
             self.camera = channel_camera(record, p["camera"], self.owner)
-        elif (problems := intrinsics_problems(record, None)):
-            raise ParamError(f"{self.owner}: {problems[0][1]}")
-        else:
+        elif p["fx"] is not None or not intrinsics_problems(record, None):
+            if problems := intrinsics_problems(record, None):
+                raise ParamError(f"{self.owner}: {problems[0][1]}")
             self.camera = camera_of(p, self.owner)
 
     @classmethod
     def problems(cls, record: Plugin, system: System | None) -> list[tuple[Any, str]]:
         """Neither intrinsics nor a camera channel, or a camera naming no simulated camera (verify reports
         each at its ``FILE:LINE:COL``)."""
+        if fed_camera_info(record, system) and not any(p.name in ("camera", "fx") for p in record.params):
+            return []
         return intrinsics_problems(record, system)
 
-    def depth_image(self, data: Any) -> npt.NDArray[Any]:
-        """``data`` as the float depth image in metres (H, W) this plugin clusters, else ValueError."""
+    def depth_image(self, data: Any) -> tuple[npt.NDArray[Any], Camera]:
+        """``data`` as the float depth image in metres (H, W) this plugin clusters and the camera that
+        took it (a camera frame's CameraInfo, else the Params' or channel's), else ValueError."""
+        camera = self.camera
+        if is_camera_frame(data):
+            camera = camera_of_info(data[CAMERA_INFO], self.owner)
+            data = data[IMAGE]
         depth = np.asarray(data)
         if depth.ndim != 2 or depth.dtype.kind != "f":
             raise ValueError(
                 f"{self.owner} expects a float depth image in metres (H, W), got {depth.dtype} {depth.shape}"
             )
-        return depth
+        if camera is None:
+            raise ValueError(f"{self.owner}: the frame carries no camera_info and no intrinsics are configured")
+        return depth, camera
 
     def clustering(self) -> dict[str, Any]:
         """The clustering Params as keyword arguments of :func:`segment` (and the tabletop's segmentation)."""
@@ -232,7 +288,8 @@ class EuclideanClustering(ProcessingPlugin):
 
     def process(self, data: Any, context: Context) -> list[Cluster]:
         """The clusters of the depth image, left to right."""
-        return segment(self.depth_image(data), self.camera, plane=self.params["plane"], **self.clustering())
+        depth, camera = self.depth_image(data)
+        return segment(depth, camera, plane=self.params["plane"], **self.clustering())
 
 
 ROUND = ("cylinder", "sphere")

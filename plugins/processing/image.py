@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ckmconf.model.resources import Plugin
+from plugins.processing.camera_info import IMAGE, is_camera_frame
 from runtime.kernel.interfaces import ParamError
 from runtime.resources.spt import Context, ProcessingPlugin
 from runtime.verification.manifest import ARRAY, P, Params, Ports
@@ -57,7 +58,9 @@ class Resize(ProcessingPlugin):
 
     Params: ``width`` and ``height`` (0: unset; one alone keeps the aspect ratio) or, when neither
     is set, ``scale`` (default 1); ``interpolation``: ``area`` (default: block average for whole
-    factors) or ``nearest``. The resolution profiles of the recognition services use it.
+    factors) or ``nearest``. The resolution profiles of the recognition services use it. A camera
+    frame ``{image, camera_info}`` (:mod:`.camera_info`) comes out as one, its image resized and its
+    CameraInfo passed on: the intrinsics stay at the CameraInfo's size, which its users scale from.
     """
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": ARRAY})  # an image in, the resized image out
@@ -91,8 +94,10 @@ class Resize(ProcessingPlugin):
             return height, max(1, round(cols * height / rows))
         return max(1, round(rows * scale)), max(1, round(cols * scale))
 
-    def process(self, data: Any, context: Context) -> Image:
-        """The image resized to the target size."""
+    def process(self, data: Any, context: Context) -> Image | dict[str, Any]:
+        """The image resized to the target size (a camera frame's image, its CameraInfo passed on)."""
+        if is_camera_frame(data):
+            return {**data, IMAGE: self.process(data[IMAGE], context)}
         image = _image(data, self.owner)
         return resize(image, *self.target(*image.shape[:2]), area=self.area)
 

@@ -204,6 +204,7 @@ class KeypointMatching(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": ANY}, outputs={"*": MAPPING})  # objects, reliability, keypoints, size
     PROVIDES = "object-detection"  # docs/interfaces.md
+    POSITIONS = "image"  # x, y: shares of the frame (plugins.behaviors.upstream)
     WRITES: ClassVar[Mapping[str, tuple[str, ...]]] = {"objects": (
         "objects[].name", "objects[].matches", "objects[].inliers", "objects[].x", "objects[].y",
         "objects[].reliability", "reliability", "keypoints", "width", "height")}

@@ -28,6 +28,7 @@ class OrbRecognition(ProcessingPlugin):
 
     PORTS = Ports(inputs={"*": ARRAY}, outputs={"*": MAPPING})  # an image in, objects + reliability out
     PROVIDES = "object-detection"  # docs/interfaces.md
+    POSITIONS = "image"  # x, y: shares of the frame (plugins.behaviors.upstream)
     WRITES = KeypointMatching.WRITES
     PARAMS: ClassVar[Mapping[str, Any]] = as_params(OrbKeypoints.PARAMS) | KeypointMatching.PARAMS
 

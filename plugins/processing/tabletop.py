@@ -112,4 +112,5 @@ class TabletopClustering(EuclideanClustering):
 
     def process(self, data: Any, context: Context) -> list[Cluster]:
         """The clusters standing on the floor or on a table, left to right."""
-        return tabletop_segment(self.depth_image(data), self.camera, planes=self.params["planes"], **self.clustering())
+        depth, camera = self.depth_image(data)
+        return tabletop_segment(depth, camera, planes=self.params["planes"], **self.clustering())

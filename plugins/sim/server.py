@@ -54,7 +54,7 @@ from runtime.kernel.interfaces import ParamError
 from .client import ENV_KEY, no_delay
 from .devices import ChannelDevice, SimWorld, Spec
 from .disturbances import ENV_SCENARIO, DisturbedPlan, disturbed, fired, record_into
-from .evidence import Trace, watch_parent, write_final, write_ready
+from .evidence import Trace, body_pose, watch_parent, write_final, write_ready
 from .plan import WorldPlan
 from .render import RenderWorker
 from .scenario import ScenarioError
@@ -364,6 +364,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         server.close()
         final = {"time": sim.world.time, "positions": sim.world.movable_positions(), "scenario": args.scenario,
+                 "bodies": {name: body_pose(sim.world, robot.body) for name, robot in sim.robots.items()},
                  "disturbances": fired(plan), "trace": trace.samples}  # fmt: skip
         if args.ready is not None:
             write_final(args.ready, final)

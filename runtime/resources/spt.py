@@ -90,8 +90,9 @@ class ProcessingPlugin(abc.ABC):
     def process(self, data: Any, context: Context) -> Any:
         """The result for ``data`` (the parent's result, or the frame for a root); must not modify ``data``.
 
-        An output plugin returns None when it has nothing to publish for this frame (a service of
-        several inputs whose needed one has not arrived yet): its service then publishes nothing."""
+        A plugin returns None when it has nothing for this frame (a service of several inputs whose
+        needed one has not arrived yet, a frame it already processed): the plugins below it do not run
+        and the services whose outputs lie in its subtree publish nothing."""
 
     def stop(self) -> None:
         """Release what ``setup()`` opened."""
@@ -175,6 +176,10 @@ class Composite:
             if frame.record is not None:
                 frame.record(self.plugin.name, time.perf_counter() - start, True)
             frame.memo[path] = value
+        if value is None:  # nothing for this frame: the subtree's outputs are empty too
+            for below, _ in self.walk(prefix):
+                frame.memo.setdefault(below, None)
+            return
         for child in self.children:
             child.run(value, frame, path)
 

@@ -49,3 +49,34 @@ def test_an_unknown_expect_object_is_refused_at_its_line(tmp_path: Path) -> None
         ckmconf.load(copy / "lab.xml")
     assert f"plan.xml:{line}:" in str(raised.value)
     assert "object 'cylinder_red_strips' does not exist in the environment" in str(raised.value)
+
+
+
+AERIAL = Path("configs/examples/aerial/uavs.xml")
+AWAY = {"quadrotor": [8.55, 2.05, 0.06, 0.0, 0.0, 0.1], "hexarotor": [8.4, 4.3, 0.07, 0.0, 0.0, -0.2]}
+"""The airframes' final base poses (x, y, z, roll, pitch, yaw) on their away pads."""
+
+
+def test_robots_expected_on_their_pads_are_judged_by_their_final_body_poses() -> None:
+    judged = evidence(AERIAL, "cross", {"positions": {}, "bodies": AWAY})
+    assert [(e["object"], e["on"], e["met"]) for e in judged] == [
+        ("quadrotor", "pad_quad_away", True), ("hexarotor", "pad_hexa_away", True)]
+    assert judged[0]["position"] == AWAY["quadrotor"][:3]
+    stayed = AWAY | {"hexarotor": [1.5, 4.2, 0.07, 0.0, 0.0, 0.0]}  # still on its home pad
+    assert [e["met"] for e in evidence(AERIAL, "cross", {"positions": {}, "bodies": stayed})] == [True, False]
+    assert [e["met"] for e in evidence(AERIAL, "cross", {"positions": {}})] == [None, None]  # a record without bodies
+
+
+def test_an_unknown_robot_is_refused_at_its_line_naming_the_robots(tmp_path: Path) -> None:
+    copy = tmp_path / "aerial"
+    shutil.copytree(AERIAL.parent, copy)
+    path = copy / AERIAL.name
+    text = path.read_text().replace('Expect object="quadrotor"', 'Expect object="quadrotr"', 1)
+    path.write_text(text)
+    line = next(i for i, row in enumerate(text.splitlines(), 1) if "quadrotr\"" in row)
+    with pytest.raises(ckmconf.ConfigError) as raised:
+        ckmconf.load(path)
+    message = str(raised.value)
+    assert f"uavs.xml:{line}:" in message
+    assert "object 'quadrotr' does not exist in the environment or the simulated robots; did you mean 'quadrotor'?" \
+        in message

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.mission_scenarios import object_home
 from tests.conftest import REPO
 from tests.runtime.network.conftest import private_network
 
@@ -44,6 +45,7 @@ def test_both_uavs_cross_the_rack_above_it_and_land_on_their_away_pads(tmp_path:
         assert abs(x - px) <= half and abs(y - py) <= half, (body, x, y)  # on its pad
         assert z < 0.3, (body, z)  # resting on its skids
         assert abs(poses[-1][3]) < 0.05 and abs(poses[-1][4]) < 0.05  # level: roll, pitch
+    assert object_home(UAVS, run_dir, "cross") is True  # the plan's own <Expect>s, from the final bodies (D306)
     report = subprocess.run([tool("ckm-mission"), "report", str(run_dir), "--html", "--config", str(UAVS)],
                             cwd=REPO, capture_output=True, text=True, timeout=120)
     assert report.returncode == 0, report.stderr[-2000:]

@@ -238,7 +238,7 @@ def test_the_speed_parameter_scales_the_trajectory_and_bad_values_are_refused(ar
 
 
 def _pose_file(tmp_path: Path, text: str) -> ArmPoses:
-    (tmp_path / "poses.yml").write_text(text)
+    (tmp_path / "poses.yml").write_text("tool: gripper_tool_link\n" + text)  # the Turtlebot's tool point
     loc = Loc(str(tmp_path / "resources.xml"), 1, 1, "/Plugin")
     params = (Param(name="poses", value="poses.yml"), Param(name="model", value="turtlebot"),
               Param(name="joints", value=JOINTS))
@@ -272,6 +272,7 @@ def test_poses_out_of_reach_or_out_of_the_joint_limits_fail_when_asked(tmp_path:
         ("legs:\n", ":1: unknown key 'legs'"),
         ("version: 2\narm:\n  a: 0 0 0 0\n", "unsupported pose file version"),
         ("tool: x\n", "no arm or gripper poses"),
+        ("arm:\n  a: 0.2 0 0.35 1.57\n", "no 'tool': the URDF link whose point the arm poses place (tool: LINK)"),
     ],
 )
 def test_a_bad_pose_file_is_named_with_its_line(text: str, error: str) -> None:
@@ -290,7 +291,7 @@ def test_bad_params_and_files_are_reported(tmp_path: Path) -> None:
     with pytest.raises(OSError, match="cannot read pose file"):
         missing.setup()
     broken = _pose_file(tmp_path, "arm:\n  a: 0.2\n")
-    with pytest.raises(ValueError, match=r"bad pose file: .*poses\.yml:2"):
+    with pytest.raises(ValueError, match=r"bad pose file: .*poses\.yml:3"):  # line 1 is the tool
         broken.setup()
     with pytest.raises(FileNotFoundError, match="robot model"):
         arm_plugin(model="nowhere.urdf").setup()

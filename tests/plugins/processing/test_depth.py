@@ -59,7 +59,8 @@ def plugin(kind: str, params: Mapping[str, object] | None = None, *, name: str =
 
 
 def metres(depth: Any) -> np.ndarray[Any, Any]:
-    return DepthAcquisition(plugin("depth-acquisition")).process(depth, CTX)
+    result: np.ndarray[Any, Any] = DepthAcquisition(plugin("depth-acquisition")).process(depth, CTX)
+    return result
 
 
 def clustering(**params: object) -> EuclideanClustering:

@@ -122,6 +122,7 @@ def test_the_intrinsics_can_come_from_the_camera_s_own_channel(view: tuple[np.nd
         Param(name="camera", value="wrist_camera"), Param(name="tolerance", value="0.03"),
         Param(name="minPoints", value="60"))))
     by_params = plugin(TabletopClustering, "tabletop-clustering", tolerance=0.03, minPoints=60, **intrinsics())
+    assert by_channel.camera is not None and by_params.camera is not None
     assert by_channel.camera.intrinsics(HEIGHT, WIDTH) == pytest.approx(by_params.camera.intrinsics(HEIGHT, WIDTH))
     ours, theirs = by_channel.process(depth, context), by_params.process(depth, context)
     assert [c.points.shape for c in ours] == [c.points.shape for c in theirs] and len(ours) >= 2
