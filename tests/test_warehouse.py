@@ -33,7 +33,7 @@ def test_the_warehouse_validates_and_its_plans_are_coherent() -> None:
     checked = subprocess.run([tool("ckm-mission"), "validate", str(SYSTEM)], capture_output=True, text=True,
                              timeout=300)
     assert checked.returncode == 0, checked.stdout + checked.stderr
-    assert "plan fetch: coherent (2 agents)" in checked.stdout and "plan pick: coherent" in checked.stdout
+    assert "plan fetch: coherent (3 agents)" in checked.stdout and "plan pick: coherent" in checked.stdout
 
 
 @pytest.mark.parametrize(
