@@ -21,8 +21,9 @@ URDF's velocity limit) and ``status`` (ArmStatus: ``{stamp, id, group, pose, sta
 ``tolerance`` of the pose; with ``contact`` (or a pose of ``contactPoses``), also when the joints have
 stood still (each within ``stillness``) short of it for ``settle`` s after the planned time — a
 carried object set down on its support. Failed: an unknown pose or group, a target, or not reached
-``timeout`` s after the planned time. A pose value outside its joint's URDF limits is refused at
-set-up. Time is the frame's stamp.
+``timeout`` s after the planned time. A pose without one value per joint, or outside its joint's URDF
+limits, and a joint the URDF lacks or that is fixed are refused by ``verify`` at the Param. Time is the
+frame's stamp.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from typing import Any, ClassVar
 
 import pybullet as p
 
+from ckmconf.model import System
 from ckmconf.model.resources import Plugin
 from plugins.urdf_model import load_urdf
 from runtime.kernel.interfaces import ParamError
@@ -44,6 +46,9 @@ from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
 from .joint_states import joint_values
 from .kinematics import MODELS
+
+POSES = Entries("value…", count=1, most=32, numbers=True)
+"""The ``poses`` Param's syntax: each pose one number per joint (the count is checked against ``joints``)."""
 
 CUBIC_PEAK = 1.5
 """Peak over mean speed of the controller's cubic rest-to-rest segment (plugins/controllers/trajectory.py)."""
@@ -78,7 +83,7 @@ class JointPoses(ProcessingPlugin):
         P("joints", REQUIRED, "The joints moved, space-separated (any number, revolute or prismatic; also the "
           "order of a JointState without names).", type=str),
         P("poses", REQUIRED, "The named poses, 'name: one value per joint; …' (rad or m, within the URDF's "
-          "limits).", type=str, entries=Entries("value…", count=1, most=32, numbers=True)),
+          "limits).", type=str, entries=POSES),
         P("speed", 0.5, "Velocity scaling until the service Parameter 'speed' sets it.", above=0.0, max=1.0),
         P("tolerance", 0.01, "Largest joint error at which a pose counts as reached (rad or m).", above=0.0),
         P("settle", 0.5, "How long joints stopped short by contact must stand still to count as reached.",
@@ -89,23 +94,58 @@ class JointPoses(ProcessingPlugin):
         P("timeout", 5.0, "Time allowed after the planned duration before a goal fails.", unit="s", above=0.0),
     )
 
+    @classmethod
+    def problems(cls, record: Plugin, system: System | None) -> list[tuple[Any, str]]:
+        """What ``verify`` (and the build) refuses across the Params, at the Param: joints named twice, a
+        pose without one value per joint, a contact pose that is no pose, and against the URDF a joint
+        it lacks, a joint neither revolute nor prismatic, a pose value outside its joint's limits."""
+        given = {p.name: p for p in record.params}
+        joints_param, poses_param = given.get("joints"), given.get("poses")
+        if joints_param is None or poses_param is None:
+            return []  # the manifest check reports a missing Param
+        joints = joints_param.value.split()
+        if not joints or len(set(joints)) != len(joints):
+            return [(joints_param, f"parameter 'joints' must name each joint once, got {joints_param.value!r}")]
+        try:
+            poses = POSES.parse(poses_param.value, "poses")
+        except ParamError:
+            return []  # the manifest check reports the syntax at its entry
+        found: list[tuple[Any, str]] = []
+        for name, values in poses.items():
+            if len(values) != len(joints):
+                found.append((poses_param, f"parameter 'poses': pose {name!r} needs one value per joint "
+                                           f"({len(joints)}: {' '.join(joints)}), got {len(values)}"))
+        contact = given.get("contactPoses")
+        for name in (contact.value.split() if contact is not None else []):
+            if name not in poses:
+                found.append((contact, f"parameter 'contactPoses' names pose {name!r}, which is not one of "
+                                       f"'poses' ({', '.join(poses)})"))
+        model = given.get("model")
+        if found or model is None:
+            return found
+        path = _model_path(record, model.value)
+        if not path.is_file():
+            return [(model, f"robot model {path} does not exist")]
+        try:
+            limits = _joint_limits(path, joints)
+        except ValueError as exc:
+            return [(joints_param, str(exc))]
+        for name, values in poses.items():
+            for joint, q in zip(joints, values, strict=True):
+                lower, upper, _ = limits[joint]
+                if lower < upper and not lower - 1e-9 <= q <= upper + 1e-9:
+                    found.append((poses_param, f"parameter 'poses': pose {name!r} puts joint {joint!r} at {q}, "
+                                               f"outside its limits {lower} to {upper} in {path.name}"))
+        return found
+
     def __init__(self, record: Plugin) -> None:
         super().__init__(record)
+        if (problems := self.problems(record, None)):
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
         v = self.params
         self.joints: list[str] = str(v["joints"]).split()
-        if not self.joints or len(set(self.joints)) != len(self.joints):
-            raise ParamError(f"{self.owner}: parameter 'joints' must name each joint once, got {v['joints']!r}")
         self.poses: dict[str, list[float]] = {name: [float(q) for q in values] for name, values in v["poses"].items()}
-        wrong = [name for name, values in self.poses.items() if len(values) != len(self.joints)]
-        if wrong:
-            raise ParamError(f"{self.owner}: parameter 'poses': pose {wrong[0]!r} needs one value per joint "
-                             f"({len(self.joints)}: {' '.join(self.joints)})")
-        unknown = [name for name in str(v["contactPoses"]).split() if name not in self.poses]
-        if unknown:
-            raise ParamError(f"{self.owner}: parameter 'contactPoses' names pose {unknown[0]!r}, which is not one "
-                             f"of 'poses' ({', '.join(self.poses)})")
-        model = str(v["model"])
-        self.model_path = config_dir(record) / model if Path(model).suffix else MODELS / f"{model}.urdf"
+        self.model_path = _model_path(record, str(v["model"]))
         self.speed: float = v["speed"]
         self.contact_poses = frozenset(str(v["contactPoses"]).split())
         self.velocity: list[float] = []
@@ -114,30 +154,14 @@ class JointPoses(ProcessingPlugin):
         self._history: deque[tuple[float, tuple[float, ...]]] = deque()
 
     def setup(self) -> None:
-        """Each joint's limits and velocity from the URDF (loaded privately, then closed); every pose checked."""
+        """Each joint's velocity limit from the URDF (loaded privately, then closed); the Params re-checked."""
         if not self.model_path.is_file():
             raise FileNotFoundError(f"{self.owner}: robot model {self.model_path} does not exist")
         try:
-            model = load_urdf(self.model_path)
+            limits = _joint_limits(self.model_path, self.joints)
         except ValueError as exc:
             raise ValueError(f"{self.owner}: {exc}") from None
-        try:
-            missing = [j for j in self.joints if j not in model.joints]
-            if missing:
-                raise ValueError(f"{self.owner}: the robot model {self.model_path} has no joint {', '.join(missing)}")
-            infos = [p.getJointInfo(model.body, model.joints[j], physicsClientId=model.client) for j in self.joints]
-        finally:
-            p.disconnect(physicsClientId=model.client)
-        for joint, info in zip(self.joints, infos, strict=True):
-            if info[2] not in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
-                raise ValueError(f"{self.owner}: joint {joint!r} of {self.model_path} is not revolute or prismatic")
-        self.velocity = [float(info[11]) or 1.0 for info in infos]
-        for name, values in self.poses.items():
-            for joint, info, q in zip(self.joints, infos, values, strict=True):
-                lower, upper = float(info[8]), float(info[9])
-                if lower < upper and not lower - 1e-9 <= q <= upper + 1e-9:
-                    raise ValueError(f"{self.owner}: pose {name!r} puts joint {joint!r} at {q}, outside its limits "
-                                     f"{lower} to {upper} in {self.model_path}")
+        self.velocity = [limits[j][2] or 1.0 for j in self.joints]
 
     def apply_service_parameters(self, parameters: Mapping[str, Any]) -> None:
         """The service's ``speed`` Parameter: the velocity scaling of later goals."""
@@ -238,6 +262,31 @@ class JointPoses(ProcessingPlugin):
             return False
         bound = self.params["stillness"]
         return all(max(q) - min(q) < bound for q in zip(*(s for _, s in self._history), strict=True))
+
+
+def _model_path(record: Plugin, model: str) -> Path:
+    """A model name of plugins/sim/models, or a path relative to the configuration file."""
+    return config_dir(record) / model if Path(model).suffix else MODELS / f"{model}.urdf"
+
+
+def _joint_limits(path: Path, joints: Sequence[str]) -> dict[str, tuple[float, float, float]]:
+    """Each joint's (lower, upper, velocity) limits in the URDF at ``path``.
+
+    Raises:
+        ValueError: the model cannot be loaded, lacks a joint, or a joint is not revolute or prismatic.
+    """
+    model = load_urdf(path)
+    try:
+        missing = [j for j in joints if j not in model.joints]
+        if missing:
+            raise ValueError(f"the robot model {path} has no joint {', '.join(missing)}")
+        infos = {j: p.getJointInfo(model.body, model.joints[j], physicsClientId=model.client) for j in joints}
+    finally:
+        p.disconnect(physicsClientId=model.client)
+    for joint, info in infos.items():
+        if info[2] not in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
+            raise ValueError(f"joint {joint!r} of {path} is not revolute or prismatic")
+    return {j: (float(info[8]), float(info[9]), float(info[11])) for j, info in infos.items()}
 
 
 def _speed(value: Any, where: str) -> float:

@@ -129,13 +129,13 @@ def test_params_that_cannot_work_are_refused_when_built(params: dict[str, str], 
         service("carrier", values.pop("joints"), values.pop("poses"), **values)
 
 
-def test_a_pose_beyond_the_urdf_s_limits_or_an_unknown_joint_is_refused_at_set_up() -> None:
+def test_a_pose_beyond_the_urdf_s_limits_or_an_unknown_joint_is_refused_when_built() -> None:
     with pytest.raises(ValueError, match=r"pose 'high' puts joint 'lift_joint' at 0.5, outside its limits 0.0 to 0.3"):
-        service("carrier", "lift_joint", "down: 0.0; high: 0.5").setup()
+        service("carrier", "lift_joint", "down: 0.0; high: 0.5")
     with pytest.raises(ValueError, match="has no joint mast_joint_x"):
-        service("carrier", "mast_joint_x", "down: 0.0").setup()
+        service("carrier", "mast_joint_x", "down: 0.0")
     with pytest.raises(ValueError, match="is not revolute or prismatic"):
-        service("carrier", "laser_joint", "down: 0.0").setup()
+        service("carrier", "laser_joint", "down: 0.0")
 
 
 def test_an_unnamed_joint_state_gives_its_leading_positions_and_too_few_are_refused() -> None:
