@@ -1,8 +1,9 @@
 """ckm-bench mission: the use case's missions over N seeds, individual vs cooperative (thesis §7.5, Table 7.9).
 
-Per seed ``k`` a randomised copy of the configuration (:mod:`benchmarks.mission_random`: object
-poses on the workbench, the Turtlebot's start pose, sensor noise and the world's seed) runs once
-per plan — the same copy for every plan, so the plans are compared on the same draws — with
+Per seed ``k`` a randomised copy of the configuration (:mod:`benchmarks.mission_random`, any
+configuration: the movable objects' poses, every mobile robot's start, sensor noise and the world's
+seed, as its ``<Validation><Randomise>`` says; one line per seed says what moved) runs once per
+plan — the same copy for every plan, so the plans are compared on the same draws — with
 ``ckm-run COPY --plan PLAN --duration D [--time-scale S] --log-dir OUT/runs/PLAN-seedK`` in its own
 process group, bounded by a wall timeout (``D / S`` plus a margin: SIGINT, then SIGKILL). Its
 output goes to ``OUT/runs/PLAN-seedK.log``.
@@ -45,7 +46,7 @@ from typing import Any
 
 import ckmconf
 from benchmarks.mission_compact import compact
-from benchmarks.mission_random import NS, Jitter, Q, randomise
+from benchmarks.mission_random import NS, Q, randomise
 from benchmarks.mission_report import describe, plot, state_figures, summarise, thesis_figures
 from benchmarks.mission_scenarios import (
     Scenario,
@@ -334,8 +335,14 @@ def run(argv: Sequence[str] | None = None) -> dict[str, Any]:
     for seed in range(args.first_seed, args.first_seed + args.runs):
         config, changed = base, None
         if not args.no_randomise:
-            randomised = randomise(base, seed, out / "configs" / f"seed{seed}", Jitter(noise_scale=args.noise_scale))
+            try:
+                randomised = randomise(base, seed, out / "configs" / f"seed{seed}", noise_scale=args.noise_scale)
+            except (ckmconf.ConfigError, ValueError) as error:
+                parser.error(f"seed {seed}: cannot randomise {base}: {error}")
             config, changed = randomised.config, randomised.to_json()
+            print(randomised.describe(), file=sys.stderr)
+        else:
+            print(f"seed {seed}: not randomised (--no-randomise): the configuration as it is", file=sys.stderr)
         for plan in args.plans:
             name = f"{plan}-seed{seed}"
             code, wall = _run(config, plan, out / "runs" / name, scenario, args.duration, scale, out / "runs",

@@ -23,16 +23,10 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import ckmconf
-from benchmarks.mission_random import (
-    NAVIGATION_PARAM,
-    NS,
-    ROBOT,
-    Q,
-    param_values,
-    params_named,
-    set_param,
-    sim_channels,
-)
+from benchmarks.mission_random import NS, Q, param_values, params_named, set_param, sim_channels
+
+ROBOT = "turtlebot"  # the lab's mobile manipulator (this layout is the lab's own)
+NAVIGATION_PARAM = "initialPose"  # its Navigation resource's start estimate (amcl-navigation)
 
 DROP_TABLE = (6.2, 5.6)  # the drop table's centre (m); its front edge is 0.3 m below, at y 5.3
 HOME_AREA = ((5.4, 4.2), (6.9, 4.2), (6.9, 5.9), (5.4, 5.9))

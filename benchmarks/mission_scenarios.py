@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import ckmconf
-from benchmarks.mission_random import _inside
+from benchmarks.mission_placement import _inside
 from ckmconf.model.environment import EnvObject, Geometry3D, Geometry25D
 from plugins.sim.disturbances import ENV_SCENARIO, Disturbances
 from plugins.sim.plan import WorldPlan

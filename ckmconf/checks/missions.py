@@ -25,6 +25,7 @@ def check_missions(system: System, scope: Scope, report: Reporter) -> None:
     _check_nesting(system, report)
     for plan in system.plans:
         _check_plan(plan, system, scope, report)
+    _check_randomise(system, report)
 
 
 def _check_behavior(behavior: Behavior, scope: Scope, report: Reporter) -> None:
@@ -350,3 +351,18 @@ def _check_expects(plan: Plan, system: System, report: Reporter) -> None:
             report.error(expect, missing("object", expect.on, "the environment", objects), "on")
         if expect.in_ is not None and expect.in_ not in areas:
             report.error(expect, missing("area", expect.in_, "the environment", areas), "in")
+
+
+def _check_randomise(system: System, report: Reporter) -> None:
+    """``<Validation><Randomise objects>`` (D301) names environment Objects, each once."""
+    randomise = None if system.validation is None else system.validation.randomise
+    if randomise is None or not randomise.objects or system.environment is None:
+        return
+    objects = [o.name for o in system.environment.objects]
+    seen: set[str] = set()
+    for name in randomise.objects:
+        if name not in objects:
+            report.error(randomise, missing("object", name, "the environment", objects), "objects")
+        elif name in seen:
+            report.error(randomise, f"object {name!r} is named twice in objects", "objects")
+        seen.add(name)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
-from ..binding import Record, attr, children, text
+from ..binding import Record, attr, child, children, text
 from ..expressions import TRANSITION, Vocabulary
 from .conditions import ConditionRecord
 from .params import Param
@@ -245,8 +245,20 @@ class Plan(Record):
 
 
 @dataclass(frozen=True, kw_only=True)
+class Randomise(Record):
+    """<Randomise>: what ``ckm-bench mission`` moves per seed (D301); ``objects`` None: every movable object."""
+
+    TAG = "Randomise"
+    objects: tuple[str, ...] | None = attr(default=None)
+    object_xy: float = attr(xml="objectXY", default=0.03)
+    object_yaw: float = attr(default=0.3)
+    start_xy: float = attr(xml="startXY", default=0.15)
+    start_yaw: float = attr(default=0.2)
+
+
+@dataclass(frozen=True, kw_only=True)
 class Validation(Record):
-    """<Validation>: off-line validation settings (§5.4, eq. 5.7)."""
+    """<Validation>: off-line validation settings (§5.4, eq. 5.7) and the bench's <Randomise>."""
 
     TAG = "Validation"
     p_min: float = attr(default=0.9)
@@ -254,3 +266,4 @@ class Validation(Record):
     coverage: float = attr(default=1.0)
     step: float = attr(default=0.1)
     horizon: float = attr(default=3600.0)
+    randomise: Randomise | None = child(default=None)

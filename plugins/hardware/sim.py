@@ -120,6 +120,8 @@ _SPEC = Params(
     P("drag", 0.3, "Multirotor: linear drag of the body.", unit="N/(m/s)", min=0.0),
     P("yawMoment", 0.016, "Multirotor: a rotor's reaction torque per newton of its thrust.", unit="N·m/N",
       above=0.0),
+    P("failsafe", 1.0, "Multirotor: simulated seconds without a set-point after which it hovers 2 s, then "
+                       "lands at 0.5 m/s, as PX4 does on offboard loss (0: never).", unit="s", min=0.0),
     P(
         "latency",
         0.0,

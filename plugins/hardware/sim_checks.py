@@ -215,6 +215,17 @@ def _map(environment: Environment) -> MapModel:
     return MapModel.from_environment(environment)
 
 
+def robot_model(channel: HWChannel, system: System) -> Path:
+    """The URDF the robot of ``channel`` (a ``sim`` HWChannel) is loaded from (see :func:`_model_file`)."""
+    values = {p.name: p.value for p in channel.params}
+    return _model_file(channel, {"body": values.get("body", ""), "model": values.get("model", "")}, system)[0]
+
+
+def base_radius(path: Path) -> float | None:
+    """How far the robot's root link reaches from its origin in the plane (see :func:`_base_radius`)."""
+    return _base_radius(path)
+
+
 def _base_radius(path: Path) -> float | None:
     """How far the robot's root link reaches from its origin in the plane: the half diagonal of a box
     collision, a cylinder's or sphere's radius (the largest of its collisions); None when it has none."""

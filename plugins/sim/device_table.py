@@ -67,6 +67,9 @@ class Device:
     modes: tuple[str, ...] = ()
     required: tuple[str, ...] = ()
     optional: tuple[str, ...] = ()
+    typical_noise: float | None = None
+    """A typical ``noise`` s.d. (the device's units) for a channel that gives none: what ``ckm-bench mission``
+    scales per seed (D301); None where no figure fits every robot (a joint's raw units depend on its scale)."""
 
     @property
     def name(self) -> str:
@@ -140,7 +143,7 @@ def _gripper(kind: str) -> Device:
 
 
 MULTIROTOR = ("actuator", "rotors", "spin", "maxThrust")
-AIRFRAME = ("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment")
+AIRFRAME = ("thrustLag", "maxTilt", "maxSpeed", "maxClimb", "maxYawRate", "drag", "yawMoment", "failsafe")
 
 
 def _axis(kind: str) -> Device:
@@ -167,6 +170,7 @@ DEVICES: tuple[Device, ...] = (
         size=fixed(1),
         required=("joint", "ticksPerRev"),
         optional=("noise",),
+        typical_noise=20.0,  # ~0.25 % of a Kobuki wheel's top speed
     ),
     Device(
         kind="pwm",
@@ -219,6 +223,7 @@ DEVICES: tuple[Device, ...] = (
         size=ANY_SIZE,
         required=("sensor", "fov"),
         optional=("link", "rangeMin", "noise"),
+        typical_noise=0.01,  # a Hokuyo URG's ±1 cm
     ),
     Device(
         kind="stream",
@@ -252,6 +257,7 @@ DEVICES: tuple[Device, ...] = (
         size=fixed(6),
         required=("sensor",),
         optional=("link", "noise"),
+        typical_noise=0.01,
     ),
     Device(
         kind="analog",
@@ -262,6 +268,7 @@ DEVICES: tuple[Device, ...] = (
         size=fixed(1),
         required=("sensor",),
         optional=("link", "noise"),
+        typical_noise=0.01,
     ),
     Device(
         kind="bus",
@@ -284,6 +291,7 @@ DEVICES: tuple[Device, ...] = (
         size=fixed(2),
         required=("sensor",),
         optional=("link", "noise"),
+        typical_noise=0.05,
     ),
     Device(
         kind="bus",
@@ -295,6 +303,7 @@ DEVICES: tuple[Device, ...] = (
         size=fixed(3),
         required=("sensor",),
         optional=("link", "noise"),
+        typical_noise=0.03,  # UWB
     ),
     Device(
         kind="analog",
@@ -306,6 +315,7 @@ DEVICES: tuple[Device, ...] = (
         size=fixed(1),
         required=("sensor",),
         optional=("link", "noise"),
+        typical_noise=0.01,
     ),
     Device(
         kind="bus",

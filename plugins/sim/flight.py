@@ -20,6 +20,11 @@ counter-clockwise). :class:`Multirotor` flies it, at every physics step
 Nothing clamps the position: a thrust that cannot hold the weight makes the robot sink. On the
 ground with a set-point that does not climb (vz ≤ 0) it is landed: the rotors stop and it rests on
 its skids (horizontal set-points are ignored there); a climbing set-point takes off.
+
+Set-point loss: as PX4 leaves offboard mode when its set-points stop (``COM_OF_LOSS_T``), a flying
+robot that receives no set-point for ``failsafe`` simulated seconds (0: never) hovers for
+:data:`FAILSAFE_HOVER` s and then descends at :data:`FAILSAFE_DESCENT` m/s until it has landed; a new
+set-point ends it. So a UAV whose flight computer died does not fly on with its last command.
 """
 
 from __future__ import annotations
@@ -47,6 +52,8 @@ ATTITUDE_DAMPING = 0.8
 YAW_RATE = 4.0  # rad/s: yaw's loop is slower, its moment (the rotors' drag) a few % of their thrust's
 LIFTED = 0.2  # s: landed, but off the ground this long (not a bounce): it flies again
 UP_CONTACT = 0.7  # a contact whose normal is this close to vertical is ground under the robot
+FAILSAFE_HOVER = 2.0  # s of hover once the set-points stopped, before the failsafe landing
+FAILSAFE_DESCENT = 0.5  # m/s, the failsafe landing's descent (at most maxClimb)
 
 
 @dataclass(frozen=True)
@@ -63,6 +70,7 @@ class Airframe:
     max_yaw_rate: float = 2.0  # rad/s
     drag: float = 0.3  # N per m/s of the body's velocity
     yaw_moment: float = 0.016  # N·m of reaction torque per N of thrust
+    failsafe: float = 1.0  # s without a set-point before the failsafe hover and landing (0: never)
 
     @classmethod
     def from_values(cls, v: dict[str, object], owner: str) -> Airframe:
@@ -95,6 +103,7 @@ class Airframe:
             number("maxYawRate"),
             number("drag"),
             number("yawMoment"),
+            number("failsafe"),
         )
 
     def setpoint(self, values: Sequence[float], owner: str) -> tuple[float, float, float, float]:
@@ -175,6 +184,9 @@ class Multirotor:
         self.target = np.zeros(len(self.links))
         self.setpoint = (0.0, 0.0, 0.0, 0.0)
         self.landed = False
+        self.failsafe = False
+        """Whether the set-points stopped and the failsafe flies the robot (module docstring)."""
+        self._commanded = robot.world.time  # when the last set-point arrived (simulated s)
         self._airborne = 0  # steps since the robot last stood on something
         self._yaw: float | None = None  # the yaw held, the yaw rate integrated
         rate = min(ATTITUDE_RATE, ATTITUDE_BANDWIDTH / frame.thrust_lag) if frame.thrust_lag > 0 else ATTITUDE_RATE
@@ -196,11 +208,23 @@ class Multirotor:
         """Fly the set-point (vx, vy, vz, yaw_rate) from now on; ValueError naming ``owner`` (default:
         the first channel's) if it is not one."""
         self.setpoint = self.frame.setpoint(values, owner or self.owner)
+        self._commanded = self.robot.world.time
+        self.failsafe = False
 
     def detach(self) -> None:
         """Stop pushing the body (the rotors are off from the next step)."""
         if self.push in self.robot.world.before_step:
             self.robot.world.before_step.remove(self.push)
+
+    def _failsafe_setpoint(self) -> tuple[float, float, float, float]:
+        """The set-point to fly: the last one, or once set-points stopped the failsafe's hover, then descent."""
+        silent = self.robot.world.time - self._commanded
+        if self.frame.failsafe <= 0.0 or silent <= self.frame.failsafe:
+            return self.setpoint
+        self.failsafe = True
+        if silent <= self.frame.failsafe + FAILSAFE_HOVER:
+            return (0.0, 0.0, 0.0, 0.0)
+        return (0.0, 0.0, -min(FAILSAFE_DESCENT, self.frame.max_climb), 0.0)
 
     def _on_ground(self) -> bool:
         contacts = p.getContactPoints(bodyA=self.robot.body, physicsClientId=self.robot.world.client)
@@ -215,7 +239,7 @@ class Multirotor:
         rotation = np.array(p.getMatrixFromQuaternion(orientation)).reshape(3, 3)
         velocity = np.asarray(linear)
         yaw = math.atan2(rotation[1, 0], rotation[0, 0])
-        vx, vy, vz, yaw_rate = self.setpoint
+        vx, vy, vz, yaw_rate = self._failsafe_setpoint()
         on_ground = self._on_ground()
         self._airborne = 0 if on_ground else self._airborne + 1
         if vz > 0.0 or self._airborne * dt > LIFTED:  # taking off, or lifted (pushed off a ledge): fly

@@ -15,7 +15,7 @@ import pytest
 import ckmconf
 from benchmarks.cli import BENCHMARKS, TAKES_OPTIONS, main
 from benchmarks.mission import collect, layout_config, mission_wall, run_once, success_finals
-from benchmarks.mission_random import DEFAULT_NOISE, OBJECTS, ROBOT_RADIUS, Jitter, footprint_distance, randomise
+from benchmarks.mission_random import Jitter, footprint_distance, randomise
 from benchmarks.mission_report import plot, summarise, wilson
 from benchmarks.mission_scenarios import BUILT_IN, judge, object_home
 from plugins.sim.plan import WorldPlan
@@ -28,6 +28,9 @@ from tests.runtime.network.conftest import private_network
 LAB = Path("configs/usecase/lab.xml")
 PLAN = Path("configs/examples/plan_two_agents.xml")
 Q = "{urn:ckm:1}"
+OBJECTS = ("cylinder_red_stripes", "cylinder_blue_dots")  # the lab's <Randomise objects> (plan.xml)
+ROBOT_RADIUS = 0.2  # the Kobuki base (0.175 m in its URDF) and 2.5 cm of margin
+DEFAULT_NOISE = {"lidar": 0.01, "counter": 20.0}  # the device table's typical noise of the lab's noisy sensors
 
 
 def _sim_params(copy: Path) -> list[dict[str, str]]:
@@ -66,15 +69,16 @@ def test_a_randomised_copy_is_valid_and_moves_what_it_should_by_bounded_amounts(
             else:
                 assert obj.pose == old
         # the start pose: the same in every channel of the Turtlebot and in Navigation's initialPose
-        assert done.start is not None
-        x, y, yaw = done.start
+        assert list(done.starts) == ["turtlebot"] and list(done.kept) == ["nao"]
+        start = done.starts["turtlebot"]
+        x, y, yaw = start
         assert abs(x - 1.5) <= 0.15 and abs(y - 1.5) <= 0.15 and abs(yaw - 0.785) <= 0.2
         assert 0.3 + ROBOT_RADIUS <= x <= 2.6 - ROBOT_RADIUS and 0.3 + ROBOT_RADIUS <= y <= 2.6 - ROBOT_RADIUS
         assert all(footprint_distance(o, x, y) >= ROBOT_RADIUS for o in copy.environment.objects)
         channels = _sim_params(done.config)
         poses = {c["pose"] for c in channels if c.get("body") == "turtlebot" and "pose" in c}
-        assert len(poses) == 1 and [float(v) for v in poses.pop().split()] == pytest.approx(done.start, abs=1e-4)
-        assert [float(v) for v in _initial_pose(done.config).split()] == pytest.approx(done.start, abs=1e-4)
+        assert len(poses) == 1 and [float(v) for v in poses.pop().split()] == pytest.approx(start, abs=1e-4)
+        assert [float(v) for v in _initial_pose(done.config).split()] == pytest.approx(start, abs=1e-4)
         nao = [c["pose"] for c in channels if c.get("body") == "nao" and "pose" in c]
         assert nao == ["7.6 6.78 -1.5708"]  # the Nao is not moved
         # noise: the lidar's and the encoders' s.d. scaled by the seed's factor; the world's seed is the seed
@@ -87,7 +91,7 @@ def test_a_randomised_copy_is_valid_and_moves_what_it_should_by_bounded_amounts(
         assert set(done.noise) == {"kobuki/left_encoder", "kobuki/right_encoder", "turtlebot/hokuyo"}
         plan = WorldPlan.of(list(copy.nodes))
         assert plan is not None and plan.seed == seed
-        assert [float(v) for v in plan.bodies["turtlebot"][1].split()] == pytest.approx(done.start, abs=1e-4)
+        assert [float(v) for v in plan.bodies["turtlebot"][1].split()] == pytest.approx(start, abs=1e-4)
 
 
 def test_the_same_seed_gives_the_same_copy_and_another_seed_another(tmp_path: Path) -> None:
@@ -97,9 +101,10 @@ def test_the_same_seed_gives_the_same_copy_and_another_seed_another(tmp_path: Pa
     assert first.to_json() == again.to_json() != other.to_json()
     for name in ("nodes.xml", "resources.xml", "environment.xml"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
-    quiet = randomise(LAB, 7, tmp_path / "d", Jitter(noise_scale=0.0))
+    quiet = randomise(LAB, 7, tmp_path / "d", noise_scale=0.0)
     assert quiet.noise_factor == 0.0 and all(v == 0.0 for v in quiet.noise.values())
-    assert quiet.objects == first.objects and quiet.start == first.start  # the same draws, the noise aside
+    assert quiet.objects == first.objects and quiet.starts == first.starts  # the same draws, the noise aside
+    assert randomise(LAB, 7, tmp_path / "e", Jitter(noise_scale=0.0)).to_json() == quiet.to_json()  # the lab's own
 
 
 def test_the_randomised_world_holds_the_objects_on_the_table_and_the_robot_clear(tmp_path: Path) -> None:
@@ -114,15 +119,10 @@ def test_the_randomised_world_holds_the_objects_on_the_table_and_the_robot_clear
             x, y, z = where[name]
             assert math.hypot(x - done.objects[name][0], y - done.objects[name][1]) < 0.005
             assert z > 0.30
-        assert done.start is not None
-        assert math.hypot(where["turtlebot"][0] - done.start[0], where["turtlebot"][1] - done.start[1]) < 0.02
+        start = done.starts["turtlebot"]
+        assert math.hypot(where["turtlebot"][0] - start[0], where["turtlebot"][1] - start[1]) < 0.02
     finally:
         sim.world.close()
-
-
-def test_a_configuration_without_the_objects_is_refused_by_name(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="cylinder_red_stripes"):
-        randomise(Path("configs/examples/environment_objects.xml"), 1, tmp_path / "copy")
 
 
 def test_wilson_interval_matches_its_formula_at_known_points() -> None:
@@ -140,7 +140,9 @@ def test_bench_runs_a_plan_and_its_summary_is_what_the_recordings_say(
     argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "2"]
     argv += ["--duration", "30", "--time-scale", "0", "--no-randomise", "--out", str(out)]
     assert main(argv) == 0
-    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    printed = capsys.readouterr()
+    assert "seed 2: not randomised (--no-randomise)" in printed.err
+    result = json.loads(printed.out.strip().splitlines()[-1])
     assert json.loads((out / "summary.json").read_text()) == result
     (plan,) = result["plans"]
     assert set(plan) >= {"plan", "runs", "success_rate", "mean_mission_s", "realtime_factor", "states"}
@@ -189,10 +191,14 @@ def test_a_lockstep_bench_runs_without_the_default_time_scale(
     # ckm-run refuses --lockstep beside --time-scale: the bench must not pass its default scale along
     out = tmp_path / "bench"
     argv = ["mission", "--json", "--config", str(PLAN), "--plans", "fetch-together", "--runs", "1"]
-    argv += ["--duration", "30", "--lockstep", "0.01", "--no-randomise", "--out", str(out)]
+    argv += ["--duration", "30", "--lockstep", "0.01", "--out", str(out)]
     assert main(argv) == 0
-    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    printed = capsys.readouterr()
+    result = json.loads(printed.out.strip().splitlines()[-1])
     assert result["time_scale"] is None and result["plans"][0]["success_rate"] == 1.0
+    # a plan with no environment and no simulated robot: randomised, and the line says that nothing moved (D301)
+    assert "seed 1: objects moved: none; starts moved: none; noise none (no noisy sensor)" in printed.err
+    assert result["randomised"] and result["results"][0]["randomised"]["objects"] == {}
     command = (out / "runs" / "fetch-together-seed1.log").read_text().splitlines()[0]
     assert "--lockstep 0.01" in command and "--time-scale" not in command
 

@@ -14,13 +14,14 @@ import pytest
 
 import ckmconf
 from benchmarks.mission_compact import DOCK_POSE, DROP_TABLE, NAV_HOME_GOAL, START, compact
-from benchmarks.mission_random import ROBOT_RADIUS, footprint_distance
+from benchmarks.mission_random import footprint_distance
 from plugins.environment.geometry import Footprint
 from plugins.navigation.obstacles import ScanObstacles
 from plugins.navigation.routes import Routes
 from tests.conftest import CONFIGS
 
 LAB = CONFIGS / "usecase" / "lab.xml"
+ROBOT_RADIUS = 0.2  # the Kobuki base (0.175 m in its URDF) and 2.5 cm of margin
 NAV_GOAL = (7.6, 5.5)  # the NAV behavior's goal at the workbench (behaviors.xml), unchanged
 
 

@@ -83,10 +83,11 @@ class Flight:
         return math.acos(min(1.0, p.getMatrixFromQuaternion(orientation)[8]))
 
     def go(self, vx: float, vy: float, vz: float, yaw_rate: float, seconds: float) -> list[np.ndarray]:
-        """Fly the set-point for ``seconds``; the positions read every TICK."""
-        self.fly.write((vx, vy, vz, yaw_rate))
+        """Fly the set-point for ``seconds``, sent every TICK as an offboard stream is; the positions read
+        every TICK."""
         track = []
         for _ in range(round(seconds / TICK)):
+            self.fly.write((vx, vy, vz, yaw_rate))
             self.clock.advance(TICK)
             track.append(self.position())
         return track
@@ -162,6 +163,45 @@ def test_take_off_and_landing(flight: Flight) -> None:
     assert np.abs(flight.velocity()).max() < 0.01
     flight.go(0.0, 0.0, 0.5, 0.0, 1.0)
     assert flight.position()[2] - flight.rest > 0.3  # and it takes off again
+
+
+def test_set_points_that_stop_make_it_hover_then_land_where_it_was(flight: Flight) -> None:
+    """PX4's offboard loss: no set-point for ``failsafe`` (1 s) → hover 2 s → descend at 0.5 m/s to the ground."""
+    flight.climb_to(1.5)
+    flight.go(0.8, 0.0, 0.0, 0.0, 1.0)  # flying ahead when its flight computer goes silent
+    lost = flight.position()
+    track = []
+    for _ in range(round(1.0 / TICK)):  # no set-point from here on: the last one flies for 1 s
+        flight.clock.advance(TICK)
+        track.append(flight.position())
+    assert not flight.flyer.failsafe and track[-1][0] - lost[0] > 0.6  # still flying its last command
+    for _ in range(round(2.0 / TICK)):
+        flight.clock.advance(TICK)
+        track.append(flight.position())
+    assert flight.flyer.failsafe
+    assert np.linalg.norm(flight.velocity()) < 0.15  # hovering
+    height = track[-1][2]
+    for _ in range(round(8.0 / TICK)):  # bounded: 1.5 m at 0.5 m/s is 3 s
+        flight.clock.advance(TICK)
+        track.append(flight.position())
+        if flight.flyer.landed:
+            break
+    assert flight.flyer.landed and height - flight.rest > 1.2
+    end = flight.position()
+    assert end[2] == pytest.approx(flight.rest, abs=0.01)
+    assert math.dist(end[:2], track[round(2.2 / TICK)][:2]) < 0.3  # down where it hovered, not blown away
+    flight.go(0.0, 0.0, 1.0, 0.0, 1.0)  # a new set-point ends the failsafe: it takes off again
+    assert not flight.flyer.failsafe and flight.position()[2] - flight.rest > 0.5
+
+
+def test_a_zero_failsafe_flies_the_last_set_point_on() -> None:
+    flight = Flight("quadrotor", failsafe="0")
+    flight.climb_to(1.0)
+    flight.fly.write((0.0, 0.0, 0.3, 0.0))
+    start = flight.position()
+    for _ in range(round(4.0 / TICK)):
+        flight.clock.advance(TICK)
+    assert not flight.flyer.failsafe and flight.position()[2] - start[2] > 0.9  # still climbing after 4 s
 
 
 @pytest.mark.parametrize("model", list(AIRFRAMES))
@@ -267,22 +307,26 @@ def test_the_example_flies_through_its_channels() -> None:
     clock = ManualClock()
     ch = channels_of(EXAMPLE, clock)
 
+    commands: dict[str, tuple[float, float, float, float]] = {}
+
     def run(seconds: float) -> None:
-        for _ in range(round(seconds / TICK)):
+        for _ in range(round(seconds / TICK)):  # the set-points streamed every TICK, as offboard control does
+            for name, value in commands.items():
+                ch[name].write(value)
             clock.advance(TICK)
             ch["quad_fix"].read()
 
     start = np.array(ch["hexa_fix"].read())
-    ch["quad_velocity"].write((0.0, 0.0, 1.0, 0.0))
-    ch["hexa_velocity"].write((0.0, 0.0, 0.8, 0.0))
+    commands["quad_velocity"] = (0.0, 0.0, 1.0, 0.0)
+    commands["hexa_velocity"] = (0.0, 0.0, 0.8, 0.0)
     run(1.5)
-    ch["quad_velocity"].write((0.0, 0.0, 0.0, 0.5))  # turn 0.5 rad
-    ch["hexa_velocity"].write((0.0, 0.0, 0.0, 0.0))
+    commands["quad_velocity"] = (0.0, 0.0, 0.0, 0.5)  # turn 0.5 rad
+    commands["hexa_velocity"] = (0.0, 0.0, 0.0, 0.0)
     run(1.0)
     sim = find_world(ch["quad_fix"].scope)
     assert sim is not None
     turned = sim.robots["quadrotor"].planar_pose()
-    ch["quad_velocity"].write((1.0, 0.0, 0.0, 0.0))  # then ahead, along the new heading
+    commands["quad_velocity"] = (1.0, 0.0, 0.0, 0.0)  # then ahead, along the new heading
     run(2.0)
     heading = ch["quad_compass"].read()
     assert isinstance(heading, float) and heading == pytest.approx(0.5, abs=0.08)  # noise 0.02
@@ -298,8 +342,8 @@ def test_the_example_flies_through_its_channels() -> None:
     assert hexa[2] - start[2] > 0.8 and math.dist(hexa[:2], start[:2]) < 0.1  # it hovers where it rose
     height = ch["hexa_range"].read()
     assert isinstance(height, float) and height == pytest.approx(hexa[2] - 0.2 + 0.145, abs=0.02)
-    ch["quad_velocity"].write((0.0, 0.0, -1.0, 0.0))
-    ch["hexa_velocity"].write((0.0, 0.0, -1.0, 0.0))
+    commands["quad_velocity"] = (0.0, 0.0, -1.0, 0.0)
+    commands["hexa_velocity"] = (0.0, 0.0, -1.0, 0.0)
     run(4.0)
     assert sim.flyers["quadrotor"].landed and sim.flyers["hexarotor"].landed
     assert ch["quad_range"].read() == pytest.approx(0.09, abs=0.04)  # the camera's height on the skids
@@ -339,6 +383,7 @@ def test_a_multirotor_flies_through_the_world_server(tmp_path: Path, monkeypatch
             height = ground[2]
             while time.monotonic() < deadline and height - ground[2] < 0.5:
                 time.sleep(0.1)
+                fly.write((0.0, 0.0, 1.0, 0.0))  # streamed: set-points that stop make it hover and land
                 value = fix.read()
                 assert isinstance(value, tuple)
                 height = value[2]
@@ -366,9 +411,9 @@ def test_axis_channels_fly_as_the_set_point_channel() -> None:
     fix.read()  # the world's clock starts at its first use (D88), as Flight's first write starts it
     for _ in range(4):  # as Flight settles its robot
         clock.advance(TICK)
-    for backend, value in zip(axes, (0.5, -0.3, 1.0, 0.2), strict=True):
-        backend.write(value)
-    for _ in range(round(2.0 / TICK)):
+    for _ in range(round(2.0 / TICK)):  # each axis streamed every TICK, as Flight.go streams the whole
+        for backend, value in zip(axes, (0.5, -0.3, 1.0, 0.2), strict=True):
+            backend.write(value)
         clock.advance(TICK)
         fix.read()
     assert np.array_equal(np.array(fix.read()), whole.position())
