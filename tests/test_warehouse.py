@@ -94,4 +94,4 @@ def test_the_carrier_picks_the_parcel_it_was_signalled(tmp_path: Path) -> None:
     x, y, z = final["positions"]["parcel"]
     cx, cy, _ = final["positions"]["carrier"]
     assert z > 0.15 + 0.2, z  # lifted: its centre 0.28 m (the lift's carry height) above where it stood
-    assert 0.4 < math.dist((x, y), (cx, cy)) < 0.65  # in the clamp, 0.53 m ahead of the carrier's centre
+    assert 0.4 < math.dist((x, y), (cx, cy)) < 0.65  # in the clamp, 0.45-0.60 m ahead of the carrier's centre
