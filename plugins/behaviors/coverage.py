@@ -12,9 +12,15 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import shapely
 from shapely import affinity
+
+from ckmconf.model import Param, System
+from ckmconf.model.environment import Environment
+from runtime.kernel.interfaces import ParamError
 
 Waypoint = tuple[float, float, float]
 
@@ -73,3 +79,25 @@ def lawnmower(points: list[tuple[float, float]], spacing: float, margin: float =
             waypoints.append((point.x, point.y, math.remainder(yaw, 2 * math.pi)))
         forward = not forward
     return waypoints
+
+
+def area_problems(area: Param, system: System | None) -> list[tuple[Param, str]]:
+    """The ``area`` Param of a sweeping behavior naming no ``<Area>`` of the system's map."""
+    if system is None:
+        return []
+    environment = system.environment
+    names = [a.name for a in environment.areas] if environment is not None else []
+    if area.value in names:
+        return []
+    where = "the system has no <Environment>" if environment is None else f"its Areas: {names}"
+    return [(area, f"parameter 'area' = {area.value!r} is no Area of the map ({where})")]
+
+
+def sweep_waypoints(environment: Environment | None, params: Mapping[str, Any], owner: str) -> list[Waypoint]:
+    """The lawnmower waypoints of the Area ``params["area"]`` (``spacing``; ``margin``, negative: half
+    the spacing; ``along``); ParamError naming ``owner`` when the map has no such Area."""
+    area = next((a for a in environment.areas if a.name == params["area"]), None) if environment else None
+    if area is None:
+        raise ParamError(f"{owner}: parameter 'area' = {params['area']!r} is no Area of the map")
+    spacing, margin = float(params["spacing"]), float(params["margin"])
+    return lawnmower(area.points(), spacing, spacing / 2 if margin < 0 else margin, str(params["along"]))

@@ -13,13 +13,17 @@ MobileBase.Displacement, which drives it on odometry — as APPR does with the c
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ckmconf.model import System
 from ckmconf.model.missions import Behavior as BehaviorRecord
+from ckmconf.model.resources import Plugin
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
+from runtime.verification.entries import Entries
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
@@ -74,6 +78,48 @@ class Dock(_Goals):
 
 
 DOCKING = Uses(Use("dock", "docking", "docks the base and reports the goal's status"))
+DOCKING_KIND = "docking"
+_DOCKS = Entries("x y yaw", count=3, numbers=True)
+
+
+def _docking_plugin(record: BehaviorRecord, system: System) -> tuple[str, Plugin] | None:
+    """The service the behavior uses as ``dock`` and its docking plugin, when it has exactly one."""
+    use = next((u for u in record.uses if u.alias == "dock"), None)
+    if use is None or "." not in use.service:
+        return None
+    resource_name, service_name = use.service.split(".", 1)
+    resource = system.resource(resource_name)
+    service = next((s for s in resource.services if s.name == service_name), None) if resource else None
+    if resource is None or service is None:
+        return None
+    profiles = {scenario.profile for scenario in service.scenarios}
+    outputs = {profile.output_plugin() for profile in resource.profiles if profile.name in profiles}
+    found = [plugin for plugin in resource.plugins if plugin.name in outputs and plugin.kind == DOCKING_KIND]
+    return (use.service, found[0]) if len(found) == 1 else None
+
+
+def dock_problems(record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+    """``dock`` or ``pose``, one of them; a ``dock`` the docking service it uses does not know (D307)."""
+    params = {p.name: p for p in record.params}
+    dock, pose = params.get("dock"), params.get("pose")
+    name = dock.value.strip() if dock is not None else ""
+    if bool(name) == bool(pose is not None and pose.value.strip()):
+        return [(dock or pose or record, "give the dock's name ('dock') or its docked pose ('pose'), one of them")]
+    used = _docking_plugin(record, system) if name and system is not None else None
+    if used is None:
+        return []
+    service, plugin = used
+    text = next((p.value for p in plugin.params if p.name == "docks"), "")
+    try:
+        docks = list(_DOCKS.parse(text, "docks")) if text.strip() else []
+    except ParamError:
+        return []  # the docking plugin's own Param check reports its docks
+    if name in docks:
+        return []
+    close = difflib.get_close_matches(name, docks, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    return [(dock, f"parameter 'dock' = {name!r} is no dock of the docking service {service} "
+                   f"(its docks: {', '.join(docks) or 'none'}){hint}")]
 
 
 class DockRobot(_Goals):
@@ -88,10 +134,16 @@ class DockRobot(_Goals):
     PORTS = Ports(inputs={"*": MAPPING}, outputs={"*": MAPPING})
     action, until = "dock", "docked"
 
+    @classmethod
+    def problems(cls, record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+        """A dock by name or by pose, and a name the docking service knows."""
+        return dock_problems(record, system) if cls.action == "dock" else []
+
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)
-        if self.action == "dock" and bool(self.params["dock"]) == bool(self.params["pose"]):
-            raise ParamError(f"{self.owner}: give the dock's name ('dock') or its docked pose ('pose'), one of them")
+        problems = self.problems(record, None)
+        if problems:
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
 
     def start(self) -> None:
         """Forget the last goal; the goal is sent at the first step."""

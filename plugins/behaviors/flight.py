@@ -18,6 +18,7 @@ import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ckmconf.model import System
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
@@ -108,19 +109,28 @@ class FlyTo(_FlightGoal):
     )
     what = "the flight"
 
+    @classmethod
+    def problems(cls, record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+        """A goal Param, or an input to fly over with an ``altitude``: not both, not neither (D307)."""
+        params = {p.name: p for p in record.params}
+        goal, altitude = params.get("goal"), params.get("altitude")
+        if record.inputs:
+            if goal is not None and goal.value.strip():
+                return [(goal, "give parameter 'goal' or an input to fly over, not both")]
+            if altitude is None:
+                return [(record, "flying over a received position needs parameter 'altitude'")]
+        elif goal is None or not goal.value.strip():
+            return [(record, "parameter 'goal' is required (or an input to fly over)")]
+        return []
+
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)
-        text = str(self.params["goal"])
-        if record.inputs:
-            if text:
-                raise ParamError(f"{self.owner}: give parameter 'goal' or an input to fly over, not both")
-            if self.params["altitude"] is None:
-                raise ParamError(f"{self.owner}: flying over a received position needs parameter 'altitude'")
-            self.point: tuple[float, float, float, float] | None = None
-        else:
-            if not text:
-                raise ParamError(f"{self.owner}: parameter 'goal' is required (or an input to fly over)")
-            self.point = _map_goal(text, self.owner)
+        problems = self.problems(record, None)
+        if problems:
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
+        self.point: tuple[float, float, float, float] | None = None
+        if not record.inputs:
+            self.point = _map_goal(str(self.params["goal"]), self.owner)
 
     def goal(self) -> dict[str, Any] | None:
         """The configured point, or ``altitude`` over the newest received map position."""

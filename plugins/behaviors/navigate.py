@@ -16,6 +16,7 @@ import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ckmconf.model import System
 from ckmconf.model.missions import Behavior as BehaviorRecord
 from runtime.kernel.interfaces import ParamError
 from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
@@ -53,15 +54,25 @@ class NavigateTo(Behavior):
     )
     PORTS = Ports(inputs={"*": ANY})
 
+    @classmethod
+    def problems(cls, record: BehaviorRecord, system: System | None) -> list[tuple[Any, str]]:
+        """One goal source: the ``goal`` Param or an ``input`` that names one of its <Input>s (D307)."""
+        params = {p.name: p for p in record.params}
+        goal, source = params.get("goal"), params.get("input")
+        has_goal, has_source = bool(goal and goal.value.strip()), bool(source and source.value.strip())
+        if has_goal == has_source:
+            return [(source if has_goal else record, "give the goal either as parameter 'goal' or through "
+                                                     "parameter 'input', one of the two")]
+        names = [p.name for p in record.inputs]
+        if source is not None and has_source and source.value.strip() not in names:
+            return [(source, f"parameter 'input' = {source.value.strip()!r} is not one of its inputs ({names})")]
+        return []
+
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)
-        goal, source = self.params["goal"].strip(), self.params["input"]
-        if bool(goal) == bool(source):
-            raise ParamError(f"{self.owner}: give the goal either as parameter 'goal' or through parameter "
-                             "'input', one of the two")
-        names = [p.name for p in record.inputs]
-        if source and source not in names:
-            raise ParamError(f"{self.owner}: parameter 'input' = {source!r} is not one of its inputs ({names})")
+        problems = self.problems(record, None)
+        if problems:
+            raise ParamError(f"{self.owner}: {problems[0][1]}")
 
     def start(self) -> None:
         """Configure the services; with a goal Param, send it at once."""

@@ -27,7 +27,7 @@ from runtime.missions.behaviors import Behavior, BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, P, Params, Ports
 
-from .coverage import lawnmower
+from .coverage import area_problems, sweep_waypoints
 from .messages import _state, robot_pose
 from .sightings import (
     SIGHTING_PARAMS,
@@ -75,12 +75,8 @@ class SearchArea(Behavior):
         area = _value(record, "area")
         if area is None or not area.value.strip():
             found.append((record, "give the Area to sweep: <Param name=\"area\" value=\"…\"/>"))
-        elif system is not None:
-            environment = system.environment
-            names = [a.name for a in environment.areas] if environment is not None else []
-            if area.value not in names:
-                where = "the system has no <Environment>" if environment is None else f"its Areas: {names}"
-                found.append((area, f"parameter 'area' = {area.value!r} is no Area of the map ({where})"))
+        else:
+            found.extend(area_problems(area, system))
         return found
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
@@ -88,14 +84,8 @@ class SearchArea(Behavior):
         problems = self.problems(record, None)
         if problems:
             raise ParamError(f"{self.owner}: {problems[0][1]}")
-        environment = context.environment
-        area = next((a for a in environment.areas if a.name == self.params["area"]), None) if environment else None
-        if area is None:
-            raise ParamError(f"{self.owner}: parameter 'area' = {self.params['area']!r} is no Area of the map")
+        self.waypoints = sweep_waypoints(context.environment, self.params, self.owner)
         self.mount = mount_of(self.params["sensorPose"], self.owner)
-        spacing, margin = self.params["spacing"], self.params["margin"]
-        self.waypoints = lawnmower(area.points(), spacing, spacing / 2 if margin < 0 else margin,
-                                   self.params["along"])
 
     def start(self) -> None:
         """Configure the services and send the first waypoint."""

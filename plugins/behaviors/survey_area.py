@@ -35,7 +35,7 @@ from runtime.missions.behaviors import BehaviorContext, BehaviorStatus
 from runtime.verification.interfaces import Use, Uses
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
-from .coverage import lawnmower
+from .coverage import area_problems, sweep_waypoints
 from .messages import _failed, _Goals, _state, robot_pose
 from .sightings import SIGHTING_USES, labels, map_sighting, mount_of, on_map, perception, sighting_problems
 from .upstream import perception_reports
@@ -108,26 +108,16 @@ class SurveyArea(_Goals):
         if system is not None:
             found.extend(_perception_problems(record, system))
         area = _param(record, "area")
-        if area is not None and system is not None:
-            environment = system.environment
-            areas = [a.name for a in environment.areas] if environment is not None else []
-            if area.value not in areas:
-                where = "the system has no <Environment>" if environment is None else f"its Areas: {areas}"
-                found.append((area, f"parameter 'area' = {area.value!r} is no Area of the map ({where})"))
+        if area is not None:
+            found.extend(area_problems(area, system))
         return found
 
     def __init__(self, record: BehaviorRecord, context: BehaviorContext) -> None:
         super().__init__(record, context)
         if (problems := self.problems(record, None)):
             raise ParamError(f"{self.owner}: {problems[0][1]}")
-        environment = context.environment
-        area = next((a for a in environment.areas if a.name == self.params["area"]), None) if environment else None
-        if area is None:
-            raise ParamError(f"{self.owner}: parameter 'area' = {self.params['area']!r} is no Area of the map")
+        self.waypoints = sweep_waypoints(context.environment, self.params, self.owner)
         self.mount = mount_of(self.params["sensorPose"], self.owner)
-        spacing, margin = self.params["spacing"], self.params["margin"]
-        self.waypoints = lawnmower(area.points(), spacing, spacing / 2 if margin < 0 else margin,
-                                   self.params["along"])
         self.reports = [o.name for o in record.outputs if o.name != GOAL]
 
     def start(self) -> None:

@@ -206,7 +206,7 @@ def test_the_checks_apply_the_rows_sizes_modes_and_params() -> None:
                 "scale": "2",
                 "offset": "1",
                 **dict.fromkeys(("maxThrust", "thrustLag", "maxTilt", "maxSpeed", "maxClimb"), "0.1"),
-                **dict.fromkeys(("maxYawRate", "drag", "yawMoment"), "0.1"),
+                **dict.fromkeys(("maxYawRate", "drag", "yawMoment", "failsafe"), "0.1"),
             }.get(name, "x")
             found = messages(example(device, **{name: value}))
             assert found, (device.where, name)  # a Param the device does not read is refused
