@@ -1,7 +1,8 @@
 """Reading a JointState (sensor_msgs/JointState: ``{stamp, name, position, velocity?, effort?}``) for
 the manipulation services: the positions (and efforts) of the joints a service moves, in the order
 of its Param ``joints``; a JointState without names (as an arm's bus sensor publishes it, D99) is
-taken in that order."""
+taken in that order: its leading positions, as ``controller.joint-trajectory`` takes them, so one bus of
+a robot's joints (a lift, then a clamp's pad) serves a service of the first of them (D303)."""
 
 from __future__ import annotations
 
@@ -41,9 +42,11 @@ def joint_values(state: Any, joints: Sequence[str], owner: str, field: str = "po
         if missing:
             raise ValueError(f"{owner}: joint_states has no {', '.join(missing)}")
         values = [by_name[j] for j in joints]
-    elif len(values) != len(joints):
+    elif len(values) < len(joints):
         raise ValueError(f"{owner}: joint_states has {len(values)} unnamed {field}s, expected "
                          f"{len(joints)} ({' '.join(joints)})")
+    else:
+        values = values[: len(joints)]
     if not all(math.isfinite(q) for q in values):
         raise ValueError(f"{owner}: joint_states holds a {field} that is not finite")
     return values

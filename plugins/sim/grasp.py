@@ -144,7 +144,8 @@ class ChannelGrasp:
     close towards their lower limit. A command below where the fingers stand starts closing; an
     object both fingers touch while closing is caught (checked after each advance of the world).
     It is let go when the fingers have really opened — by ``RELEASE_GAP`` beyond where they
-    stood on it — not on a command: a servo's quantised command to hold its position can round
+    stood on it, or to their open stop when they caught it nearer to it than that — not on a
+    command: a servo's quantised command to hold its position can round
     a step up, and the object must not fall for that. A ``hold_force`` of 0 or less is the
     fingers' own (:func:`hold_force_of`, D296); an object that slips out (too heavy for it) is let go."""
 
@@ -199,7 +200,7 @@ class ChannelGrasp:
                 self.closing, self.slipped = False, True
                 for finger in self.gripper.fingers:
                     self.gripper.robot.command(finger, "position", self.target)
-            elif self._opening() > self.opening_held + self.RELEASE_GAP:
+            elif self._opening() > self.opening_held + self.RELEASE_GAP or self._opened_to_the_stop():
                 LOG.info("t=%.2f: let go of body %s (fingers opened to %.4f m)", self.gripper.robot.world.time,
                          self.gripper.held, self._opening())
                 self.gripper.release()
@@ -209,6 +210,13 @@ class ChannelGrasp:
             self._stall()
             LOG.info("t=%.2f: caught body %s (fingers at %.4f m)", self.gripper.robot.world.time, self.gripper.held,
                      self.opening_held)
+
+    def _opened_to_the_stop(self) -> bool:
+        """Opened as far as the fingers go, beyond where they caught the object: an object caught less than
+        ``RELEASE_GAP`` short of the open stop (as wide as the jaw) is let go there, or it would be held for good."""
+        limit = self.gripper.open_limit
+        position = self._opening()
+        return self.target >= limit - 1e-9 and position >= limit - self.RELEASE_GAP and position > self.opening_held
 
     @property
     def held(self) -> int | None:

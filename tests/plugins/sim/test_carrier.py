@@ -232,3 +232,22 @@ def test_the_clamp_as_configured_holds_by_the_models_own_grip() -> None:
 
 def _where_in(client: int, body: int) -> tuple[float, ...]:
     return tuple(p.getBasePositionAndOrientation(body, physicsClientId=client)[0])
+
+
+def test_a_parcel_as_wide_as_the_open_clamp_is_let_go_when_it_opens_to_its_stop(carrier: Clamp) -> None:
+    """Caught less than the grasp's release gap short of the open stop (a 0.415 m box: the pads stand
+    0.187 m open on it, 3 mm from their 0.19 m limit), the box is let go once the pads reach the stop;
+    before, the release waited for an opening beyond the limit and the carrier drove off with it."""
+    clamp = carrier
+    assert clamp.grip({"id": 1, "action": "open"})["state"] == "reached"
+    cid = clamp.world.client
+    x, y, _ = clamp.robot.planar_pose()
+    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.1, 0.2075, 0.1], physicsClientId=cid)
+    wide = int(p.createMultiBody(2.0, shape, -1, [x + AHEAD, y, 0.101], physicsClientId=cid))
+    clamp.world.step(60)
+    closed = clamp.grip({"id": 2, "action": "close"})
+    assert closed["state"] == "holding" and clamp.grasp.held == wide, closed
+    assert clamp.grasp.opening_held > clamp.grasp.gripper.open_limit - clamp.grasp.RELEASE_GAP
+    assert clamp.grip({"id": 3, "action": "open"})["state"] == "reached"
+    clamp.run(0.5)
+    assert clamp.grasp.held is None
