@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 import pybullet as p
+from ckm_lab.arm import ARM_JOINTS, POSES
 from ckm_lab.devices import XTION_FOV
 
 import ckmconf
@@ -47,7 +48,6 @@ from plugins.processing.image import Resize
 from plugins.processing.recognition import CameraAcquisition, KeypointMatching, OrbKeypoints
 from plugins.processing.tabletop import TabletopClustering
 from plugins.processing.textures import read_model
-from plugins.sim.arm import ARM_JOINTS, POSES
 from plugins.sim.robots import Robot
 from plugins.sim.sensors import Camera
 from plugins.sim.skins import dress

@@ -24,12 +24,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ckm_lab.arm import Arm
 from ckm_lab.devices import HOKUYO, KOBUKI, NAO_HEAD, XTION_FOV
 
 import ckmconf
 from ckmconf.model import System
 from plugins.processing.textures import read_model
-from plugins.sim.arm import Arm
 from plugins.sim.head import PanTiltHead
 from plugins.sim.robots import DiffDriveBase, OdometryNoise, Robot
 from plugins.sim.sensors import Camera, Lidar

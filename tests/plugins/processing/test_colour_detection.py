@@ -17,13 +17,13 @@ from typing import Any
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.arm import ARM_JOINTS, POSES
 from ckm_lab.devices import XTION_FOV
 
 import ckmconf
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.processing.colour import ColourDetection
-from plugins.sim.arm import ARM_JOINTS, POSES
 from plugins.sim.robots import Robot
 from plugins.sim.sensors import Camera
 from plugins.sim.world import World

@@ -17,12 +17,12 @@ import cv2
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.arm import ARM_JOINTS, POSES
 
 import ckmconf
 from ckmconf.model import Param
 from ckmconf.model.resources import Plugin
 from plugins.processing.image import Grayscale, Undistort
-from plugins.sim.arm import ARM_JOINTS, POSES
 from plugins.sim.robots import Robot
 from plugins.sim.sensors import Camera
 from plugins.sim.world import World

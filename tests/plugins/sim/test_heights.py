@@ -9,6 +9,7 @@ from collections.abc import Iterator
 
 import pybullet as p
 import pytest
+from ckm_lab.arm import Arm
 from ckm_lab.devices import HOKUYO, KOBUKI, XTION_FOV
 
 from ckmconf.model import Environment, MapBounds
@@ -22,7 +23,6 @@ from ckmconf.model.environment import (
     Texture,
     Vertex,
 )
-from plugins.sim.arm import Arm
 from plugins.sim.robots import DiffDriveBase
 from plugins.sim.sensors import Camera, Lidar
 from plugins.sim.world import MARKING_THICKNESS, World

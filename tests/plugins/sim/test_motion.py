@@ -9,9 +9,9 @@ import statistics
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.arm import POSES, Arm
 from ckm_lab.devices import HOKUYO, KOBUKI, NAO_HEAD, XTION_FOV
 
-from plugins.sim.arm import POSES, Arm
 from plugins.sim.grasp import Gripper
 from plugins.sim.head import PanTiltHead
 from plugins.sim.robots import DiffDriveBase, OdometryNoise

@@ -7,9 +7,9 @@ import time
 
 import numpy as np
 import pytest
+from ckm_lab.arm import Arm
 from ckm_lab.devices import HOKUYO, XTION_FOV
 
-from plugins.sim.arm import Arm
 from plugins.sim.devices import SimWorld
 from plugins.sim.sensors import Camera, Lidar
 from plugins.sim.world import World

@@ -13,12 +13,12 @@ from typing import Any
 import numpy as np
 import pybullet as p
 import pytest
+from ckm_lab.arm import ARM_JOINTS, POSES
 from ckm_lab.devices import XTION_FOV
 from ckm_lab.scenes import USECASE_MODEL
 
 from ckmconf.loader import load
 from plugins.processing.textures import read_model
-from plugins.sim.arm import ARM_JOINTS, POSES
 from plugins.sim.plan import WorldPlan
 from plugins.sim.render import RenderWorker
 from plugins.sim.robots import Robot

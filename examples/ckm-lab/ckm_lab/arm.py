@@ -1,4 +1,5 @@
-"""The mobile manipulator's arm: predefined poses (thesis Fig. 7.20) reached by pybullet's inverse
+"""The lab Turtlebot's arm in a bare pybullet world, for the lab's tests and benchmarks (no CKM service:
+the general arm is plugin.arm-poses): predefined poses (thesis Fig. 7.20) reached by pybullet's inverse
 kinematics (the MoveIt! role of Table 7.1), and the two-finger gripper."""
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from .robots import Robot
+from plugins.sim.robots import Robot
 
 ARM_JOINTS = ("arm_shoulder_pan_joint", "arm_shoulder_lift_joint", "arm_elbow_flex_joint", "arm_wrist_flex_joint")
 
