@@ -75,7 +75,7 @@ def test_an_object_s_narrowest_width_is_its_shapes_own() -> None:
         ("turtlebot", ("gripper_joint", "gripper_right_joint"), 0.09),
         ("station_arm", ("left_finger_joint", "right_finger_joint"), 0.40),
         ("carrier", ("left_jaw_joint", "right_jaw_joint"), 0.42),
-        ("inspection_arm", ("left_finger_joint", "right_finger_joint"), 0.42),
+        ("inspection_arm", ("left_finger_joint", "right_finger_joint"), 0.54),
     ],
 )
 def test_the_full_opening_is_the_urdf_s(model: str, fingers: tuple[str, str], opening: float) -> None:
