@@ -73,8 +73,8 @@ MIN_DURATION = 0.1
 """Shortest planned motion (s): a goal already met still gets a well-formed trajectory."""
 
 
-class _Goal:
-    """The goal being executed: what it asked, its target and its timing."""
+class MotionGoal:
+    """An arm-motion goal being executed: what it asked, its target and its timing (also plugin.joint-poses')."""
 
     def __init__(self, message: Mapping[str, Any], group: str, pose: str, speed: float) -> None:
         self.id = message.get("id")
@@ -151,7 +151,7 @@ class ArmPoses(ProcessingPlugin):
         self.file: PoseFile | None = None
         self.solutions: dict[str, Solution] = {}
         self.velocity: list[float] = []
-        self.goal: _Goal | None = None
+        self.goal: MotionGoal | None = None
         self._message: Any = None
         self._history: deque[tuple[float, tuple[float, ...]]] = deque()  # the goal's joints over 'settle' s
         self._posture: list[float] | None = None  # the arm joints' last measured positions (the IK's seed)
@@ -259,14 +259,14 @@ class ArmPoses(ProcessingPlugin):
             self._posture = values[: self.arm_count]
         return values
 
-    def _accept(self, message: Any) -> _Goal:
+    def _accept(self, message: Any) -> MotionGoal:
         """A new goal, already failed if it cannot be executed (the reason in its ``error``)."""
         assert self.file is not None
         if not isinstance(message, Mapping):
-            goal = _Goal({}, "", "", self.speed)
+            goal = MotionGoal({}, "", "", self.speed)
             return self._fail(goal, f"goal is {type(message).__name__}, not an ArmGoal mapping")
         group, pose = message.get("group"), message.get("pose")
-        goal = _Goal(message, str(group or ""), str(pose or ""), self.speed)
+        goal = MotionGoal(message, str(group or ""), str(pose or ""), self.speed)
         if isinstance(goal.id, bool) or not isinstance(goal.id, int):
             return self._fail(goal, f"goal id {goal.id!r} is not an integer")
         if group not in ("arm", "gripper"):
@@ -310,11 +310,11 @@ class ArmPoses(ProcessingPlugin):
             goal.indices, goal.target = [self.arm_count], [self.model.gripper_position(self.file.gripper[goal.pose])]
         return goal
 
-    def _fail(self, goal: _Goal, error: str) -> _Goal:
+    def _fail(self, goal: MotionGoal, error: str) -> MotionGoal:
         goal.state, goal.error = "failed", error
         return goal
 
-    def _plan(self, goal: _Goal, positions: Sequence[float], now: float) -> dict[str, Any]:
+    def _plan(self, goal: MotionGoal, positions: Sequence[float], now: float) -> dict[str, Any]:
         """The goal's JointTrajectory from the measured ``positions``, timed at the goal's speed."""
         start = [positions[i] for i in goal.indices]
         duration = max(CUBIC_PEAK * abs(t - s) / (self.velocity[i] * goal.speed)
@@ -322,7 +322,9 @@ class ArmPoses(ProcessingPlugin):
         goal.started, goal.duration = now, max(MIN_DURATION, duration)
         return self._trajectory(goal, start, goal.target, goal.duration)
 
-    def _trajectory(self, goal: _Goal, start: list[float], end: Sequence[float], duration: float) -> dict[str, Any]:
+    def _trajectory(
+        self, goal: MotionGoal, start: list[float], end: Sequence[float], duration: float
+    ) -> dict[str, Any]:
         """A JointTrajectory of the goal's joints from ``start`` to ``end`` in ``duration`` s."""
         return {
             "joint_names": [self.joints[i] for i in goal.indices],
@@ -330,13 +332,13 @@ class ArmPoses(ProcessingPlugin):
                        {"positions": list(end), "time_from_start": duration}],
         }
 
-    def _stay(self, goal: _Goal, positions: Sequence[float]) -> dict[str, Any]:
+    def _stay(self, goal: MotionGoal, positions: Sequence[float]) -> dict[str, Any]:
         """A JointTrajectory holding the goal's joints where they stand (the controller's target
         becomes the measured position: the arm no longer pushes on what stopped it)."""
         here = [positions[i] for i in goal.indices]
         return self._trajectory(goal, here, here, MIN_DURATION)
 
-    def _judge(self, goal: _Goal, positions: Sequence[float], now: float) -> None:
+    def _judge(self, goal: MotionGoal, positions: Sequence[float], now: float) -> None:
         """Reached, still moving, or failed by timeout (see the module docstring)."""
         assert self.model is not None and goal.started is not None
         errors = [abs(positions[i] - t) for i, t in zip(goal.indices, goal.target, strict=True)]
@@ -362,7 +364,7 @@ class ArmPoses(ProcessingPlugin):
                              f"{goal.duration + self.params['timeout']:.1f} s ({self.joints[goal.indices[worst]]} "
                              f"still {errors[worst]:.3f} from its target)")
 
-    def _hold(self, goal: _Goal | None, position: float) -> None:
+    def _hold(self, goal: MotionGoal | None, position: float) -> None:
         """Keep the ``holding`` measure: set when a closing gripper goal stops on an object, cleared
         when a gripper goal opens, or when the fingers reach their closed target (the object slipped out)."""
         assert self.model is not None
@@ -376,12 +378,12 @@ class ArmPoses(ProcessingPlugin):
             if abs(position - self.held) <= self.params["gripperTolerance"] * span:
                 self.held = None
 
-    def _holding(self, goal: _Goal, positions: Sequence[float], now: float, span: float) -> bool:
+    def _holding(self, goal: MotionGoal, positions: Sequence[float], now: float, span: float) -> bool:
         """Whether closing fingers have stood still short of their target for ``settle`` s (an object)."""
         closing = goal.target[0] < positions[self.arm_count]
         return self._still(goal, positions, now, 0.01 * span) and closing
 
-    def _still(self, goal: _Goal, positions: Sequence[float], now: float, bound: float) -> bool:
+    def _still(self, goal: MotionGoal, positions: Sequence[float], now: float, bound: float) -> bool:
         """Whether the goal's joints have each moved less than ``bound`` over the last ``settle`` s,
         after its planned time."""
         assert goal.started is not None

@@ -44,6 +44,7 @@ from runtime.resources.spt import Context, ProcessingPlugin, config_dir
 from runtime.verification.entries import Entries
 from runtime.verification.manifest import MAPPING, REQUIRED, P, Params, Ports
 
+from .arm_poses import MotionGoal
 from .joint_states import joint_values
 from .kinematics import MODELS
 
@@ -54,22 +55,6 @@ CUBIC_PEAK = 1.5
 """Peak over mean speed of the controller's cubic rest-to-rest segment (plugins/controllers/trajectory.py)."""
 MIN_DURATION = 0.1
 """Shortest planned motion (s)."""
-
-
-class _Goal:
-    """The goal being executed: its pose, target, timing and how it ended."""
-
-    def __init__(self, message: Mapping[str, Any], speed: float) -> None:
-        self.id = message.get("id")
-        self.group = str(message.get("group") or "")
-        self.pose = str(message.get("pose") or "")
-        self.speed = speed
-        self.state, self.error = "moving", ""
-        self.contact = False
-        self.stops_on_contact = False
-        self.target: list[float] = []
-        self.started: float | None = None
-        self.duration = 0.0
 
 
 class JointPoses(ProcessingPlugin):
@@ -149,7 +134,7 @@ class JointPoses(ProcessingPlugin):
         self.speed: float = v["speed"]
         self.contact_poses = frozenset(str(v["contactPoses"]).split())
         self.velocity: list[float] = []
-        self.goal: _Goal | None = None
+        self.goal: MotionGoal | None = None
         self._message: Any = None
         self._history: deque[tuple[float, tuple[float, ...]]] = deque()
 
@@ -204,11 +189,12 @@ class JointPoses(ProcessingPlugin):
                                  "holding": False, "contact": goal.contact, "opening": None}
         return result
 
-    def _accept(self, message: Any) -> _Goal:
+    def _accept(self, message: Any) -> MotionGoal:
         """A new goal, already failed if it cannot be executed (the reason in its ``error``)."""
         if not isinstance(message, Mapping):
-            return _failed(_Goal({}, self.speed), f"goal is {type(message).__name__}, not an ArmGoal mapping")
-        goal = _Goal(message, self.speed)
+            nothing = MotionGoal({}, "", "", self.speed)
+            return _failed(nothing, f"goal is {type(message).__name__}, not an ArmGoal mapping")
+        goal = MotionGoal(message, str(message.get("group") or ""), str(message.get("pose") or ""), self.speed)
         if isinstance(goal.id, bool) or not isinstance(goal.id, int):
             return _failed(goal, f"goal id {goal.id!r} is not an integer")
         if goal.group != "arm":
@@ -228,13 +214,13 @@ class JointPoses(ProcessingPlugin):
         goal.target = list(self.poses[goal.pose])
         return goal
 
-    def _plan(self, goal: _Goal, positions: Sequence[float], now: float) -> dict[str, Any]:
+    def _plan(self, goal: MotionGoal, positions: Sequence[float], now: float) -> dict[str, Any]:
         duration = max(CUBIC_PEAK * abs(t - s) / (v * goal.speed)
                        for s, t, v in zip(positions, goal.target, self.velocity, strict=True))
         goal.started, goal.duration = now, max(MIN_DURATION, duration)
         return _trajectory(self.joints, list(positions), goal.target, goal.duration)
 
-    def _judge(self, goal: _Goal, positions: Sequence[float], now: float) -> None:
+    def _judge(self, goal: MotionGoal, positions: Sequence[float], now: float) -> None:
         """Reached, still moving, or failed by timeout (see the module docstring)."""
         assert goal.started is not None
         errors = [abs(q - t) for q, t in zip(positions, goal.target, strict=True)]
@@ -250,7 +236,7 @@ class JointPoses(ProcessingPlugin):
                           f"{goal.duration + self.params['timeout']:.1f} s ({self.joints[worst]} still "
                           f"{errors[worst]:.3f} from its target)")
 
-    def _still(self, goal: _Goal, positions: Sequence[float], now: float) -> bool:
+    def _still(self, goal: MotionGoal, positions: Sequence[float], now: float) -> bool:
         """Whether the joints have each moved less than ``stillness`` over the last ``settle`` s, after the
         planned time."""
         assert goal.started is not None
@@ -295,7 +281,7 @@ def _speed(value: Any, where: str) -> float:
     return float(value)
 
 
-def _failed(goal: _Goal, error: str) -> _Goal:
+def _failed(goal: MotionGoal, error: str) -> MotionGoal:
     goal.state, goal.error = "failed", error
     return goal
 
