@@ -8,7 +8,6 @@ reaction (safe stop, controller switch, delegation, partition restart).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -57,18 +56,21 @@ class MonitorService:
         self.react = react
         self.asked = asked  # does a subscriber ask for a topic the monitor only observes (D245)
         self._asked_since: dict[str, float] = {}
+        self._watched_since: dict[str, float] = {}
         self.alarms = {a.name: AlarmState(a) for a in monitor.alarms}
         self._misses: dict[str, int] = {}
         self._crashes: dict[str, int] = {}
         psutil.cpu_percent(None)  # the first reading only starts the measurement
 
     def _staleness(self, topic: str) -> float:
-        """Seconds since the topic's newest sample. A topic of a lazy producer, which the monitor
-        only observes, is stale only while a subscriber asks for it, counted from the ask (D245)."""
+        """Seconds since the topic's newest sample; a topic never seen is as old as the watch, so its
+        producers have the alarm's own limit to start (D311). A topic of a lazy producer, which the
+        monitor only observes, is stale only while a subscriber asks for it, counted from the ask (D245)."""
         subscription = self.subscriptions.get(topic)
         sample = subscription.history()[-1] if subscription is not None and subscription.history() else None
         now = time.time()
-        age = math.inf if sample is None else now - (sample.stamp - sample.offset)
+        watched = self._watched_since.setdefault(topic, now)
+        age = now - watched if sample is None else now - (sample.stamp - sample.offset)
         if subscription is None or not subscription.passive:
             return age
         if not self.asked(topic):
