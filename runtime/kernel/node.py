@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -63,7 +64,15 @@ def _commands_to(service: ActuationService) -> Callable[[Sample], None]:
 
 
 class NodeRuntime:
-    """The kernel of one node: channels, sensors, controllers, actuators on one scheduler."""
+    """The kernel of one node: channels, sensors, controllers, actuators on one scheduler.
+
+    Threads: :meth:`setup`, :meth:`start` and :meth:`stop` run on the host's thread; every task
+    (sensors, controllers with their ``<Switch>`` criteria, the monitor and its reactions, the
+    actuators' timeouts) on the scheduler's; an actuator's commands arrive on the transport's
+    threads and only set its pending command. :meth:`add_controller`, :meth:`remove_controller`,
+    :meth:`switch` and :meth:`statistics` may be called from any thread: they hold :attr:`lock`,
+    as a switch does, so the set of controllers never changes under an iteration.
+    """
 
     def __init__(
         self,
@@ -104,7 +113,8 @@ class NodeRuntime:
         self._final_tasks: dict[str, Any] | None = None
         self._watched: dict[str, Subscription] = {}
         self._ros: Any = None  # the ROS 2 types, for sensors publishing a ROS type (D193)
-        self.switching = ControllerSwitching(self.controllers, self._watch, self._watched, self.report)
+        self.lock = threading.RLock()  # the controllers and their hand-overs (see the class docstring)
+        self.switching = ControllerSwitching(self.controllers, self._watch, self._watched, self.report, self.lock)
         self._controller_classes = {c.name: self.registry.resolve("controller", c.kind, c) for c in node.controllers}
         self._backend_classes = {
             ch.name: self.registry.resolve("hardware", ch.backend, ch, "backend") for ch in node.channels
@@ -330,24 +340,26 @@ class NodeRuntime:
 
     def add_controller(self, record: ControllerRecord) -> ControlService:
         """Add a controller while the node runs (§3.1.2.7); active ones take over their outputs bumplessly."""
-        if record.name in self.controllers:
-            raise ValueError(f"node {self.node.name!r} already runs a controller named {record.name!r}")
-        extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in self.node.sensors}
-        control = self._control_service(record, extrapolation)
-        self.switching.add_criteria(record)
-        self.controllers[record.name] = control
-        if record.active:
-            control.active = False
-            self.switch(record.name, reason="added")
-        self._schedule_control(control)
+        with self.lock:
+            if record.name in self.controllers:
+                raise ValueError(f"node {self.node.name!r} already runs a controller named {record.name!r}")
+            extrapolation: dict[str, str] = {s.topic: s.extrapolation for s in self.node.sensors}
+            control = self._control_service(record, extrapolation)
+            self.switching.add_criteria(record)
+            self.controllers[record.name] = control
+            if record.active:
+                control.active = False
+                self.switch(record.name, reason="added")
+            self._schedule_control(control)
         return control
 
     def remove_controller(self, name: str) -> None:
         """Stop and forget a controller; its outputs fall silent (the actuators then fail safe)."""
-        control = self.controllers.pop(name)
-        control.deactivate()
-        self.scheduler.remove(f"{self.node.name}.{name}")
-        self.switching.forget(name)
+        with self.lock:
+            control = self.controllers.pop(name)
+            control.deactivate()
+            self.scheduler.remove(f"{self.node.name}.{name}")
+            self.switching.forget(name)
         self.report("controller-removed", {"controller": name})
 
     def switch(self, to: str, reason: str = "command") -> None:
@@ -364,12 +376,14 @@ class NodeRuntime:
             "actuators": {
                 n: {"mode": a.mode, "value": a.value, "out_of_range": a.out_of_range} for n, a in self.actuators.items()
             },
-            "controllers": {
-                n: {"active": c.active, "skipped": c.skipped, "optional_used": c.optional_used}
-                for n, c in self.controllers.items()
-            },
+            "controllers": self._controller_statistics(),
             "resources": self.hosting.statistics(),
         }
+
+    def _controller_statistics(self) -> dict[str, Any]:
+        with self.lock:
+            return {n: {"active": c.active, "skipped": c.skipped, "optional_used": c.optional_used}
+                    for n, c in self.controllers.items()}
 
     # ------------------------------------------------------------------ events
 

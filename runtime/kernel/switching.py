@@ -9,6 +9,7 @@ topic the node watches), and the name ``elapsed`` (seconds since the controller 
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -32,8 +33,11 @@ class ControllerSwitching:
         watch: Callable[[str], Subscription],
         watched: Mapping[str, Subscription],
         report: Report,
+        lock: threading.RLock,
     ) -> None:
-        """``watch(topic)`` subscribes to a topic a condition reads; ``watched`` holds those subscriptions."""
+        """``watch(topic)`` subscribes to a topic a condition reads; ``watched`` holds those subscriptions;
+        ``lock`` is the node's, held while controllers change hands (and while the node adds or removes one)."""
+        self._lock = lock
         self._controllers = controllers
         self._watch = watch
         self._watched = watched
@@ -94,12 +98,13 @@ class ControllerSwitching:
 
     def switch(self, to: str, reason: str = "command") -> None:
         """Hand the outputs of the active controller(s) sharing ``to``'s outputs over to ``to``, bumplessly."""
-        target = self._controllers[to]
-        outputs = {p.topic for p in target.record.outputs}
-        previous = None
-        for control in self._controllers.values():
-            if control is not target and control.active and outputs & {p.topic for p in control.record.outputs}:
-                previous = control.last_output
-                control.deactivate()
-        target.activate(previous)
+        with self._lock:
+            target = self._controllers[to]
+            outputs = {p.topic for p in target.record.outputs}
+            previous = None
+            for control in self._controllers.values():
+                if control is not target and control.active and outputs & {p.topic for p in control.record.outputs}:
+                    previous = control.last_output
+                    control.deactivate()
+            target.activate(previous)
         self._report("controller-switched", {"to": to, "reason": reason})

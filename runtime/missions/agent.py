@@ -171,7 +171,14 @@ class LiveFactory:
 
 
 class AgentRunner:
-    """One agent of a ``<Plan>`` (§5.3), run on this node (see the module docstring)."""
+    """One agent of a ``<Plan>`` (§5.3), run on this node (see the module docstring).
+
+    Threads: :meth:`run` and everything it calls (the mission engine, its behaviors, the watch of
+    the other agents, the recorder) run on the caller's thread, which owns ``seen``, ``finished``,
+    ``lost`` and the latched signals. The transport's threads only decode and hand over: a
+    heartbeat or a signal is queued and taken in at the agent's next period, in arrival order.
+    :meth:`stop` may be called from any thread.
+    """
 
     def __init__(
         self,
@@ -197,6 +204,7 @@ class AgentRunner:
         self.period, self.heartbeat = period, heartbeat
         self.clock = clock or _run_clock
         successes = {a.name: system.mission(a.mission) for a in record.agents}
+        self._others = {a.name for a in record.agents} - {agent}
         self._successes = {name: m.finals[0].name for name, m in successes.items() if m is not None and m.finals}
         self.progress = progress  # told each change of active state, as one line (issue K: a run shows how it goes)
         self._shown: str | None = None
@@ -209,6 +217,8 @@ class AgentRunner:
         self.outcome: str | None = None
         self.error: BaseException | None = None
         self._done = threading.Event()  # this agent's mission has ended: late signals are dropped
+        # what the transport's threads hand to the agent's thread (deque appends and pops are atomic)
+        self._inbox: collections.deque[Callable[[], None]] = collections.deque()
         self._publishers = {s.name: transport.publisher(self._qos(record, s.name)) for s in record.signals}
         for signal in record.signals:
             transport.subscribe(self._qos(record, signal.name), self._received(signal.name))
@@ -252,9 +262,9 @@ class AgentRunner:
             LOG.info("plan %s: signal %s reaches %s, which has finished: dropped", self.plan.name, name, receiver)
 
     def _received(self, name: str) -> Callable[[Sample], None]:
+        """The transport's callback for signal ``name``: decoded there, latched on the agent's thread."""
+
         def on(sample: Sample) -> None:
-            if name in self.signals.values:
-                return  # latched already
             try:
                 value = codec.decode(sample.value)
             except ValueError:
@@ -265,17 +275,32 @@ class AgentRunner:
             if self._done.is_set():
                 LOG.info("%s: signal %s arrived after the mission ended: dropped", self.agent.name, name)
                 return  # never raise into the sender's thread (one process shares a transport)
-            self.signals.set(name, value)
-            self.recorder.write("signal", name=name, direction="received", value=value)
+            self._inbox.append(functools.partial(self._latch, name, value))
 
         return on
 
+    def _latch(self, name: str, value: Any) -> None:
+        """Latch a received signal (the agent's thread)."""
+        if name in self.signals.values:
+            return  # latched already
+        self.signals.set(name, value)
+        self.recorder.write("signal", name=name, direction="received", value=value)
+
     def _on_beat(self, sample: Sample) -> None:
+        """The transport's callback for a heartbeat: the agent's thread takes it in at its next period."""
         beat = sample.value
-        if not (isinstance(beat, dict) and isinstance(beat.get("agent"), str) and beat["agent"] != self.agent.name):
-            return
-        other = beat["agent"]
-        self.seen[other] = self.clock()
+        if not (isinstance(beat, dict) and beat.get("agent") in self._others):
+            return  # not a heartbeat, ours, or from no agent of the plan
+        self._inbox.append(functools.partial(self._heard, beat["agent"], beat, self.clock()))
+
+    def _drain(self) -> None:
+        """Take in what the transport's threads handed over since the last period, in arrival order."""
+        while self._inbox:
+            self._inbox.popleft()()
+
+    def _heard(self, other: str, beat: dict[str, Any], at: float) -> None:
+        """Agent ``other``'s heartbeat, heard at ``at`` (the agent's thread)."""
+        self.seen[other] = at
         if "outcome" in beat and beat.get("state") is None and other not in self.finished:
             outcome = beat["outcome"] if isinstance(beat["outcome"], str) else None
             self.finished[other] = outcome
@@ -322,6 +347,7 @@ class AgentRunner:
             self._meet()
             self.engine.start()
             while not self._stop.is_set():
+                self._drain()
                 now = self.clock()
                 if now >= next_beat:
                     beat = {"agent": self.agent.name, "state": self.engine.active_path(), "t": now}
@@ -347,6 +373,7 @@ class AgentRunner:
         """Heartbeats until every other agent of the plan is heard (or finished), at most ``lostAfter`` (D208)."""
         others = {a.name for a in self.plan.agents} - {self.agent.name}
         while not self._stop.is_set():
+            self._drain()
             missing = others - set(self.seen) - set(self.finished)
             if not missing or self.clock() - self._started >= self.plan.lost_after:
                 if missing:
