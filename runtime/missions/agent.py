@@ -371,10 +371,9 @@ class AgentRunner:
 
     def _meet(self) -> None:
         """Heartbeats until every other agent of the plan is heard (or finished), at most ``lostAfter`` (D208)."""
-        others = {a.name for a in self.plan.agents} - {self.agent.name}
         while not self._stop.is_set():
             self._drain()
-            missing = others - set(self.seen) - set(self.finished)
+            missing = self._others - set(self.seen) - set(self.finished)
             if not missing or self.clock() - self._started >= self.plan.lost_after:
                 if missing:
                     LOG.warning("plan %s: agent %s starts without %s (not heard within lostAfter, %g s)",

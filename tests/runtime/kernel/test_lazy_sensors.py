@@ -8,11 +8,10 @@ from pathlib import Path
 
 import pytest
 
-import ckmconf
 from runtime.kernel.node import NodeRuntime
-from runtime.network import Transport, open_transport
+from runtime.network import Transport
 from tests import waiting
-from tests.runtime.network.conftest import private_network
+from tests.runtime.kernel.conftest import running_node
 
 until = functools.partial(waiting.until, interval=0.01)
 
@@ -36,18 +35,8 @@ LAZY = """<System xmlns="urn:ckm:1" version="1.0" name="lazy">
 
 @pytest.fixture
 def node(tmp_path: Path) -> Iterator[tuple[NodeRuntime, Transport]]:
-    transport = open_transport(private_network(), name="lazy-test")
-    transport.setup()
-    transport.start()
-    path = tmp_path / "lazy.xml"
-    path.write_text(LAZY)
-    system = ckmconf.load(path)
-    runtime = NodeRuntime(system.nodes[0], system, transport)
-    runtime.setup()
-    runtime.start()
-    yield runtime, transport
-    runtime.stop()
-    transport.stop()
+    with running_node(LAZY, tmp_path, "lazy-test") as running:
+        yield running
 
 
 def test_a_lazy_sensor_reads_only_while_its_topic_is_asked_for(node: tuple[NodeRuntime, Transport]) -> None:

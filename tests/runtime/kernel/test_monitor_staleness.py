@@ -11,11 +11,9 @@ from pathlib import Path
 
 import pytest
 
-import ckmconf
 from runtime.kernel.node import NodeRuntime
-from runtime.network import Transport, open_transport
 from tests import waiting
-from tests.runtime.network.conftest import private_network
+from tests.runtime.kernel.conftest import running_node
 
 until = functools.partial(waiting.until, interval=0.01)
 
@@ -31,18 +29,8 @@ SILENT = """<System xmlns="urn:ckm:1" version="1.0" name="silent">
 
 @pytest.fixture
 def runtime(tmp_path: Path) -> Iterator[NodeRuntime]:
-    transport: Transport = open_transport(private_network(), name="staleness-test")
-    transport.setup()
-    transport.start()
-    path = tmp_path / "silent.xml"
-    path.write_text(SILENT)
-    system = ckmconf.load(path)
-    node = NodeRuntime(system.nodes[0], system, transport)
-    node.setup()
-    node.start()
-    yield node
-    node.stop()
-    transport.stop()
+    with running_node(SILENT, tmp_path, "staleness-test") as (node, _):
+        yield node
 
 
 def test_a_topic_never_published_is_stale_only_after_the_alarms_limit(runtime: NodeRuntime) -> None:

@@ -5,45 +5,25 @@ controller drives the shared output at the end."""
 from __future__ import annotations
 
 import dataclasses
-import sys
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
-import ckmconf
 from runtime.kernel.node import NodeRuntime
-from runtime.network import Transport, open_transport
+from tests.runtime.kernel.conftest import running_node
 from tests.runtime.kernel.test_node import SWITCHING
-from tests.runtime.network.conftest import private_network
 
 ROUNDS = 60
 
-
-@pytest.fixture(autouse=True)
-def switching_often() -> Iterator[None]:
-    """Threads switch every microsecond, not every 5 ms: a race shows in a short test."""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(1e-6)
-    yield
-    sys.setswitchinterval(before)
+pytestmark = pytest.mark.usefixtures("switching_often")
 
 
 @pytest.fixture
 def node(tmp_path: Path) -> Iterator[NodeRuntime]:
-    transport: Transport = open_transport(private_network(), name="node-threads")
-    transport.setup()
-    transport.start()
-    path = tmp_path / "switching.xml"
-    path.write_text(SWITCHING)
-    system = ckmconf.load(path)
-    runtime = NodeRuntime(system.nodes[0], system, transport)
-    runtime.setup()
-    runtime.start()
-    yield runtime
-    runtime.stop()
-    transport.stop()
+    with running_node(SWITCHING, tmp_path, "node-threads") as (runtime, _):
+        yield runtime
 
 
 def test_controllers_change_from_many_threads_while_the_node_runs_and_reports(node: NodeRuntime) -> None:

@@ -4,10 +4,8 @@ nor record an event twice."""
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,13 +24,7 @@ CALLS = 400
 STRANGERS = 5000  # heartbeats of no agent of the plan (another plan's, a stale process)
 
 
-@pytest.fixture(autouse=True)
-def switching_often() -> Iterator[None]:
-    """Threads switch every microsecond, not every 5 ms: a race shows in a short test."""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(1e-6)
-    yield
-    sys.setswitchinterval(before)
+pytestmark = pytest.mark.usefixtures("switching_often")
 
 
 def sample(value: object, seq: int) -> Sample:
